@@ -1,0 +1,369 @@
+"""Collect one-curve files into the analysis-ready sweep dataset (``sweep.nc``).
+
+One curve file holds one pull-off simulation (one layout, N, kbar, seed).
+`build_sweep` reads them all with `brushcore.io.read_curve` and lays the
+scalars out on the full (layout, n_pillars, kbar, seed) grid, NaN where a
+combination was not run, with the force-displacement curves NaN-padded along
+``step``.  Contact snapshots are large, so only a chosen subset of cases keeps
+them, stacked along a ``case`` dimension.  The result opens with plain
+``xarray.open_dataset``; `encoding` gives the compression to write it with.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from brushcore.io import read_curve
+
+LAYOUTS = ("regular", "random")
+CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
+
+#: Scalar variables copied from each curve file.
+SCALAR_VARIABLES = (
+    "adhesive_force_normalized",
+    "work_of_separation_normalized",
+    "adhesive_force",
+    "work_of_separation",
+    "displacement_at_adhesive_force",
+)
+#: Curve-file attributes promoted to sweep variables: name -> (units, long_name).
+ATTRIBUTE_SCALARS = {
+    "events": ("1", "detachment events of the pull-off"),
+    "operator_applications": ("1", "applications of the elastic + spring operator"),
+    "cg_iterations": ("1", "conjugate-gradient iterations"),
+    "wall_time_s": ("s", "wall time of the simulation"),
+    "phi_actual": ("1", "filling factor A / L^2 realised on the grid"),
+    "real_contact_area": ("1", "real contact area A (units of h^2)"),
+}
+#: Per-step curves, NaN-padded to the longest curve of the sweep.
+CURVE_VARIABLES = (
+    "displacement",
+    "force",
+    "displacement_normalized",
+    "force_normalized",
+    "contact_area",
+    "attached_pillars",
+)
+
+
+class AggregationError(ValueError):
+    """The curve files cannot form one sweep; the message names the file(s)."""
+
+
+@dataclass(frozen=True, order=True)
+class CaseKey:
+    """Coordinates of one simulation in the sweep.
+
+    Parameters
+    ----------
+    layout : "regular" or "random".
+    n_pillars : number of pillars N.
+    kbar : normalised spring stiffness k / (E* L) [-].
+    seed : random-layout seed (0 for regular layouts).
+    """
+
+    layout: str
+    n_pillars: int
+    kbar: float
+    seed: int
+
+
+def case_key(curve: xr.Dataset) -> CaseKey:
+    """Read the case coordinates from a curve file's attributes."""
+    a = curve.attrs
+    return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]))
+
+
+def file_sha256(path: str | Path) -> str:
+    """SHA-256 hex digest of a file's bytes (provenance of the inputs)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def load_curves(paths: Iterable[str | Path]) -> dict[CaseKey, tuple[Path, xr.Dataset]]:
+    """Read every curve file and index it by its case.
+
+    Raises
+    ------
+    AggregationError
+        If a file cannot be read (the message names it) or two files hold the
+        same case (the message names both).
+    """
+    curves: dict[CaseKey, tuple[Path, xr.Dataset]] = {}
+    for raw in paths:
+        path = Path(raw)
+        try:
+            curve = read_curve(path)
+            key = case_key(curve)
+        except Exception as exc:  # CurveFileError, missing attribute, bad value
+            raise AggregationError(f"cannot aggregate curve file {path}: {exc}") from exc
+        if key in curves:
+            raise AggregationError(
+                f"curve files {curves[key][0]} and {path} hold the same case {key}"
+            )
+        curves[key] = (path, curve)
+    if not curves:
+        raise AggregationError("no curve files to aggregate")
+    return curves
+
+
+def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:
+    """An attribute every curve must share (e.g. grid); raise naming a mismatch."""
+    values = {}
+    for path, curve in curves.values():
+        values.setdefault(curve.attrs.get(name), path)
+    if len(values) > 1:
+        found = ", ".join(f"{v!r} in {p}" for v, p in values.items())
+        raise AggregationError(f"curve files disagree on {name}: {found}")
+    return next(iter(values))
+
+
+def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
+    keys = list(keys)
+    layouts = [lay for lay in LAYOUTS if any(k.layout == lay for k in keys)]
+    layouts += sorted({k.layout for k in keys} - set(LAYOUTS))
+    return {
+        "layout": np.array(layouts, dtype=object),
+        "n_pillars": np.array(sorted({k.n_pillars for k in keys}), dtype=np.int64),
+        "kbar": np.array(sorted({k.kbar for k in keys}), dtype=np.float64),
+        "seed": np.array(sorted({k.seed for k in keys}), dtype=np.int64),
+    }
+
+
+def _index(coords: dict[str, np.ndarray], key: CaseKey) -> tuple[int, int, int, int]:
+    return tuple(  # type: ignore[return-value]
+        int(np.flatnonzero(coords[dim] == getattr(key, dim))[0]) for dim in CASE_DIMS
+    )
+
+
+def snapshot_filter(
+    keep: Iterable[tuple[str, int]], *, all_below_bytes: int, total_bytes: int
+) -> Callable[[CaseKey], bool]:
+    """Which cases keep their contact snapshots.
+
+    Parameters
+    ----------
+    keep : (layout, n_pillars) pairs whose snapshots are always kept (Fig. 5).
+    all_below_bytes : keep every case's snapshots if they need less than this.
+    total_bytes : size all snapshots would need [bytes].
+    """
+    if total_bytes < all_below_bytes:
+        return lambda key: True
+    wanted = {(str(layout), int(n)) for layout, n in keep}
+    return lambda key: (key.layout, key.n_pillars) in wanted
+
+
+def build_sweep(
+    paths: Sequence[str | Path],
+    *,
+    keep_snapshots: Iterable[tuple[str, int]] = (("regular", 256),),
+    all_snapshots_below_mb: float = 64.0,
+) -> xr.Dataset:
+    """Aggregate curve files into one sweep dataset.
+
+    Parameters
+    ----------
+    paths : curve files written by `brushcore.io.write_curve`.
+    keep_snapshots : (layout, n_pillars) whose contact snapshots are kept.
+    all_snapshots_below_mb : keep all snapshots when they total less [MiB].
+
+    Returns
+    -------
+    xarray.Dataset
+        Scalars on (layout, n_pillars, kbar, seed); curves on the same dims
+        plus ``step``; snapshots on (case, snapshot, y, x); provenance attrs.
+
+    Raises
+    ------
+    AggregationError
+        Naming the offending file when one cannot be read or cases clash.
+    """
+    curves = load_curves(paths)
+    grid = _common_attr(curves, "grid")
+    phi = _common_attr(curves, "phi")
+    coords = _case_coords(curves)
+    shape = tuple(len(coords[d]) for d in CASE_DIMS)
+    n_steps = max(curve.sizes["step"] for _, curve in curves.values())
+    first = next(iter(curves.values()))[1]
+
+    data: dict[str, xr.DataArray] = {}
+    scalars = {name: np.full(shape, np.nan) for name in (*SCALAR_VARIABLES, *ATTRIBUTE_SCALARS)}
+    scalars["n_steps"] = np.full(shape, np.nan)
+    lines = {name: np.full((*shape, n_steps), np.nan) for name in CURVE_VARIABLES}
+    for key, (path, curve) in curves.items():
+        at = _index(coords, key)
+        for name in SCALAR_VARIABLES:
+            scalars[name][at] = float(curve[name])
+        for name in ATTRIBUTE_SCALARS:
+            scalars[name][at] = float(curve.attrs.get(name, np.nan))
+        scalars["n_steps"][at] = curve.sizes["step"]
+        for name in CURVE_VARIABLES:
+            values = np.asarray(curve[name].values, dtype=np.float64)
+            lines[name][at][: values.size] = values
+
+    for name in SCALAR_VARIABLES:
+        data[name] = xr.DataArray(scalars[name], dims=CASE_DIMS, attrs=dict(first[name].attrs))
+    for name, (units, long_name) in ATTRIBUTE_SCALARS.items():
+        data[name] = xr.DataArray(
+            scalars[name], dims=CASE_DIMS, attrs={"units": units, "long_name": long_name}
+        )
+    data["n_steps"] = xr.DataArray(
+        scalars["n_steps"], dims=CASE_DIMS,
+        attrs={"units": "1", "long_name": "valid entries along step (rest is NaN padding)"},
+    )
+    for name in CURVE_VARIABLES:
+        data[name] = xr.DataArray(
+            lines[name], dims=(*CASE_DIMS, "step"), attrs=dict(first[name].attrs)
+        )
+    data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb))
+
+    sweep = xr.Dataset(data, coords=_coordinate_arrays(coords))
+    # The stacked snapshot cases are labels, not data: make them coordinates.
+    sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
+    sweep.attrs = _provenance(curves, grid=grid, phi=phi)
+    return sweep
+
+
+def _coordinate_arrays(coords: dict[str, np.ndarray]) -> dict[str, xr.DataArray]:
+    attrs = {
+        "layout": {"long_name": "pillar layout"},
+        "n_pillars": {"units": "1", "long_name": "number of pillars N"},
+        "kbar": {"units": "1", "long_name": "normalised spring stiffness k / (E* L)"},
+        "seed": {"units": "1", "long_name": "random-layout seed (0 for regular)"},
+    }
+    out = {d: xr.DataArray(coords[d], dims=d, attrs=attrs[d]) for d in CASE_DIMS}
+    out["layout"] = out["layout"].astype(str)
+    return out
+
+
+def _snapshots(
+    curves: dict[CaseKey, tuple[Path, xr.Dataset]],
+    keep: Iterable[tuple[str, int]],
+    all_below_mb: float,
+) -> dict[str, xr.DataArray]:
+    with_snaps = {k: c for k, (_, c) in curves.items() if "contact_snapshot" in c}
+    if not with_snaps:
+        return {}
+    total = sum(int(c["contact_snapshot"].size) for c in with_snaps.values())
+    wanted = snapshot_filter(keep, all_below_bytes=int(all_below_mb * 2**20), total_bytes=total)
+    keys = sorted(k for k in with_snaps if wanted(k))
+    if not keys:
+        return {}
+    n_snap = max(with_snaps[k].sizes["snapshot"] for k in keys)
+    ny, nx = with_snaps[keys[0]].sizes["y"], with_snaps[keys[0]].sizes["x"]
+    snap = np.full((len(keys), n_snap, ny, nx), -1, dtype=np.int8)
+    step = np.full((len(keys), n_snap), -1, dtype=np.int32)
+    label = np.full((len(keys), n_snap), "", dtype=object)
+    detach = np.full((len(keys), ny, nx), -1, dtype=np.int32)
+    for i, key in enumerate(keys):
+        c = with_snaps[key]
+        m = c.sizes["snapshot"]
+        snap[i, :m] = c["contact_snapshot"].values
+        step[i, :m] = c["snapshot_step"].values
+        label[i, :m] = [str(s) for s in c["snapshot_label"].values]
+        if "detachment_step" in c:
+            detach[i] = c["detachment_step"].values
+    first = with_snaps[keys[0]]
+    dims = ("case", "snapshot")
+    out = {
+        "contact_snapshot": xr.DataArray(
+            snap, dims=(*dims, "y", "x"), attrs=dict(first["contact_snapshot"].attrs)
+        ),
+        "snapshot_step": xr.DataArray(step, dims=dims, attrs=dict(first["snapshot_step"].attrs)),
+        "snapshot_label": xr.DataArray(label.astype(str), dims=dims),
+        "case_layout": xr.DataArray(np.array([k.layout for k in keys]), dims="case"),
+        "case_n_pillars": xr.DataArray(np.array([k.n_pillars for k in keys]), dims="case"),
+        "case_kbar": xr.DataArray(np.array([k.kbar for k in keys]), dims="case"),
+        "case_seed": xr.DataArray(np.array([k.seed for k in keys]), dims="case"),
+    }
+    if "detachment_step" in first:
+        out["detachment_step"] = xr.DataArray(
+            detach, dims=("case", "y", "x"), attrs=dict(first["detachment_step"].attrs)
+        )
+    return out
+
+
+def _provenance(
+    curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, grid: object, phi: object
+) -> dict[str, object]:
+    import brushcore
+
+    files = sorted(str(path) for path, _ in curves.values())
+    hashes = [file_sha256(f) for f in files]
+    combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
+    commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
+    versions = sorted({str(c.attrs.get("brushcore_version", "unknown")) for _, c in curves.values()})
+    now = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+    return {
+        "title": "brushcore sweep: adhesive pull-off of spring-mounted brushes",
+        "Conventions": "CF-1.10",
+        "references": "He, Li & Popov, Lubricants 8 (2020) 94",
+        "history": f"{now} aggregated {len(files)} curve files by brushcore.aggregate",
+        "date_created": now,
+        "brushcore_version": getattr(brushcore, "__version__", "unknown"),
+        "simulation_brushcore_versions": ", ".join(versions),
+        "simulation_git_commits": ", ".join(commits),
+        "grid": int(grid) if grid is not None else -1,
+        "phi": float(phi) if phi is not None else math.nan,
+        "source_files": "\n".join(files),
+        "source_sha256": "\n".join(hashes),
+        "source_digest_sha256": combined.hexdigest(),
+    }
+
+
+def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, object]]:
+    """netCDF4 encoding: zlib for the padded curves and the snapshots.
+
+    One chunk per curve keeps NaN padding and unrun cases nearly free on disk.
+    """
+    enc: dict[str, dict[str, object]] = {}
+    for name, var in sweep.data_vars.items():
+        if var.dtype.kind in "fi" and var.ndim >= 2:
+            chunks = tuple(1 if d in CASE_DIMS or d in ("case", "snapshot") else n
+                           for d, n in var.sizes.items())
+            enc[name] = {"zlib": True, "complevel": complevel, "chunksizes": chunks}
+    return enc
+
+
+def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
+    """Write the sweep to netCDF4 atomically (temporary file + rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    sweep.to_netcdf(tmp, engine="netcdf4", encoding=encoding(sweep))
+    tmp.replace(path)
+
+
+def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0):
+    """Contact snapshots of one case, or None when the sweep did not keep them.
+
+    Returns
+    -------
+    xarray.Dataset or None
+        ``contact_snapshot(snapshot, y, x)`` (1 attached, 0 detached, -1 no
+        pillar), ``snapshot_step`` and ``snapshot_label`` of that case.
+    """
+    if "contact_snapshot" not in sweep:
+        return None
+    hit = (
+        (sweep["case_layout"] == layout)
+        & (sweep["case_n_pillars"] == n_pillars)
+        & np.isclose(sweep["case_kbar"], kbar, rtol=1e-9, atol=0.0)
+        & (sweep["case_seed"] == seed)
+    )
+    idx = np.flatnonzero(hit.values)
+    if idx.size == 0:
+        return None
+    names = [n for n in ("contact_snapshot", "snapshot_step", "snapshot_label") if n in sweep]
+    return sweep[names].isel(case=int(idx[0]))

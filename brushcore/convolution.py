@@ -1,0 +1,162 @@
+"""Non-periodic convolution with the half-space kernel by pruned DC-FFT.
+
+The stress lives on an n x n grid and is zero-padded to 2n x 2n (Liu, Wang &
+Liu 2000).  A plain 2-D real FFT pair would transform 2n rows of which n
+are zero going in, and return 2n rows of which n are discarded.  We do the
+two axes separately and skip those rows: rows (length 2n, n of them) ->
+columns (length 2n, n + 1 of them) -> multiply by the real kernel spectrum ->
+columns back -> only the first n rows back.  That is 3/4 of the work of a
+full pair.  FFTW plans are made once per grid (with wisdom cached on disk)
+and reused for every application; scipy.fft is the fallback without pyfftw.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import threading
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .kernel import wrapped_kernel
+
+try:  # pyfftw is a declared dependency; the fallback keeps the package importable
+    import pyfftw
+
+    HAVE_PYFFTW = True
+except ImportError:  # pragma: no cover - exercised only where pyfftw is missing
+    HAVE_PYFFTW = False
+
+_WISDOM_LOCK = threading.Lock()
+
+
+def _wisdom_path() -> Path:
+    root = os.environ.get("BRUSHCORE_WISDOM_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "brushcore"
+    )
+    return Path(root) / "fftw-wisdom.pickle"
+
+
+def _load_wisdom() -> None:
+    path = _wisdom_path()
+    try:
+        with open(path, "rb") as fh:
+            pyfftw.import_wisdom(pickle.load(fh))
+    except (OSError, ValueError, pickle.UnpicklingError, EOFError, TypeError):
+        pass  # no or unreadable wisdom: plan afresh
+
+
+def _save_wisdom() -> None:
+    path = _wisdom_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        with open(tmp, "wb") as fh:
+            pickle.dump(pyfftw.export_wisdom(), fh)
+        os.replace(tmp, path)  # atomic: concurrent jobs never read half a file
+    except OSError:
+        pass  # a read-only cache only costs planning time
+
+
+class Convolver:
+    """u = K * sigma on an n x n grid (non-periodic), with reusable FFT plans.
+
+    Parameters
+    ----------
+    n : grid size (elements per side)
+    h : element size [length]
+    e_star : effective modulus E* [stress]
+    threads : FFTW threads
+    use_pyfftw : use pyfftw when available (False forces scipy.fft)
+    """
+
+    def __init__(self, n: int, h: float = 1.0, e_star: float = 1.0, threads: int = 1,
+                 use_pyfftw: bool = True) -> None:
+        self.n = n
+        self.threads = threads
+        self.applications = 0
+        spectrum = np.fft.rfft2(wrapped_kernel(n, h, e_star))
+        # The wrapped kernel is even in both axes, so its spectrum is real.
+        self.spectrum = np.ascontiguousarray(spectrum.real)
+        self.backend = "pyfftw" if (use_pyfftw and HAVE_PYFFTW) else "scipy"
+        if self.backend == "pyfftw":
+            self._plan()
+            # FFTW transforms are unnormalised: fold 1/(2n)^2 into the kernel.
+            self._scaled = self.spectrum / float(4 * n * n)
+        else:
+            self._real_in = np.zeros((n, 2 * n))
+            self._real_out = np.zeros((n, 2 * n))
+
+    def _plan(self) -> None:
+        n, nc = self.n, self.n + 1
+        empty = pyfftw.empty_aligned
+        self._real_in = empty((n, 2 * n), dtype="float64")
+        self._half = empty((2 * n, nc), dtype="complex128")
+        self._real_out = empty((n, 2 * n), dtype="float64")
+        flags = ("FFTW_MEASURE",)
+        with _WISDOM_LOCK:
+            _load_wisdom()
+            # In-place column transforms measured ~1.5x faster than out-of-place.
+            self._rows_fwd = pyfftw.FFTW(self._real_in, self._half[:n], axes=(1,),
+                                         flags=flags, threads=self.threads)
+            self._cols_fwd = pyfftw.FFTW(self._half, self._half, axes=(0,),
+                                         flags=flags, threads=self.threads)
+            self._cols_bwd = pyfftw.FFTW(self._half, self._half, axes=(0,),
+                                         direction="FFTW_BACKWARD", flags=flags,
+                                         threads=self.threads)
+            self._rows_bwd = pyfftw.FFTW(self._half[:n], self._real_out, axes=(1,),
+                                         direction="FFTW_BACKWARD", flags=flags,
+                                         threads=self.threads)
+            _save_wisdom()
+        self._real_in[:] = 0.0  # planning with FFTW_MEASURE scribbles on buffers
+        self._half[:] = 0.0
+
+    @property
+    def buffer(self) -> np.ndarray:
+        """The zero-padded input, shape (n, 2n); columns n: must stay zero.
+
+        Callers write stress at flat indices of this layout (see
+        `padded_index`) and must zero entries they no longer use.
+        """
+        return self._real_in
+
+    def padded_index(self, flat: np.ndarray) -> np.ndarray:
+        """Flat indices into the (n, 2n) buffers from flat indices of an n x n grid."""
+        row, col = np.divmod(np.asarray(flat, dtype=np.intp), self.n)
+        return row * (2 * self.n) + col
+
+    def apply_buffer(self) -> np.ndarray:
+        """Convolve `buffer`; returns the (n, 2n) output whose first n columns are u.
+
+        The output is overwritten by the next call.
+        """
+        self.applications += 1
+        n = self.n
+        if self.backend == "pyfftw":
+            self._half[n:] = 0.0  # zero padding, overwritten by the in-place columns
+            self._rows_fwd.execute()
+            self._cols_fwd.execute()
+            np.multiply(self._half, self._scaled, out=self._half)
+            self._cols_bwd.execute()
+            self._rows_bwd.execute()
+            return self._real_out
+        import scipy.fft as sfft
+
+        spec = sfft.rfft2(self._real_in, s=(2 * n, 2 * n), workers=self.threads)
+        spec *= self.spectrum
+        self._real_out[...] = sfft.irfft2(spec, s=(2 * n, 2 * n), workers=self.threads)[:n]
+        return self._real_out
+
+    def __call__(self, stress: np.ndarray) -> np.ndarray:
+        """Displacement [length] from an n x n stress field [stress] (a new array)."""
+        n = self.n
+        self._real_in[:, :n] = stress
+        return self.apply_buffer()[:, :n].copy()
+
+
+@lru_cache(maxsize=4)
+def cached_convolver(n: int, h: float, e_star: float, threads: int) -> Convolver:
+    """One Convolver per (grid, h, E*, threads) in a process: plans are costly."""
+    return Convolver(n, h, e_star, threads)

@@ -1,0 +1,256 @@
+"""The paper's Figures 5-8 drawn from a sweep dataset (matplotlib, no pyplot).
+
+Each ``figN`` function takes the dataset of `brushcore.aggregate.build_sweep`
+and returns a `matplotlib.figure.Figure`; `save` writes it.  Figures are
+built on the object API with the Agg canvas, so no global pyplot state or GUI
+backend is involved.  Brushes or layouts absent from a sweep are skipped, and
+a panel with nothing to show says so instead of failing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+from brushcore import theory
+from brushcore.aggregate import snapshots
+from brushcore.summary import fit_soft_prefactor, seed_mean, soft_plateau
+
+F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
+D_LABEL = r"$\bar d = d / \sqrt{2\pi\Delta\gamma\sqrt{A/\pi}/E^*}$"
+K_LABEL = r"$\bar k = k / (E^* L)$"
+FAD_LABEL = r"$\bar F_{ad}$"
+W_LABEL = r"$\bar W = W / (2\pi a_0^2 \Delta\gamma)$"
+PANEL_TITLES = {"regular": "(a) regular", "random": "(b) random"}
+# detached / attached pillar element on a white background (no pillar)
+SNAPSHOT_CMAP = ListedColormap(["white", "0.8", "tab:red"])
+
+
+def _new_figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _layouts(sweep: xr.Dataset) -> list[str]:
+    return [str(v) for v in sweep.layout.values]
+
+
+def _brush_colors(n_pillars: Sequence[int]) -> dict[int, str]:
+    """One colour per N, stable across figures and panels."""
+    return {int(n): f"C{i}" for i, n in enumerate(sorted(n_pillars))}
+
+
+def _no_data(ax, message: str) -> None:
+    ax.text(0.5, 0.5, message, ha="center", va="center", transform=ax.transAxes)
+
+
+def _phi(sweep: xr.Dataset) -> float:
+    return float(sweep.attrs.get("phi", math.nan))
+
+
+def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int):
+    """(d, F) normalised of one run without padding, or None when absent."""
+    try:
+        case = sweep.sel(layout=layout, n_pillars=n_pillars, seed=seed).sel(
+            kbar=kbar, method="nearest", tolerance=abs(kbar) * 1e-9
+        )
+    except KeyError:
+        return None
+    d = case["displacement_normalized"].values
+    f = case["force_normalized"].values
+    ok = np.isfinite(d) & np.isfinite(f)
+    return (d[ok], f[ok]) if ok.any() else None
+
+
+def fig5(
+    sweep: xr.Dataset,
+    *,
+    n_pillars: int = 256,
+    kbar: Sequence[float] = (0.455, 0.005, 0.001),
+    layout: str = "regular",
+    seed: int = 0,
+) -> Figure:
+    """Fig. 5: F-d curves of one brush at a few kbar, contact snapshots beside.
+
+    Numbered dots on each curve mark the steps of the snapshots to its right
+    (red: attached element, grey: detached, white: no pillar).
+    """
+    cases = [k for k in kbar if _curve(sweep, layout, n_pillars, k, seed) is not None]
+    n_snap = int(sweep.sizes.get("snapshot", 0))
+    rows = max(len(cases), 1)
+    fig = _new_figure(3.2 + 1.3 * n_snap, 2.4 * rows)
+    grid = fig.add_gridspec(rows, 1 + n_snap, width_ratios=[3.0] + [1.0] * n_snap)
+    side = math.isqrt(n_pillars)
+    name = f"{side} x {side}" if layout == "regular" and side * side == n_pillars else str(n_pillars)
+    fig.suptitle(f"{layout} brush, N = {name} pillars")
+    if not cases:
+        _no_data(fig.add_subplot(grid[0, :]), f"no {layout} runs with N = {n_pillars}")
+        return fig
+    for row, k in enumerate(cases):
+        d, f = _curve(sweep, layout, n_pillars, k, seed)
+        ax = fig.add_subplot(grid[row, 0])
+        ax.plot(d, f, color="C0", lw=1.2)
+        ax.set_title(f"({chr(ord('a') + row)}) " + r"$\bar k$" + f" = {k:g}", loc="left")
+        ax.set_xlabel(r"$\bar d$")
+        ax.set_ylabel(r"$\bar F$")
+        snap = snapshots(sweep, layout, n_pillars, k, seed)
+        if snap is None:
+            continue
+        steps = snap["snapshot_step"].values
+        for j in range(n_snap):
+            step = int(steps[j])
+            image_ax = fig.add_subplot(grid[row, 1 + j])
+            image_ax.set_axis_off()
+            if step < 0:
+                continue
+            image_ax.imshow(snap["contact_snapshot"].values[j] + 1, cmap=SNAPSHOT_CMAP,
+                            vmin=0, vmax=2, interpolation="nearest", origin="lower")
+            image_ax.set_title(f"{j + 1}: {snap['snapshot_label'].values[j]}", fontsize=7)
+            if step < d.size:
+                ax.plot(d[step], f[step], "o", ms=4, color="C3")
+                ax.annotate(str(j + 1), (d[step], f[step]), textcoords="offset points",
+                            xytext=(3, 3), fontsize=7)
+    return fig
+
+
+def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, object]]:
+    layouts = _layouts(sweep)
+    fig = _new_figure(4.2 * max(len(layouts), 1), 3.6)
+    axes = fig.subplots(1, max(len(layouts), 1), squeeze=False)[0]
+    fig.suptitle(title)
+    return fig, dict(zip(layouts, axes))
+
+
+def fig6(sweep: xr.Dataset) -> Figure:
+    """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
+
+    The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
+    punch F_ad = 1 is dotted.  With several seeds the bars span min to max.
+    """
+    fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
+    colors = _brush_colors(sweep.n_pillars.values)
+    phi = _phi(sweep)
+    for layout, ax in axes.items():
+        drawn = False
+        for n in sweep.n_pillars.values:
+            series = seed_mean(sweep, "adhesive_force_normalized", layout, int(n))
+            if series.size == 0:
+                continue
+            drawn = True
+            runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
+            runs = runs.sel(kbar=series.kbar)
+            low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
+            ax.errorbar(series.kbar, series, yerr=[series - low, high - series], marker="o",
+                        ms=4, capsize=2, color=colors[int(n)], label=f"N = {int(n)}")
+        ax.set_xscale("log")
+        ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")
+        ax.set_xlabel(K_LABEL)
+        ax.set_ylabel(FAD_LABEL)
+        if not drawn:
+            _no_data(ax, f"no {layout} runs")
+            continue
+        if math.isfinite(phi):
+            ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
+                       label=rf"rigid limit $\varphi^{{-1/4}}$ = {theory.rigid_limit(phi):.2f}")
+        ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
+        ax.legend(fontsize=7)
+    return fig
+
+
+def fig7(sweep: xr.Dataset) -> Figure:
+    """Fig. 7: soft-plateau adhesive force against N, log-log, with N^(1/4).
+
+    The plateau value is F_ad at the softest kbar run for each brush.  The
+    fitted prefactor c of F = c N^(1/4) (and 1/c, the paper's 1.2-1.3) is
+    printed on the plot.
+    """
+    fig = _new_figure(4.6, 3.8)
+    ax = fig.add_subplot()
+    ax.set_title("Soft plateau of the adhesive force")
+    all_n, all_f = [], []
+    markers = {"regular": "s", "random": "o"}
+    for layout in _layouts(sweep):
+        points = [(int(n), *soft_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
+        points = [(n, k, f) for n, k, f in points if math.isfinite(f)]
+        if not points:
+            continue
+        n, k, f = map(np.asarray, zip(*points))
+        all_n += list(n)
+        all_f += list(f)
+        ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none", label=f"{layout} (min "
+                + r"$\bar k$" + f" = {k.min():g})")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    # Label the N actually run; decade-only log ticks say little over 4 ... 2304.
+    ax.set_xticks(sorted(set(all_n)), [str(n) for n in sorted(set(all_n))])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_major_formatter(ScalarFormatter())
+    ax.yaxis.set_minor_formatter(ScalarFormatter())
+    ax.set_xlabel("number of pillars N")
+    ax.set_ylabel(FAD_LABEL + " (soft plateau)")
+    if not all_n:
+        _no_data(ax, "no runs")
+        return fig
+    span = np.geomspace(min(all_n) / 1.5, max(all_n) * 1.5, 50)
+    ax.plot(span, theory.soft_limit(span), "k-", lw=1.2, label=r"$N^{1/4}$ (eq. 6)")
+    fit = fit_soft_prefactor(all_n, all_f)
+    ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "k--", lw=1,
+            label=rf"fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
+    text = f"fitted prefactor c = {fit['prefactor']:.3f}\n" + r"$N^{1/4}/\bar F_{ad}$" \
+        + f" = 1/c = {fit['ratio']:.2f} (paper 1.2-1.3)"
+    if math.isfinite(fit["exponent"]):
+        text += f"\nfree fit exponent {fit['exponent']:.3f}"
+    ax.text(0.03, 0.97, text, transform=ax.transAxes, va="top", fontsize=8)
+    ax.legend(fontsize=7, loc="lower right")
+    return fig
+
+
+def fig8(sweep: xr.Dataset) -> Figure:
+    """Fig. 8: work of separation against kbar per N, with eq. 27's soft limit.
+
+    Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
+    (`brushcore.theory.soft_work`); W = 1 is the rigid compact punch.
+    """
+    fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
+    colors = _brush_colors(sweep.n_pillars.values)
+    phi = _phi(sweep)
+    for layout, ax in axes.items():
+        drawn = False
+        for n in sweep.n_pillars.values:
+            series = seed_mean(sweep, "work_of_separation_normalized", layout, int(n))
+            if series.size == 0:
+                continue
+            drawn = True
+            ax.plot(series.kbar, series, "o-", ms=4, color=colors[int(n)], label=f"N = {int(n)}")
+            if math.isfinite(phi):
+                kbar = series.kbar.values
+                ax.plot(kbar, theory.soft_work(int(n), phi, kbar), "--", lw=1,
+                        color=colors[int(n)])
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")
+        ax.set_xlabel(K_LABEL)
+        ax.set_ylabel(W_LABEL)
+        if not drawn:
+            _no_data(ax, f"no {layout} runs")
+            continue
+        ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
+        ax.plot([], [], "k--", lw=1, label=r"soft limit $\bar W_S$ (eq. 27)")
+        ax.legend(fontsize=7)
+    return fig
+
+
+def save(fig: Figure, path: str | Path, dpi: int = 150) -> None:
+    """Write a figure (format from the suffix), creating the directory."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)

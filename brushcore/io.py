@@ -1,0 +1,76 @@
+"""Curve files: atomic netCDF writing and validated reading."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+#: Variables and attributes a curve file must have to be aggregated.
+REQUIRED_VARS = ("displacement", "force", "contact_area", "attached_pillars",
+                 "adhesive_force", "adhesive_force_normalized", "work_of_separation",
+                 "work_of_separation_normalized")
+REQUIRED_ATTRS = ("layout", "n_pillars", "kbar", "grid", "phi", "seed",
+                  "operator_applications", "brushcore_version", "parameter_hash")
+
+
+class CurveFileError(ValueError):
+    """A curve file is missing, truncated, corrupt or not a brushcore curve."""
+
+
+def _encoding(ds: xr.Dataset) -> dict:
+    enc = {}
+    for name, v in ds.data_vars.items():
+        if v.ndim >= 2:  # maps and snapshots compress ~50x
+            enc[name] = {"zlib": True, "complevel": 4}
+    return enc
+
+
+def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
+    """Write a curve Dataset to netCDF4 atomically.
+
+    The file is written to a temporary name in the same directory, flushed
+    to disk, and renamed over ``path``: a killed job leaves either no file
+    or a complete one, never half of one.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(ds))
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_curve(path: str | os.PathLike) -> xr.Dataset:
+    """Load a curve file fully into memory and check that it is a complete curve.
+
+    Raises
+    ------
+    CurveFileError
+        Naming the file, when it cannot be opened, lacks a variable or
+        attribute of a curve, or holds non-finite values.
+    """
+    path = Path(path)
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            ds = ds.load()
+    except Exception as exc:  # netCDF4 raises OSError, RuntimeError, ValueError...
+        raise CurveFileError(f"{path}: cannot be read as a netCDF curve file ({exc})") from exc
+    missing = [v for v in REQUIRED_VARS if v not in ds.variables]
+    missing += [f"attribute {a}" for a in REQUIRED_ATTRS if a not in ds.attrs]
+    if missing:
+        raise CurveFileError(f"{path}: not a brushcore curve file, missing {', '.join(missing)}")
+    for name in REQUIRED_VARS:
+        if not np.all(np.isfinite(ds[name].values)):
+            raise CurveFileError(f"{path}: variable {name} holds NaN or inf")
+    return ds

@@ -1,0 +1,137 @@
+"""Event-driven, displacement-controlled pull-off (exact for the model).
+
+For a fixed attached set C the stresses scale with the pull displacement,
+sigma(d) = d sigma_1(C) (flat pillars at equal height), so F(d) is linear
+through the origin between detachment events.  We therefore jump straight
+to the next event d = sigma_c / max sigma_1, detach the element(s) that
+reach sigma_c, and re-solve at the same d until no element exceeds sigma_c
+(the unstable cascades of the paper's Fig. 5).  No step size is involved;
+F_ad is the largest event force and W is the exact area under the piecewise
+linear curve.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cg import ConvergenceError, pcg
+from .operator import BrushOperator
+from .params import SolverOptions
+
+
+class SolverError(RuntimeError):
+    """The pull-off could not be completed consistently."""
+
+
+@dataclass(frozen=True)
+class PullOffCurve:
+    """Raw result of one pull-off (units of the inputs).
+
+    Attributes
+    ----------
+    displacement : pull displacement d per step [length], non-decreasing
+    force : tensile force F per step [force]
+    attached_elements : attached element count per step
+    attached_pillars : pillars with at least one attached element per step
+    detach_step : per pillar element (operator order), the first step at
+        which it is detached
+    events : detachment events (jumps in d)
+    cg_iterations : CG iterations over all solves
+    """
+
+    displacement: np.ndarray
+    force: np.ndarray
+    attached_elements: np.ndarray
+    attached_pillars: np.ndarray
+    detach_step: np.ndarray
+    events: int
+    cg_iterations: int
+
+
+Progress = Callable[[int, int, int], None]
+
+
+def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions,
+             progress: Progress | None = None) -> PullOffCurve:
+    """Pull the brush off from full contact until every element has detached.
+
+    Parameters
+    ----------
+    op : operator over all pillar elements, all attached
+    sigma_c : critical tensile stress [stress]
+    h : element size [length]
+    options : tolerances and the (default 0) lookahead window
+    progress : called as progress(events, attached, total) after each event
+
+    Returns
+    -------
+    PullOffCurve
+    """
+    total = op.size
+    detach_step = np.full(total, -1, dtype=np.int64)
+    disp, force, n_el, n_pil = [0.0], [0.0], [total], [int(np.count_nonzero(op.counts))]
+    cg_iters = 0
+    events = 0
+    sigma1 = np.zeros(total)  # unit-displacement stresses, warm start
+    d = 0.0
+
+    def solve(x0: np.ndarray) -> np.ndarray:
+        nonlocal cg_iters
+        b = np.ones(op.size)
+        try:
+            x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter)
+        except ConvergenceError as exc:
+            raise ConvergenceError(f"{exc} at event {events}, d = {d:.6g}, "
+                                   f"{op.size} of {total} elements attached") from None
+        cg_iters += it
+        return x
+
+    def record(x: np.ndarray) -> None:
+        disp.append(d)
+        force.append(d * h * h * float(x.sum()))
+        n_el.append(op.size)
+        n_pil.append(int(np.count_nonzero(op.counts)))
+
+    def detach(mask: np.ndarray) -> None:
+        step = len(disp)  # the next recorded step is the first without them
+        positions = np.flatnonzero(op.attached)[mask]
+        detach_step[positions] = step
+        op.detach(mask)
+
+    sigma1 = solve(sigma1)
+    while op.size:
+        peak = float(sigma1.max())
+        if not np.isfinite(peak) or peak <= 0.0:
+            raise SolverError(f"no tensile stress at event {events} (max sigma_1 = {peak!r}) "
+                              f"with {op.size} elements attached")
+        d_next = sigma_c / peak
+        if d_next < d * (1.0 - 1e-12):
+            raise SolverError(f"contact set inconsistent: next event d = {d_next:.9g} lies "
+                              f"before the current d = {d:.9g}")
+        d = max(d, d_next)
+        events += 1
+        record(sigma1)
+        mask = sigma1 >= peak * (1.0 - options.tie_rtol - options.lookahead)
+        # Re-solve at fixed d until no attached element exceeds sigma_c.
+        while True:
+            keep = ~mask
+            detach(mask)
+            if not op.size:
+                break
+            sigma1 = solve(sigma1[keep])
+            record(sigma1)
+            mask = d * sigma1 >= sigma_c * (1.0 - options.tie_rtol)
+            if not mask.any():
+                break
+        if progress is not None:
+            progress(events, op.size, total)
+    # complete separation
+    disp.append(d)
+    force.append(0.0)
+    n_el.append(0)
+    n_pil.append(0)
+    return PullOffCurve(np.asarray(disp), np.asarray(force), np.asarray(n_el),
+                        np.asarray(n_pil), detach_step, events, cg_iters)

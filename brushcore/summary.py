@@ -1,0 +1,192 @@
+"""Headline numbers of a sweep beside the paper's (He, Li & Popov 2020, §4).
+
+The reductions used by both the summary table and the figures live here:
+averaging over seeds, the soft-plateau value, where the plateau starts, and
+the N^(1/4) prefactor fit.  Everything works on whatever part of the paper's
+grid a sweep contains; a missing case gives NaN here and "n/a" in the table.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from dataclasses import astuple, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from brushcore import theory
+
+#: F_ad within this relative distance of the soft plateau counts as on it.
+PLATEAU_RTOL = 0.05
+NOT_AVAILABLE = "n/a"
+
+
+def seed_mean(sweep: xr.Dataset, name: str, layout: str, n_pillars: int) -> xr.DataArray:
+    """One variable against kbar for one brush, averaged over the seeds run.
+
+    Returns
+    -------
+    xarray.DataArray
+        Indexed by kbar, only where at least one seed ran (may be empty).
+    """
+    if layout not in sweep.layout or n_pillars not in sweep.n_pillars:
+        return xr.DataArray(np.array([]), dims="kbar", coords={"kbar": np.array([])})
+    values = sweep[name].sel(layout=layout, n_pillars=n_pillars)
+    return values.mean("seed", skipna=True).dropna("kbar")
+
+
+def value_at(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> float:
+    """Seed-averaged value of one case, NaN when the case was not run."""
+    series = seed_mean(sweep, name, layout, n_pillars)
+    hit = np.flatnonzero(np.isclose(series.kbar.values, kbar, rtol=1e-9, atol=0.0))
+    return float(series.values[hit[0]]) if hit.size else math.nan
+
+
+def rigid_end(sweep: xr.Dataset, layout: str, n_pillars: int) -> tuple[float, float]:
+    """(kbar, F_ad) at the stiffest kbar run, the numerical rigid limit."""
+    series = seed_mean(sweep, "adhesive_force_normalized", layout, n_pillars)
+    if series.size == 0:
+        return math.nan, math.nan
+    return float(series.kbar[-1]), float(series[-1])
+
+
+def soft_plateau(sweep: xr.Dataset, layout: str, n_pillars: int) -> tuple[float, float]:
+    """(kbar, F_ad) at the softest kbar run, taken as the soft plateau."""
+    series = seed_mean(sweep, "adhesive_force_normalized", layout, n_pillars)
+    if series.size == 0:
+        return math.nan, math.nan
+    return float(series.kbar[0]), float(series[0])
+
+
+def plateau_onset(
+    sweep: xr.Dataset, layout: str, n_pillars: int, rtol: float = PLATEAU_RTOL
+) -> float:
+    """Largest kbar below which F_ad stays within `rtol` of the soft plateau.
+
+    The plateau value is F_ad at the softest kbar run.  NaN with fewer than
+    two kbar values (a plateau cannot be told from one point).
+    """
+    series = seed_mean(sweep, "adhesive_force_normalized", layout, n_pillars)
+    if series.size < 2:
+        return math.nan
+    plateau = float(series[0])
+    onset = float(series.kbar[0])
+    for kbar, force in zip(series.kbar.values, series.values):
+        if abs(force - plateau) > rtol * abs(plateau):
+            break
+        onset = float(kbar)
+    return onset
+
+
+def fit_soft_prefactor(n_pillars: Sequence[float], force: Sequence[float]) -> dict[str, float]:
+    """Fit F = c N^(1/4) (and, with >= 2 distinct N, F = c' N^p) in log space.
+
+    Returns
+    -------
+    dict
+        ``prefactor`` c, ``ratio`` 1/c (the paper's "1.2 to 1.3"),
+        ``exponent`` p and ``free_prefactor`` c' (NaN when not fittable).
+    """
+    n = np.asarray(n_pillars, dtype=float)
+    f = np.asarray(force, dtype=float)
+    ok = np.isfinite(n) & np.isfinite(f) & (n > 0) & (f > 0)
+    n, f = n[ok], f[ok]
+    out = {"prefactor": math.nan, "ratio": math.nan, "exponent": math.nan,
+           "free_prefactor": math.nan}
+    if n.size == 0:
+        return out
+    log_c = float(np.mean(np.log(f) - np.log(np.asarray(theory.soft_limit(n)))))
+    out["prefactor"] = math.exp(log_c)
+    out["ratio"] = math.exp(-log_c)
+    if np.unique(n).size >= 2:
+        slope, intercept = np.polyfit(np.log(n), np.log(f), 1)
+        out["exponent"] = float(slope)
+        out["free_prefactor"] = math.exp(float(intercept))
+    return out
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the summary table (values already formatted as text)."""
+
+    quantity: str
+    layout: str
+    n_pillars: str
+    kbar: str
+    value: str
+    paper: str
+    note: str
+
+
+def _fmt(value: float, digits: int = 3) -> str:
+    return NOT_AVAILABLE if value is None or not math.isfinite(value) else f"{value:.{digits}g}"
+
+
+def _brushes(sweep: xr.Dataset) -> list[tuple[str, int]]:
+    return [(str(lay), int(n)) for lay in sweep.layout.values for n in sweep.n_pillars.values
+            if seed_mean(sweep, "adhesive_force_normalized", str(lay), int(n)).size]
+
+
+def headline_rows(
+    sweep: xr.Dataset, *, fig5_n_pillars: int = 256, fig5_kbar: float = 0.455
+) -> list[Row]:
+    """The paper's headline numbers and ours, one `Row` each.
+
+    Parameters
+    ----------
+    sweep : dataset from `brushcore.aggregate.build_sweep`.
+    fig5_n_pillars, fig5_kbar : the Fig. 5a case quoted in the text (16 x 16, 0.455).
+    """
+    phi = float(sweep.attrs.get("phi", math.nan))
+    rigid_theory = theory.rigid_limit(phi) if math.isfinite(phi) else math.nan
+    rows = [
+        Row("F_ad (normalised), Fig. 5a", "regular", str(fig5_n_pillars), _fmt(fig5_kbar),
+            _fmt(value_at(sweep, "adhesive_force_normalized", "regular", fig5_n_pillars,
+                          fig5_kbar)), "~1.8", "close to the rigid limit"),
+        Row("rigid limit phi^-1/4 (eq. 5)", "", "", "", _fmt(rigid_theory), "1.7",
+            f"phi = {_fmt(phi)} requested"),
+    ]
+    brushes = _brushes(sweep)
+    for layout, n in brushes:
+        kbar, force = rigid_end(sweep, layout, n)
+        rows.append(Row("F_ad at the stiffest kbar (rigid limit)", layout, str(n), _fmt(kbar),
+                        _fmt(force), "slightly above 1.7", "Fig. 6, kbar > 1"))
+    plateau_n, plateau_f = [], []
+    for layout, n in brushes:
+        kbar, force = soft_plateau(sweep, layout, n)
+        plateau_n.append(n)
+        plateau_f.append(force)
+        rows.append(Row("N^1/4 / F_ad on the soft plateau (softest kbar)", layout, str(n),
+                        _fmt(kbar), _fmt(float(theory.soft_limit(n)) / force),
+                        "1.2-1.3", "Fig. 7"))
+    fit = fit_soft_prefactor(plateau_n, plateau_f)
+    rows.append(Row("N^1/4 / F_ad, fit over all N", "all", "", "", _fmt(fit["ratio"]),
+                    "1.2-1.3", f"free power-law exponent {_fmt(fit['exponent'])} (eq. 6: 0.25)"))
+    big = seed_mean(sweep, "adhesive_force_normalized", "regular", 2304)
+    enhancement = float(big.max()) if big.size else math.nan
+    rows.append(Row("enhancement F_ad / F_K, 2304 pillars (max over kbar)", "regular", "2304",
+                    "", _fmt(enhancement), "~6", "Fig. 6a soft plateau"))
+    paper_onset = {64: "~1e-3", 2304: "~1e-5"}
+    for layout, n in brushes:
+        rows.append(Row(f"kbar where the soft plateau is reached (within {PLATEAU_RTOL:.0%})",
+                        layout, str(n), "", _fmt(plateau_onset(sweep, layout, n), 2),
+                        paper_onset.get(n, ""), "Fig. 6"))
+    return rows
+
+
+def write_summary(rows: Sequence[Row], csv_path: str | Path, md_path: str | Path | None = None
+                  ) -> None:
+    """Write the rows as CSV (and optionally as a Markdown table)."""
+    header = [f.name for f in fields(Row)]
+    Path(csv_path).parent.mkdir(parents=True, exist_ok=True)
+    with open(csv_path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(header)
+        writer.writerows(astuple(r) for r in rows)
+    if md_path is not None:
+        lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        lines += ["| " + " | ".join(astuple(r)) + " |" for r in rows]
+        Path(md_path).write_text("\n".join(lines) + "\n")

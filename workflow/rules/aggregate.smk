@@ -1,0 +1,41 @@
+rule aggregate:
+    """Collect every curve file into results/sweep.nc."""
+    input:
+        curve_files(config),
+    output:
+        "results/sweep.nc",
+    log:
+        "logs/aggregate.log",
+    benchmark:
+        "results/benchmarks/aggregate.tsv"
+    params:
+        keep_snapshots=[("regular", config["fig5"]["n_pillars"])],
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    script:
+        "../scripts/aggregate.py"
+
+
+rule summary:
+    """Headline numbers beside the paper's."""
+    input:
+        "results/sweep.nc",
+    output:
+        csv=report(
+            "results/summary.csv",
+            caption="../report/summary.rst",
+            category="Summary",
+        ),
+        md="results/summary.md",
+    log:
+        "logs/summary.log",
+    benchmark:
+        "results/benchmarks/summary.tsv"
+    params:
+        fig5=config["fig5"],
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../scripts/summary.py"

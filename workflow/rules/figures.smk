@@ -1,0 +1,98 @@
+rule fig5:
+    """Fig. 5: F-d curves of the Fig. 5 brush with contact snapshots."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/fig5.png",
+            caption="../report/fig5.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/fig5.pdf",
+    log:
+        "logs/figures/fig5.log",
+    benchmark:
+        "results/benchmarks/figures/fig5.tsv"
+    params:
+        figure="fig5",
+        options=config["fig5"],
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../scripts/figure.py"
+
+
+rule fig6:
+    """Fig. 6: adhesive force against kbar with the rigid limit."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/fig6.png",
+            caption="../report/fig6.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/fig6.pdf",
+    log:
+        "logs/figures/fig6.log",
+    benchmark:
+        "results/benchmarks/figures/fig6.tsv"
+    params:
+        figure="fig6",
+        options={},
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../scripts/figure.py"
+
+
+rule fig7:
+    """Fig. 7: soft-plateau adhesive force against N with N^(1/4)."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/fig7.png",
+            caption="../report/fig7.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/fig7.pdf",
+    log:
+        "logs/figures/fig7.log",
+    benchmark:
+        "results/benchmarks/figures/fig7.tsv"
+    params:
+        figure="fig7",
+        options={},
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../scripts/figure.py"
+
+
+rule fig8:
+    """Fig. 8: work of separation against kbar with the soft limit."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/fig8.png",
+            caption="../report/fig8.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/fig8.pdf",
+    log:
+        "logs/figures/fig8.log",
+    benchmark:
+        "results/benchmarks/figures/fig8.tsv"
+    params:
+        figure="fig8",
+        options={},
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../scripts/figure.py"

@@ -1,0 +1,26 @@
+"""Script of rule `summary`: results/sweep.nc -> headline table (CSV, Markdown)."""
+
+import traceback
+from contextlib import redirect_stderr, redirect_stdout
+
+import xarray as xr
+
+from brushcore.summary import headline_rows, write_summary
+
+
+def main(smk) -> None:
+    fig5 = smk.params.fig5
+    with xr.open_dataset(smk.input[0]) as sweep:
+        rows = headline_rows(
+            sweep, fig5_n_pillars=int(fig5["n_pillars"]), fig5_kbar=float(fig5["kbar"][0])
+        )
+    write_summary(rows, smk.output.csv, smk.output.md)
+    print(open(smk.output.md).read())
+
+
+with open(snakemake.log[0], "w") as log, redirect_stdout(log), redirect_stderr(log):  # noqa: F821
+    try:
+        main(snakemake)  # noqa: F821
+    except Exception:
+        traceback.print_exc()
+        raise
