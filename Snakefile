@@ -6,7 +6,6 @@ snakemake --cores 2 --configfile config/test.yaml   # a tiny sweep
 
 from snakemake.utils import min_version, validate
 
-
 min_version("9.0")
 
 
@@ -41,9 +40,9 @@ localrules:
 
 
 rule all:
+    default_target: True
     input:
         "results/sweep.nc",
         "results/summary.csv",
         "results/summary.md",
         expand("results/figures/fig{n}.{ext}", n=[5, 6, 7, 8], ext=["png", "pdf"]),
-    default_target: True

@@ -7,6 +7,6 @@ event-driven displacement-controlled pull-off (He, Li & Popov 2020).
 """
 
 from .params import BrushParams, ParameterError, SolverOptions
-from .simulate import simulate
+from .curve import simulate
 
 __all__ = ["BrushParams", "ParameterError", "SolverOptions", "simulate"]

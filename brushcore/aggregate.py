@@ -329,10 +329,11 @@ def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, objec
     """
     enc: dict[str, dict[str, object]] = {}
     for name, var in sweep.data_vars.items():
-        if var.dtype.kind in "fi" and var.ndim >= 2:
-            chunks = tuple(1 if d in CASE_DIMS or d in ("case", "snapshot") else n
-                           for d, n in var.sizes.items())
-            enc[name] = {"zlib": True, "complevel": complevel, "chunksizes": chunks}
+        whole = {"step", "y", "x"} & set(var.dims)
+        if var.dtype.kind not in "fi" or not whole:
+            continue  # small scalars and labels: default storage
+        chunks = tuple(n if d in whole else 1 for d, n in var.sizes.items())
+        enc[name] = {"zlib": True, "complevel": complevel, "chunksizes": chunks}
     return enc
 
 

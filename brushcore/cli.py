@@ -61,7 +61,7 @@ class _Progress:
 
 def _simulate(args: argparse.Namespace) -> int:
     from .io import write_curve
-    from .simulate import simulate
+    from .curve import simulate
     from .threads import pin_threads
 
     try:

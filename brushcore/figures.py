@@ -30,6 +30,8 @@ K_LABEL = r"$\bar k = k / (E^* L)$"
 FAD_LABEL = r"$\bar F_{ad}$"
 W_LABEL = r"$\bar W = W / (2\pi a_0^2 \Delta\gamma)$"
 PANEL_TITLES = {"regular": "(a) regular", "random": "(b) random"}
+#: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
+SOFT_WORK_FLOOR = 0.3
 # detached / attached pillar element on a white background (no pillar)
 SNAPSHOT_CMAP = ListedColormap(["white", "0.8", "tab:red"])
 
@@ -105,9 +107,8 @@ def fig5(
         snap = snapshots(sweep, layout, n_pillars, k, seed)
         if snap is None:
             continue
-        steps = snap["snapshot_step"].values
-        for j in range(n_snap):
-            step = int(steps[j])
+        steps = [int(s) for s in snap["snapshot_step"].values]
+        for j, step in enumerate(steps):
             image_ax = fig.add_subplot(grid[row, 1 + j])
             image_ax.set_axis_off()
             if step < 0:
@@ -115,10 +116,12 @@ def fig5(
             image_ax.imshow(snap["contact_snapshot"].values[j] + 1, cmap=SNAPSHOT_CMAP,
                             vmin=0, vmax=2, interpolation="nearest", origin="lower")
             image_ax.set_title(f"{j + 1}: {snap['snapshot_label'].values[j]}", fontsize=7)
-            if step < d.size:
-                ax.plot(d[step], f[step], "o", ms=4, color="C3")
-                ax.annotate(str(j + 1), (d[step], f[step]), textcoords="offset points",
-                            xytext=(3, 3), fontsize=7)
+        # One dot per distinct step; snapshots sharing a step share its label ("1,2").
+        for step in sorted({s for s in steps if 0 <= s < d.size}):
+            label = ",".join(str(j + 1) for j, s in enumerate(steps) if s == step)
+            ax.plot(d[step], f[step], "o", ms=4, color="C3")
+            ax.annotate(label, (d[step], f[step]), textcoords="offset points",
+                        xytext=(3, 3), fontsize=7)
     return fig
 
 
@@ -232,9 +235,11 @@ def fig8(sweep: xr.Dataset) -> Figure:
             drawn = True
             ax.plot(series.kbar, series, "o-", ms=4, color=colors[int(n)], label=f"N = {int(n)}")
             if math.isfinite(phi):
+                # Only where the springs' energy matters; it falls as 1/kbar.
                 kbar = series.kbar.values
-                ax.plot(kbar, theory.soft_work(int(n), phi, kbar), "--", lw=1,
-                        color=colors[int(n)])
+                soft = np.asarray(theory.soft_work(int(n), phi, kbar))
+                keep = soft >= SOFT_WORK_FLOOR
+                ax.plot(kbar[keep], soft[keep], "--", lw=1, color=colors[int(n)])
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")

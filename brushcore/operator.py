@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .convolution import Convolver
+from .precondition import BlockInverse
 from .theory import self_compliance
 
 
@@ -39,7 +40,7 @@ class BrushOperator:
     """
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
-                 h: float, e_star: float) -> None:
+                 h: float, e_star: float, use_block: bool = True) -> None:
         self.conv = convolver
         flat = labels.ravel()
         self.elements = np.flatnonzero(flat >= 0)  # flat n x n indices of pillar elements
@@ -50,10 +51,15 @@ class BrushOperator:
         self._padded = convolver.padded_index(self.elements)
         self.conv.buffer[...] = 0.0
         self.attached = np.ones(self.elements.size, dtype=bool)
+        self.block = (BlockInverse(self.elements, self.pillar_of, convolver.n,
+                                   self.compliance, h, e_star)
+                      if use_block and BlockInverse.fits(self.pillar_of) else None)
         self._update()
 
     def _update(self) -> None:
         self.idx = self._padded[self.attached]
+        if self.block is not None:
+            self._bpos = self.block.pos[self.attached]
         self.pl = self.pillar_of[self.attached]
         self.counts = np.bincount(self.pl, minlength=self.n_pillars)
         # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
@@ -69,8 +75,10 @@ class BrushOperator:
         """Detach attached elements given by a boolean mask over the compressed vector."""
         gone = self.idx[which]
         self.conv.buffer.ravel()[gone] = 0.0
-        pos = np.flatnonzero(self.attached)
-        self.attached[pos[which]] = False
+        pos = np.flatnonzero(self.attached)[which]
+        self.attached[pos] = False
+        if self.block is not None:
+            self.block.detach(pos, self.pillar_of)
         self._update()
 
     def pillar_sums(self, x: np.ndarray) -> np.ndarray:
@@ -87,11 +95,16 @@ class BrushOperator:
         return y
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
-        """Block-diagonal inverse: (c I + s_p 1 1^T)^-1 per pillar, c = K_ii.
+        """Per-pillar block inverse.
 
-        Exact on the spring part, so the iteration count stays flat even
-        for very soft springs where S dominates.
+        With the dense blocks (`BlockInverse`) each pillar's own elastic and
+        spring coupling is inverted exactly.  Pillars too large for dense
+        blocks fall back to (c I + s_p 1 1^T)^-1 with c = K_ii, applied by
+        Sherman-Morrison: exact on the spring part, so the iteration count
+        stays flat even for very soft springs where S dominates.
         """
+        if self.block is not None:
+            return self.block.apply(r, self._bpos)
         return (r - self._sm * self.pillar_sums(r)[self.pl]) / self.diag
 
     def expand(self, x: np.ndarray, fill: float = 0.0) -> np.ndarray:

@@ -69,11 +69,19 @@ SLURMCTLD_PORT = 6817
 SLURMD_PORT = 6818
 PARTITION = "debug"
 MIN_JOB_AGE = 300  # seconds; the Slurm default, kept explicit on purpose
+CONF_MARKER = "# one-node test cluster written by brushcore tests/slurm_cluster.py"
+BACKUP_PREFIX = "slurm.conf.brushcore-backup-"
 
 
 def log(msg: str) -> None:
-    """Print a harness message (visible with ``pytest -s`` and in CI logs)."""
-    print(f"[slurm-cluster] {msg}", flush=True)
+    """Print a harness message (visible with ``pytest -s`` and in CI logs).
+
+    Goes to the process's real stdout, past pytest's ``capsys`` (the fd-level
+    capture still shows it on failure), so that it interleaves correctly
+    with the test's own progress lines.
+    """
+    out = sys.__stdout__ or sys.stdout
+    print(f"[slurm-cluster] {msg}", file=out, flush=True)
 
 
 def skip_reason() -> str | None:
@@ -120,11 +128,16 @@ def install_packages(timeout: float = 900) -> bool:
     try:
         t0 = time.monotonic()
         cmd = ["apt-get", "install", "-y", "-q", "--no-install-recommends", *PACKAGES]
-        r = subprocess.run(cmd, env=env, text=True, capture_output=True, timeout=timeout)
+        r = subprocess.run(
+            cmd, env=env, text=True, capture_output=True, timeout=timeout
+        )
         if r.returncode != 0:
             log("apt-get install failed; running apt-get update and retrying")
             subprocess.run(
-                ["apt-get", "update", "-q"], env=env, check=True, timeout=timeout,
+                ["apt-get", "update", "-q"],
+                env=env,
+                check=True,
+                timeout=timeout,
                 capture_output=True,
             )
             r = subprocess.run(
@@ -153,8 +166,13 @@ def detect_node() -> dict[str, int]:
     fields = dict(re.findall(r"(\w+)=(\S+)", out.splitlines()[0]))
     node = {
         k: int(fields[k])
-        for k in ("CPUs", "SocketsPerBoard", "CoresPerSocket", "ThreadsPerCore",
-                  "RealMemory")
+        for k in (
+            "CPUs",
+            "SocketsPerBoard",
+            "CoresPerSocket",
+            "ThreadsPerCore",
+            "RealMemory",
+        )
         if k in fields
     }
     return node
@@ -172,7 +190,7 @@ def slurm_conf_text(nodename: str, statedir: Path, node: dict[str, int]) -> str:
         f"ThreadsPerCore={node.get('ThreadsPerCore', 1)}"
     )
     return f"""\
-# one-node test cluster written by brushcore tests/slurm_cluster.py
+{CONF_MARKER}
 # (temporary: the original file, if any, is restored on teardown)
 ClusterName=brushcore-test
 SlurmctldHost={nodename}(127.0.0.1)
@@ -204,6 +222,8 @@ MpiDefault=none
 ReturnToService=2
 # finished jobs stay visible to squeue this long
 MinJobAge={MIN_JOB_AGE}
+# jobs submitted without --mem must not take the whole node
+DefMemPerCPU=1000
 SchedulerParameters=sched_interval=2
 SlurmctldTimeout=30
 SlurmdTimeout=60
@@ -213,6 +233,13 @@ Waittime=0
 NodeName={nodename} NodeAddr=127.0.0.1 {cpu} RealMemory={real_memory} State=UNKNOWN
 PartitionName={PARTITION} Nodes={nodename} Default=YES MaxTime=INFINITE State=UP
 """
+
+
+def _is_ours(path: Path) -> bool:
+    try:
+        return path.read_text(errors="replace").startswith(CONF_MARKER)
+    except OSError:
+        return False
 
 
 # --------------------------------------------------------------------------
@@ -271,7 +298,8 @@ class SlurmCluster:
         return _run(["sinfo", "-N", "-l"], check=False).stdout
 
     def squeue(self) -> str:
-        return _run(["squeue", "--states=all"], check=False).stdout
+        fmt = "%.8i %.9P %.10j %.6C %.10l %.8m %.10T %.10M %R"
+        return _run(["squeue", "--states=all", "-o", fmt], check=False).stdout
 
     def logs(self, tail: int = 40) -> str:
         parts = []
@@ -310,7 +338,9 @@ def one_node_slurm(
             )
 
     own_tmp = workdir is None
-    statedir = Path(tempfile.mkdtemp(prefix="brushcore-slurm-")) if own_tmp else Path(workdir)
+    statedir = (
+        Path(tempfile.mkdtemp(prefix="brushcore-slurm-")) if own_tmp else Path(workdir)
+    )
     statedir.mkdir(parents=True, exist_ok=True)
     for sub in ("ctld", "spool"):
         (statedir / sub).mkdir(exist_ok=True)
@@ -328,8 +358,12 @@ def one_node_slurm(
         out = open(statedir / f"{name}.out", "wb")
         open_files.append(out)
         proc = subprocess.Popen(
-            cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            start_new_session=True, **kw,
+            cmd,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+            **kw,
         )
         started.append((name, proc))
         cluster.pids[name] = proc.pid
@@ -339,10 +373,18 @@ def one_node_slurm(
     try:
         # --- slurm.conf ------------------------------------------------------
         SLURM_CONF.parent.mkdir(parents=True, exist_ok=True)
-        if SLURM_CONF.exists() or SLURM_CONF.is_symlink():
-            backup = SLURM_CONF.with_name(f"slurm.conf.brushcore-backup-{os.getpid()}")
-            os.replace(SLURM_CONF, backup)
-            log(f"moved existing {SLURM_CONF} to {backup}")
+        orphans = sorted(SLURM_CONF.parent.glob(BACKUP_PREFIX + "*"))
+        if _is_ours(SLURM_CONF) and len(orphans) == 1:
+            # a previous run died before restoring: its backup is the original
+            backup = orphans[0]
+            log(f"found {SLURM_CONF} of a crashed run; will restore {backup}")
+        elif SLURM_CONF.exists() or SLURM_CONF.is_symlink():
+            if _is_ours(SLURM_CONF):
+                log(f"found {SLURM_CONF} of a crashed run; will remove it")
+            else:
+                backup = SLURM_CONF.with_name(f"{BACKUP_PREFIX}{os.getpid()}")
+                os.replace(SLURM_CONF, backup)
+                log(f"moved existing {SLURM_CONF} to {backup}")
         SLURM_CONF.write_text(slurm_conf_text(nodename, statedir, detect_node()))
         wrote_conf = True
         log(f"wrote {SLURM_CONF} (node {nodename}, partition {PARTITION})")
@@ -376,9 +418,7 @@ def one_node_slurm(
             deadline = time.monotonic() + 20
             while not munge_works():
                 if started[-1][1].poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError(
-                        "munged did not come up:\n" + cluster.logs()
-                    )
+                    raise RuntimeError("munged did not come up:\n" + cluster.logs())
                 time.sleep(0.2)
             log("munge works")
 
@@ -397,12 +437,15 @@ def one_node_slurm(
                     )
             r = _run(["sinfo", "-h", "-N", "-o", "%N %T"], check=False, timeout=15)
             state = r.stdout.strip()
-            if r.returncode == 0 and re.search(rf"^{re.escape(nodename)} idle\b", state, re.M):
+            if r.returncode == 0 and re.search(
+                rf"^{re.escape(nodename)} idle\b", state, re.M
+            ):
                 break
             if time.monotonic() > deadline:
                 raise RuntimeError(
                     f"node not idle after {start_timeout} s (sinfo: {state!r} "
-                    f"{r.stderr.strip()!r})\n" + _run(["sinfo", "-R"], check=False).stdout
+                    f"{r.stderr.strip()!r})\n"
+                    + _run(["sinfo", "-R"], check=False).stdout
                     + cluster.logs()
                 )
             time.sleep(0.5)
@@ -411,7 +454,9 @@ def one_node_slurm(
     finally:
         # cancel whatever is still queued/running so no slurmstepd outlives us
         if any(n == "slurmctld" and p.poll() is None for n, p in started):
-            ids = _run(["squeue", "-h", "-o", "%i"], check=False, timeout=15).stdout.split()
+            ids = _run(
+                ["squeue", "-h", "-o", "%i"], check=False, timeout=15
+            ).stdout.split()
             if ids:
                 log(f"cancelling leftover jobs {ids}")
                 _run(["scancel", *ids], check=False, timeout=30)
@@ -419,7 +464,8 @@ def one_node_slurm(
                 while time.monotonic() < deadline:
                     left = _run(
                         ["squeue", "-h", "-t", "PD,R,CG,CF,S", "-o", "%i"],
-                        check=False, timeout=15,
+                        check=False,
+                        timeout=15,
                     ).stdout.split()
                     if not left:
                         break

@@ -8,11 +8,11 @@ rule aggregate:
         "logs/aggregate.log",
     benchmark:
         "results/benchmarks/aggregate.tsv"
-    params:
-        keep_snapshots=[("regular", config["fig5"]["n_pillars"])],
     resources:
         mem_mb=4000,
         runtime=30,
+    params:
+        keep_snapshots=[("regular", config["fig5"]["n_pillars"])],
     script:
         "../scripts/aggregate.py"
 
@@ -32,10 +32,10 @@ rule summary:
         "logs/summary.log",
     benchmark:
         "results/benchmarks/summary.tsv"
-    params:
-        fig5=config["fig5"],
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        fig5=config["fig5"],
     script:
         "../scripts/summary.py"

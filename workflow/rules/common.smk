@@ -8,7 +8,10 @@ def check_regular_squares(config):
 
     JSON Schema cannot express "perfect square", so this completes the schema.
     """
-    for key, values in (("regular", config["regular"]), ("fig5.n_pillars", [config["fig5"]["n_pillars"]])):
+    for key, values in (
+        ("regular", config["regular"]),
+        ("fig5.n_pillars", [config["fig5"]["n_pillars"]]),
+    ):
         bad = [n for n in values if math.isqrt(n) ** 2 != n]
         if bad:
             raise ValueError(

@@ -13,12 +13,12 @@ rule fig5:
         "logs/figures/fig5.log",
     benchmark:
         "results/benchmarks/figures/fig5.tsv"
-    params:
-        figure="fig5",
-        options=config["fig5"],
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        figure="fig5",
+        options=config["fig5"],
     script:
         "../scripts/figure.py"
 
@@ -38,12 +38,12 @@ rule fig6:
         "logs/figures/fig6.log",
     benchmark:
         "results/benchmarks/figures/fig6.tsv"
-    params:
-        figure="fig6",
-        options={},
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        figure="fig6",
+        options={},
     script:
         "../scripts/figure.py"
 
@@ -63,12 +63,12 @@ rule fig7:
         "logs/figures/fig7.log",
     benchmark:
         "results/benchmarks/figures/fig7.tsv"
-    params:
-        figure="fig7",
-        options={},
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        figure="fig7",
+        options={},
     script:
         "../scripts/figure.py"
 
@@ -88,11 +88,11 @@ rule fig8:
         "logs/figures/fig8.log",
     benchmark:
         "results/benchmarks/figures/fig8.tsv"
-    params:
-        figure="fig8",
-        options={},
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        figure="fig8",
+        options={},
     script:
         "../scripts/figure.py"

@@ -11,12 +11,12 @@ rule simulate:
         n_pillars=r"[0-9]+",
         kbar=r"[0-9][0-9.e+-]*",
         seed=r"[0-9]+",
-    params:
-        grid=config["grid"],
-        phi=config["phi"],
     threads: config["threads"]
     resources:
         mem_mb=simulate_mem_mb,
         runtime=simulate_runtime,
+    params:
+        grid=config["grid"],
+        phi=config["phi"],
     script:
         "../scripts/simulate.py"

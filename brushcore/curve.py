@@ -47,9 +47,24 @@ def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
 
 
 def run(params: BrushParams, options: SolverOptions = SolverOptions(),
-        progress: Progress | None = None) -> tuple[np.ndarray, PullOffCurve, int]:
-    """Solve one pull-off; returns (labels, curve, operator applications)."""
-    labels = build_labels(params)
+        progress: Progress | None = None, labels: np.ndarray | None = None,
+        ) -> tuple[np.ndarray, PullOffCurve, int]:
+    """Solve one pull-off.
+
+    Parameters
+    ----------
+    params, options : the problem and the numerics
+    progress : optional callback, see `pull_off`
+    labels : a label map to use instead of the one `params` describes
+        (for transformed or hand-made layouts); its pillar count must be
+        ``params.n_pillars``
+
+    Returns
+    -------
+    detachment_step map (n, n; -1 outside pillars), the curve, and the
+    number of operator applications.
+    """
+    labels = build_labels(params) if labels is None else labels
     conv = cached_convolver(params.grid, params.h, params.e_star, fft_threads())
     before = conv.applications
     op = BrushOperator(conv, labels, spring_compliance(params, params.n_pillars),

@@ -1,0 +1,58 @@
+"""Layouts: counts, gaps, filling factor, reproducibility."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from brushcore import BrushParams, ParameterError
+from brushcore.layout import build_labels, random_centres, regular_centres
+
+
+@pytest.mark.parametrize("n_pillars", [64, 220, 425, 1620])
+def test_random_layout_counts_gaps_phi(n_pillars):
+    p = BrushParams("random", n_pillars, 1.0, 512, phi=0.12, seed=11)
+    labels = build_labels(p)
+    assert labels.max() + 1 == n_pillars
+    assert np.unique(labels[labels >= 0]).size == n_pillars
+    phi = np.count_nonzero(labels >= 0) / labels.size
+    assert abs(phi / 0.12 - 1) < 0.03, f"phi = {phi:.4f}"
+    c = random_centres(n_pillars, p.side, p.pillar_radius, p.min_gap * p.h, p.seed)
+    dist = np.hypot(*(c[:, None, :] - c[None, :, :]).transpose(2, 0, 1))
+    np.fill_diagonal(dist, np.inf)
+    assert dist.min() >= 2 * p.pillar_radius + p.min_gap * p.h
+    assert np.all((c >= p.pillar_radius) & (c <= p.side - p.pillar_radius))
+    # on the grid no two pillars share an element edge
+    for a, b in ((labels[1:], labels[:-1]), (labels[:, 1:], labels[:, :-1])):
+        assert not np.any((a >= 0) & (b >= 0) & (a != b))
+
+
+def test_random_layout_is_reproducible():
+    p = BrushParams("random", 220, 1.0, 256, seed=5)
+    assert np.array_equal(build_labels(p), build_labels(p))
+    other = BrushParams("random", 220, 1.0, 256, seed=6)
+    assert not np.array_equal(build_labels(p), build_labels(other))
+
+
+def test_regular_layout_geometry():
+    c = regular_centres(16, 128.0)
+    assert c.shape == (16, 2)
+    assert np.allclose(np.unique(c[:, 0]), [16, 48, 80, 112])
+    assert np.allclose(regular_centres(1, 10.0), [[5.0, 5.0]])
+    labels = build_labels(BrushParams("regular", 256, 1.0, 512))
+    counts = np.bincount(labels[labels >= 0])
+    assert counts.size == 256 and np.all(counts == counts[0])  # same footprint each
+    assert np.array_equal(labels >= 0, (labels >= 0)[::-1]) and np.array_equal(
+        labels >= 0, (labels >= 0).T)
+
+
+def test_radius_follows_phi():
+    p = BrushParams("regular", 64, 1.0, 512, phi=0.12)
+    assert p.pillar_radius == pytest.approx(512 * math.sqrt(0.12 / (math.pi * 64)))
+
+
+def test_random_layout_that_cannot_fit_fails_fast():
+    with pytest.raises(ParameterError, match="n_pillars=400 .*fewer pillars, a smaller phi"):
+        build_labels(BrushParams("random", 400, 1.0, 256, phi=0.5, seed=0))

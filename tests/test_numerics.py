@@ -1,0 +1,107 @@
+"""Convolution, operator and preconditioner against dense brute force."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from brushcore import theory
+from brushcore.cg import ConvergenceError, pcg
+from brushcore.convolution import Convolver
+from brushcore.kernel import dense_influence_matrix, love_coefficient
+from brushcore.operator import BrushOperator
+
+
+def test_love_coefficient_matches_quadrature():
+    """Love's closed form against a direct quadrature of Boussinesq's 1/(pi E* r)."""
+    from scipy.integrate import dblquad
+
+    for x, y in [(1.7, -0.4), (-3.0, 2.5), (0.9, 0.1), (0.0, -12.0)]:
+        ref = dblquad(lambda yy, xx: 1.0 / (np.pi * 2.0 * np.hypot(x - xx, y - yy)),
+                      -0.5, 0.5, -0.5, 0.5, epsabs=1e-12)[0]
+        assert love_coefficient(x, y, 1.0, 2.0) == pytest.approx(ref, rel=1e-7), (x, y)
+    assert love_coefficient(0.0, 0.0, 1.0, 1.0) == pytest.approx(theory.self_compliance(1, 1),
+                                                                 rel=1e-14)
+
+
+@pytest.mark.parametrize("n", [3, 7, 12])
+@pytest.mark.parametrize("use_pyfftw", [True, False])
+def test_convolution_equals_dense_boussinesq(n, use_pyfftw):
+    rng = np.random.default_rng(n)
+    stress = rng.standard_normal((n, n))
+    ref = (dense_influence_matrix(n, 0.7, 2.0) @ stress.ravel()).reshape(n, n)
+    conv = Convolver(n, 0.7, 2.0, use_pyfftw=use_pyfftw)
+    for _ in range(2):  # plans are reused: the second call must agree too
+        u = conv(stress)
+        err = np.abs(u - ref).max() / np.abs(ref).max()
+        assert err < 1e-12, f"{conv.backend}: relative error {err:.2e}"
+
+
+def _dense_operator(labels, compliance, attached):
+    n = labels.shape[0]
+    flat = labels.ravel()
+    el = np.flatnonzero(flat >= 0)[attached]
+    k = dense_influence_matrix(n, 1.0, 1.0)[np.ix_(el, el)]
+    same = flat[el][:, None] == flat[el][None, :]
+    return k + same * compliance[flat[el]][:, None]
+
+
+def _random_problem(seed, n=10, n_pillars=3):
+    rng = np.random.default_rng(seed)
+    labels = rng.integers(-1, n_pillars, size=(n, n)).astype(np.int32)
+    labels[0, :n_pillars] = np.arange(n_pillars)  # every pillar present
+    compliance = rng.uniform(0.0, 50.0, n_pillars)
+    return rng, labels, compliance
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), use_block=st.booleans())
+def test_operator_symmetric_and_matches_dense(seed, use_block):
+    rng, labels, compliance = _random_problem(seed)
+    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, use_block=use_block)
+    drop = rng.random(op.size) < 0.4
+    drop[0] = False
+    op.detach(drop)
+    dense = _dense_operator(labels, compliance, op.attached)
+    x, y = rng.standard_normal((2, op.size))
+    ax, ay = op.apply(x), op.apply(y)
+    assert np.allclose(ax, dense @ x, rtol=1e-12, atol=1e-12 * np.abs(dense @ x).max())
+    assert y @ ax == pytest.approx(x @ ay, rel=1e-12)
+    assert np.all(np.linalg.eigvalsh(dense) > 0), "operator must be positive definite"
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_block_preconditioner_is_exact_block_inverse_after_downdates(seed):
+    rng, labels, compliance = _random_problem(seed)
+    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, use_block=True)
+    for _ in range(2):
+        drop = rng.random(op.size) < 0.3
+        drop[0] = False
+        op.detach(drop)
+    dense = _dense_operator(labels, compliance, op.attached)
+    pl = op.pl
+    blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
+    r = rng.standard_normal(op.size)
+    assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+
+
+def test_sherman_morrison_preconditioner_inverts_diagonal_plus_spring():
+    rng, labels, compliance = _random_problem(7)
+    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, use_block=False)
+    pl = op.pl
+    m = np.where(pl[:, None] == pl[None, :], compliance[pl][:, None], 0.0)
+    m += np.eye(op.size) * theory.self_compliance(1.0, 1.0)
+    r = rng.standard_normal(op.size)
+    assert np.allclose(op.precondition(r), np.linalg.solve(m, r), rtol=1e-12)
+
+
+def test_cg_failure_is_loud():
+    a = np.diag(np.arange(1.0, 50.0))
+    b = np.ones(49)
+    with pytest.raises(ConvergenceError, match="did not converge in 2 iterations"):
+        pcg(lambda v: a @ v, lambda r: r, b, np.zeros(49), 1e-10, 2)
+    with pytest.raises(ConvergenceError, match="non-finite|broke down"):
+        pcg(lambda v: a @ v * np.nan, lambda r: r, b, np.zeros(49), 1e-10, 5)

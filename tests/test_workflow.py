@@ -1,0 +1,200 @@
+"""The Snakemake workflow end to end, on a temporary copy of the repository.
+
+The tiny sweep of ``config/test.yaml`` runs once per module (fixture
+`test_run`); the other tests inspect its outputs or ask Snakemake for dry
+runs, lint and config validation, which start no job.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+xr = pytest.importorskip("xarray")
+pytest.importorskip("snakemake")
+
+REPO = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake"]
+FIGURES = [f"fig{n}.{ext}" for n in (5, 6, 7, 8) for ext in ("png", "pdf")]
+CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
+SCALARS = (
+    "adhesive_force_normalized",
+    "work_of_separation_normalized",
+    "adhesive_force",
+    "work_of_separation",
+    "events",
+    "operator_applications",
+    "wall_time_s",
+)
+CURVES = (
+    "displacement",
+    "force",
+    "displacement_normalized",
+    "force_normalized",
+    "contact_area",
+    "attached_pillars",
+)
+# Things a run leaves behind that must not leak into the copy.
+IGNORE = shutil.ignore_patterns(
+    ".git", ".snakemake", "results", "logs", "__pycache__", "*.egg-info", ".pytest_cache",
+    ".hypothesis", "report.html",
+)
+
+
+def snakemake(workdir: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run Snakemake in `workdir`, capturing its (merged) output."""
+    return subprocess.run(
+        [*SNAKEMAKE, *args], cwd=workdir, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def output(proc: subprocess.CompletedProcess) -> str:
+    return proc.stdout + proc.stderr
+
+
+def expected_cases(config: dict) -> set[tuple[str, int, float, int]]:
+    """The (layout, N, kbar, seed) a config asks for, counted independently of the rules."""
+    cases = {("regular", n, float(k), 0) for n in config["regular"] for k in config["kbar"]}
+    cases |= {("regular", config["fig5"]["n_pillars"], float(k), 0) for k in config["fig5"]["kbar"]}
+    cases |= {("random", n, float(k), s) for n in config["random"] for k in config["kbar"]
+              for s in config["seeds"]}
+    return cases
+
+
+def planned_simulations(text: str) -> int:
+    match = re.search(r"^simulate\s+(\d+)\s*$", text, flags=re.MULTILINE)
+    assert match, f"no simulate line in the job stats:\n{text}"
+    return int(match.group(1))
+
+
+@pytest.fixture(scope="module")
+def repo_copy(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The repository without results, Snakemake state or git, in a temp dir."""
+    dest = tmp_path_factory.mktemp("workflow") / "repo"
+    shutil.copytree(REPO, dest, ignore=IGNORE)
+    return dest
+
+
+@pytest.fixture(scope="module")
+def test_run(repo_copy: Path) -> Path:
+    """Run the test sweep once end to end; return the working directory."""
+    proc = snakemake(repo_copy, "--cores", "2", "--configfile", "config/test.yaml")
+    assert proc.returncode == 0, f"test sweep failed:\n{output(proc)[-6000:]}"
+    return repo_copy
+
+
+@pytest.fixture(scope="module")
+def test_config(repo_copy: Path) -> dict:
+    return yaml.safe_load((repo_copy / "config/test.yaml").read_text())
+
+
+def test_sweep_dataset(test_run: Path, test_config: dict) -> None:
+    with xr.open_dataset(test_run / "results/sweep.nc") as sweep:
+        for dim in (*CASE_DIMS, "step"):
+            assert dim in sweep.dims, f"sweep.nc lacks dimension {dim}"
+        for name in SCALARS:
+            assert sweep[name].dims == CASE_DIMS, f"{name} has dims {sweep[name].dims}"
+        for name in CURVES:
+            assert sweep[name].dims == (*CASE_DIMS, "step"), f"{name}: {sweep[name].dims}"
+        for attr in ("brushcore_version", "source_files", "date_created", "Conventions"):
+            assert attr in sweep.attrs, f"sweep.nc lacks provenance attribute {attr}"
+
+        cases = expected_cases(test_config)
+        assert set(sweep.layout.values) == {c[0] for c in cases}
+        assert set(sweep.n_pillars.values.tolist()) == {c[1] for c in cases}
+        assert np.allclose(sorted(sweep.kbar.values), sorted({c[2] for c in cases}))
+        ran = np.zeros(tuple(sweep.sizes[d] for d in CASE_DIMS), dtype=bool)
+        for layout, n, kbar, seed in cases:
+            case = sweep.sel(layout=layout, n_pillars=n, kbar=kbar, seed=seed)
+            ran[tuple(int(np.flatnonzero(sweep[d].values == v)[0])
+                      for d, v in zip(CASE_DIMS, (layout, n, kbar, seed)))] = True
+            for name in SCALARS:
+                assert math.isfinite(float(case[name])), f"{name} is NaN for run {case}"
+            steps = int(case["n_steps"])
+            for name in CURVES:
+                values = case[name].values
+                assert np.isfinite(values[:steps]).all(), f"{name} has NaN inside the curve"
+                assert np.isnan(values[steps:]).all(), f"{name} is not NaN-padded"
+        # combinations not run are NaN
+        assert np.isnan(sweep["adhesive_force_normalized"].values[~ran]).all()
+        assert "contact_snapshot" in sweep, "Fig. 5 snapshots missing from sweep.nc"
+
+
+def test_figures_and_summary(test_run: Path) -> None:
+    for name in FIGURES:
+        path = test_run / "results/figures" / name
+        assert path.is_file() and path.stat().st_size > 0, f"{path} missing or empty"
+    summary = (test_run / "results/summary.csv").read_text()
+    assert summary.startswith("quantity,") and "n/a" in summary  # 2304 pillars not in test sweep
+
+
+def test_second_run_does_nothing(test_run: Path) -> None:
+    proc = snakemake(test_run, "--cores", "2", "--configfile", "config/test.yaml")
+    assert proc.returncode == 0, output(proc)
+    assert "Nothing to be done" in output(proc), output(proc)
+
+
+def test_report(test_run: Path) -> None:
+    proc = snakemake(test_run, "--configfile", "config/test.yaml", "--report", "report.html")
+    assert proc.returncode == 0, output(proc)
+    assert (test_run / "report.html").stat().st_size > 0
+
+
+def test_default_config_plans_paper_grid(repo_copy: Path) -> None:
+    config = yaml.safe_load((repo_copy / "config/config.yaml").read_text())
+    proc = snakemake(repo_copy, "-n", "--cores", "2")
+    assert proc.returncode == 0, output(proc)
+    assert planned_simulations(output(proc)) == len(expected_cases(config))
+    # the paper's grid, at two or more kbar per decade over 1e-6 ... 1e2
+    assert config["regular"] == [64, 256, 576, 2304] and config["random"] == [64, 220, 425, 1620]
+    decades = np.floor(np.log10(config["kbar"]) + 1e-9)
+    assert all((decades == d).sum() >= 2 for d in range(-6, 2))
+
+
+def test_lint(repo_copy: Path) -> None:
+    """No lint but the conda/container one: software is pip-installed (README)."""
+    proc = snakemake(repo_copy, "--lint")
+    titles = re.findall(r"^\s+\* (.+?):?$", output(proc), flags=re.MULTILINE)
+    others = [t for t in titles if "conda environment or container" not in t]
+    assert not others, output(proc)
+    assert "Error" not in output(proc), output(proc)
+
+
+@pytest.mark.parametrize(
+    ("bad", "key"),
+    [
+        ({"kbar": [-1.0e-3, 1.0]}, "kbar"),
+        ({"colour": "red"}, "colour"),
+        ({"regular": [4, 10]}, "regular"),
+    ],
+)
+def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: dict, key: str
+                                         ) -> None:
+    config = tmp_path / "bad.yaml"
+    config.write_text(yaml.safe_dump(bad))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config))
+    text = output(proc)
+    assert proc.returncode != 0, text
+    assert key in text, f"error does not name {key!r}:\n{text}"
+    assert "Job stats" not in text and "rule simulate" not in text, text
+
+
+def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> None:
+    from brushcore.aggregate import AggregationError, build_sweep
+
+    good = sorted((test_run / "results/curves").rglob("*.nc"))
+    bad = tmp_path / "truncated.nc"
+    bad.write_bytes(good[0].read_bytes()[:200])
+    with pytest.raises(AggregationError, match="truncated.nc"):
+        build_sweep([*good, bad])
+    with pytest.raises(AggregationError, match="same case"):
+        build_sweep([good[0], good[0]])
