@@ -39,6 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=0.0,
                      help="approximate: detach within this relative window (default exact)")
+    sim.add_argument("--cascade", choices=("global", "local"), default="global",
+                     help="global: re-solve everything after each detachment (reference); "
+                          "local: per-pillar cascades, verified globally (faster)")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
     sim.add_argument("--out", type=Path, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -69,7 +72,7 @@ def _simulate(args: argparse.Namespace) -> int:
                              grid=args.grid, phi=args.phi, seed=args.seed,
                              min_gap=args.min_gap, e_star=args.e_star, dgamma=args.dgamma,
                              h=args.h)
-        options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead)
+        options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade)
         if args.threads < 1:
             raise ParameterError(f"threads={args.threads} is invalid: allowed an integer >= 1")
         pin_threads(args.threads)

@@ -71,15 +71,28 @@ class BrushOperator:
         """Number of attached elements."""
         return int(self.idx.size)
 
-    def detach(self, which: np.ndarray) -> None:
-        """Detach attached elements given by a boolean mask over the compressed vector."""
+    def detach(self, which: np.ndarray, stress: np.ndarray | None = None) -> np.ndarray | None:
+        """Detach attached elements given by a boolean mask over the compressed vector.
+
+        With ``stress`` (compressed, before detaching) and the block
+        preconditioner, returns the stresses of the remaining elements after
+        each pillar's exact local response to the loss (other pillars'
+        field held fixed); otherwise None.
+        """
         gone = self.idx[which]
         self.conv.buffer.ravel()[gone] = 0.0
         pos = np.flatnonzero(self.attached)[which]
-        self.attached[pos] = False
+        local = None
         if self.block is not None:
-            self.block.detach(pos, self.pillar_of)
+            local = self.block.detach(pos, stress, None if stress is None else self._bpos)
+        self.attached[pos] = False
         self._update()
+        return None if local is None else local[~which]
+
+    @property
+    def has_local_solver(self) -> bool:
+        """Whether per-pillar exact inverses are available (see `detach`)."""
+        return self.block is not None
 
     def pillar_sums(self, x: np.ndarray) -> np.ndarray:
         """Sum of a compressed vector over each pillar, shape (N,)."""

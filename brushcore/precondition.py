@@ -71,17 +71,39 @@ class BlockInverse:
         m = int(counts.max())
         return m <= max_block and counts.size * m * m * 8.0 <= budget_bytes
 
-    def detach(self, elements: np.ndarray, pillar_of: np.ndarray) -> None:
-        """Downdate the inverses for detached elements (operator-order indices)."""
+    def detach(self, elements: np.ndarray, stress: np.ndarray | None = None,
+               attached_pos: np.ndarray | None = None) -> np.ndarray | None:
+        """Downdate the inverses for detached elements (operator-order indices).
+
+        If the current stresses are given (compressed over the attached set
+        before detaching, with `attached_pos` their stack positions), also
+        return each pillar's exact response to losing those elements with the
+        field of the other pillars held fixed: sigma_p - G[:, D] G[D, D]^-1
+        sigma_p[D] (the same Schur complement as the downdate).
+        """
         pos = self.pos[elements]
         pil, slot = np.divmod(pos, self.m)
+        w = None
+        if stress is not None:
+            w = self._work
+            w.ravel()[attached_pos] = stress
         for p in np.unique(pil):
             d = slot[pil == p]
             g = self.inv[p]
             cols = g[:, d]
-            g -= cols @ np.linalg.solve(g[np.ix_(d, d)], cols.T)
+            rhs = cols.T if w is None else np.column_stack([cols.T, w[p, d]])
+            x = np.linalg.solve(g[np.ix_(d, d)], rhs)
+            g -= cols @ x[:, : self.m]
             g[d, :] = 0.0  # exact in exact arithmetic; remove round-off
             g[:, d] = 0.0
+            if w is not None:
+                w[p] -= cols @ x[:, self.m]
+                w[p, d] = 0.0
+        if w is None:
+            return None
+        out = w.ravel()[attached_pos].copy()
+        w.ravel()[attached_pos] = 0.0
+        return out
 
     def apply(self, r: np.ndarray, attached_pos: np.ndarray) -> np.ndarray:
         """z = blockdiag(G_p) r for a compressed residual over the attached elements."""

@@ -199,9 +199,9 @@ def test_sweep_through_slurm_matches_local(
         tmp_path / "local.log",
         TIMEOUT_LOCAL,
     )
+    _say(capsys, f"local run (--cores 2): {wall_local:.1f} s wall")
     assert rc == 0, f"local run failed (rc={rc}):\n{_tail(out_local)}"
     assert (local / SWEEP).exists()
-    _say(capsys, f"local run (--cores 2): {wall_local:.1f} s wall")
 
     # --- the same through Slurm ---------------------------------------------
     remote = _copy_workflow(tmp_path / "slurm")
@@ -212,20 +212,20 @@ def test_sweep_through_slurm_matches_local(
             tmp_path / "slurm.log",
             TIMEOUT_SLURM,
         )
+        _say(capsys, f"slurm run (--profile {PROFILE}): {wall_slurm:.1f} s wall")
         if rc != 0:
             pytest.fail(
                 f"slurm run failed (rc={rc}, None = killed after "
                 f"{TIMEOUT_SLURM} s):\n{_tail(out)}\n--- squeue\n{cluster.squeue()}"
                 f"\n{cluster.logs()}"
             )
-        _say(capsys, f"slurm run (--profile {PROFILE}): {wall_slurm:.1f} s wall")
 
         # job ids snakemake says it got from sbatch
         submitted = sorted(
             set(re.findall(r"submitted with SLURM jobid (\d+)", out)), key=int
         )
         assert submitted, f"no Slurm submission in the log:\n{_tail(out)}"
-        # ... are jobs Slurm itself ran, under this run's name, to completion
+        # ... are jobs that Slurm itself ran to completion
         squeue = subprocess.run(
             ["squeue", "--states=all", "-h", "-o", "%i|%j|%T"],
             capture_output=True,

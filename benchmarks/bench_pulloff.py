@@ -1,0 +1,95 @@
+"""Speed benchmark of the pull-off solver (issue 4). Prints a table; asserts nothing.
+
+    python benchmarks/bench_pulloff.py            # the three 512 cases, both cascade modes
+    python benchmarks/bench_pulloff.py --grid 256 --quick
+
+For each case: operator applications, ms per application beside a bare
+real FFT pair (forward + inverse) of the padded 2n x 2n grid with the same
+library and threads, wall time, and F_ad, W of the fast (local cascade)
+mode against the reference (global cascade) mode.  One thread throughout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from brushcore import BrushParams, SolverOptions, simulate
+from brushcore.convolution import Convolver
+
+CASES = [("regular", 256, 0.455), ("regular", 64, 1e-3), ("regular", 2304, 1e-4)]
+
+
+def bare_fft_pair_ms(n: int, repeats: int = 40) -> float:
+    """ms for rfft2 + irfft2 of a 2n x 2n array, pyfftw, FFTW_MEASURE, one thread."""
+    import pyfftw
+
+    a = pyfftw.empty_aligned((2 * n, 2 * n), dtype="float64")
+    b = pyfftw.empty_aligned((2 * n, n + 1), dtype="complex128")
+    fwd = pyfftw.FFTW(a, b, axes=(0, 1), flags=("FFTW_MEASURE",), threads=1)
+    bwd = pyfftw.FFTW(b, a, axes=(0, 1), direction="FFTW_BACKWARD",
+                      flags=("FFTW_MEASURE",), threads=1)
+    a[:] = np.random.default_rng(0).random(a.shape)
+    fwd.execute()
+    bwd.execute()
+    t = time.perf_counter()
+    for _ in range(repeats):
+        fwd.execute()
+        bwd.execute()
+    return (time.perf_counter() - t) / repeats * 1e3
+
+
+def application_ms(n: int, repeats: int = 40) -> float:
+    """ms per pruned DC-FFT operator application on an n x n grid."""
+    conv = Convolver(n)
+    conv.buffer[:, :n] = np.random.default_rng(0).random((n, n))
+    conv.apply_buffer()
+    t = time.perf_counter()
+    for _ in range(repeats):
+        conv.apply_buffer()
+    return (time.perf_counter() - t) / repeats * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--grid", type=int, default=512)
+    parser.add_argument("--quick", action="store_true", help="fast mode only")
+    args = parser.parse_args()
+    with threadpool_limits(1):
+        pair = bare_fft_pair_ms(args.grid)
+        app = application_ms(args.grid)
+        print(f"grid {args.grid}: convolution {app:.2f} ms, bare FFT pair {pair:.2f} ms, "
+              f"ratio {app / pair:.2f}")
+        head = (f"{'case':>24} {'mode':>6} {'apps':>6} {'ms/app':>7} {'wall s':>7} "
+                f"{'F_ad/F_K':>9} {'W/W_K':>9} {'dF':>9} {'dW':>9}")
+        print(head)
+        for layout, n_pillars, kbar in CASES:
+            params = BrushParams(layout, n_pillars, kbar, args.grid)
+            rows = {}
+            for mode in (("local",) if args.quick else ("local", "global")):
+                t = time.perf_counter()
+                ds = simulate(params, SolverOptions(cascade=mode))
+                wall = time.perf_counter() - t
+                rows[mode] = ds
+                apps = ds.attrs["operator_applications"]
+                f = float(ds.adhesive_force_normalized)
+                w = float(ds.work_of_separation_normalized)
+                ref = rows.get("global")
+                df = dw = float("nan")
+                if ref is not None and "local" in rows:
+                    df = float(rows["local"].adhesive_force) / float(ref.adhesive_force) - 1
+                    dw = float(rows["local"].work_of_separation) / float(
+                        ref.work_of_separation) - 1
+                print(f"{layout} N={n_pillars} k={kbar:g}".rjust(24)
+                      + f" {mode:>6} {apps:6d} {wall / apps * 1e3:7.2f} {wall:7.1f} "
+                      f"{f:9.4f} {w:9.4f} {df:9.1e} {dw:9.1e}", flush=True)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"peak resident memory of this process: {peak:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
