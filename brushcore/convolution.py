@@ -12,9 +12,12 @@ and reused for every application; scipy.fft is the fallback without pyfftw.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import pickle
 import threading
+from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
 
@@ -37,6 +40,30 @@ def _wisdom_path() -> Path:
         os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "brushcore"
     )
     return Path(root) / "fftw-wisdom.pickle"
+
+
+@contextlib.contextmanager
+def _wisdom_lock() -> Iterator[None]:
+    """Serialise planning across processes on this machine.
+
+    FFTW_MEASURE picks algorithms by timing, so two jobs planning at once
+    under different load could pick different plans and round differently.
+    With the lock the first job plans and saves wisdom; every later job
+    imports it and gets the same plans, hence bit-identical results.
+    """
+    path = _wisdom_path().with_suffix(".lock")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(path, "a")
+    except OSError:
+        yield  # unwritable cache: plan without the lock
+        return
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def _load_wisdom() -> None:
@@ -96,7 +123,7 @@ class Convolver:
         self._half = empty((2 * n, nc), dtype="complex128")
         self._real_out = empty((n, 2 * n), dtype="float64")
         flags = ("FFTW_MEASURE",)
-        with _WISDOM_LOCK:
+        with _WISDOM_LOCK, _wisdom_lock():
             _load_wisdom()
             # In-place column transforms measured ~1.5x faster than out-of-place.
             self._rows_fwd = pyfftw.FFTW(self._real_in, self._half[:n], axes=(1,),

@@ -1,0 +1,65 @@
+"""Extreme but valid parameters run and approach their physical limits (small grids)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from brushcore import BrushParams, ParameterError, simulate, theory
+from brushcore.layout import build_labels
+
+
+def _fw(ds):
+    f = float(ds.adhesive_force_normalized)
+    w = float(ds.work_of_separation_normalized)
+    assert np.isfinite(f) and np.isfinite(w) and f > 0 and w > 0
+    assert np.all(np.isfinite(ds.force.values)) and np.all(ds.force.values >= 0)
+    return f, w
+
+
+def test_very_soft_springs_sit_on_the_plateau():
+    f8, w8 = _fw(simulate(BrushParams("regular", 16, 1e-8, 64)))
+    f6, w6 = _fw(simulate(BrushParams("regular", 16, 1e-6, 64)))
+    assert f8 == pytest.approx(f6, rel=1e-3)  # soft plateau reached
+    assert w8 / w6 == pytest.approx(100.0, rel=1e-3)  # spring energy ~ 1/k (eq. 27)
+    assert f8 < theory.soft_limit(16)  # never above independent Kendall pillars
+
+
+def test_very_stiff_springs_are_rigid():
+    f6, w6 = _fw(simulate(BrushParams("regular", 16, 1e6, 64)))
+    fi, wi = _fw(simulate(BrushParams("regular", 16, math.inf, 64)))
+    assert f6 == pytest.approx(fi, rel=1e-6) and w6 == pytest.approx(wi, rel=1e-4)
+
+
+@pytest.mark.parametrize("kbar", [1e-8, 1.0, math.inf])
+def test_single_pillar_is_kendall_at_any_stiffness(kbar):
+    f, _ = _fw(simulate(BrushParams("regular", 1, kbar, 64, phi=0.3)))  # radius 19.8 h
+    assert abs(f - 1) < 0.03, f"F_ad/F_K = {f:.4f}"
+
+
+def test_densest_resolvable_regular_brush():
+    side = 17  # 18 x 18 leaves pillars without an element on a 64 grid
+    with pytest.raises(ParameterError, match="grid=64"):
+        build_labels(BrushParams("regular", 18 * 18, 1.0, 64))
+    ds = simulate(BrushParams("regular", side * side, 1e-3, 64))
+    f, _ = _fw(ds)
+    assert 1.0 < f < theory.soft_limit(side * side)
+
+
+@pytest.mark.parametrize("phi", [0.01, 0.5])
+def test_filling_factor_extremes(phi):
+    ds = simulate(BrushParams("regular", 4, 1e-4, 128, phi=phi))
+    f, _ = _fw(ds)
+    if phi == 0.01:  # far apart and soft: independent pillars, eq. 6
+        assert f == pytest.approx(theory.soft_limit(4), rel=0.05)
+    else:  # touching neighbours still never beat independent pillars
+        assert 1.0 < f < theory.soft_limit(4)
+
+
+def test_random_layout_near_the_packing_limit():
+    ds = simulate(BrushParams("random", 16, 1e-2, 64, phi=0.35, seed=0))
+    _fw(ds)
+    with pytest.raises(ParameterError, match="n_pillars=40 is invalid for layout 'random'"):
+        simulate(BrushParams("random", 40, 1e-2, 64, phi=0.5, seed=0))
