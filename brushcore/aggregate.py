@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from brushcore import provenance
 from brushcore.io import read_curve
 
 LAYOUTS = ("regular", "random")
@@ -201,7 +202,7 @@ def build_sweep(
     scalars = {name: np.full(shape, np.nan) for name in (*SCALAR_VARIABLES, *ATTRIBUTE_SCALARS)}
     scalars["n_steps"] = np.full(shape, np.nan)
     lines = {name: np.full((*shape, n_steps), np.nan) for name in CURVE_VARIABLES}
-    for key, (path, curve) in curves.items():
+    for key, (_, curve) in curves.items():
         at = _index(coords, key)
         for name in SCALAR_VARIABLES:
             scalars[name][at] = float(curve[name])
@@ -297,8 +298,6 @@ def _snapshots(
 def _provenance(
     curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, grid: object, phi: object
 ) -> dict[str, object]:
-    import brushcore
-
     files = sorted(str(path) for path, _ in curves.values())
     hashes = [file_sha256(f) for f in files]
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
@@ -311,7 +310,8 @@ def _provenance(
         "references": "He, Li & Popov, Lubricants 8 (2020) 94",
         "history": f"{now} aggregated {len(files)} curve files by brushcore.aggregate",
         "date_created": now,
-        "brushcore_version": getattr(brushcore, "__version__", "unknown"),
+        "brushcore_version": provenance.version(),
+        "git_commit": provenance.git_commit(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
         "grid": int(grid) if grid is not None else -1,

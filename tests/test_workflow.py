@@ -104,7 +104,7 @@ def test_sweep_dataset(test_run: Path, test_config: dict) -> None:
             assert sweep[name].dims == CASE_DIMS, f"{name} has dims {sweep[name].dims}"
         for name in CURVES:
             assert sweep[name].dims == (*CASE_DIMS, "step"), f"{name}: {sweep[name].dims}"
-        for attr in ("brushcore_version", "source_files", "date_created", "Conventions"):
+        for attr in ("brushcore_version", "git_commit", "source_files", "date_created", "Conventions"):
             assert attr in sweep.attrs, f"sweep.nc lacks provenance attribute {attr}"
 
         cases = expected_cases(test_config)
