@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 from pathlib import Path
@@ -15,6 +16,8 @@ REQUIRED_VARS = ("displacement", "force", "contact_area", "attached_pillars",
                  "work_of_separation_normalized")
 REQUIRED_ATTRS = ("layout", "n_pillars", "kbar", "grid", "phi", "seed",
                   "operator_applications", "brushcore_version", "parameter_hash")
+#: Attribute holding the SHA-256 of the file's values and attributes (see `content_digest`).
+DIGEST_ATTR = "content_sha256"
 
 
 class CurveFileError(ValueError):
@@ -29,6 +32,28 @@ def _encoding(ds: xr.Dataset) -> dict:
     return enc
 
 
+def content_digest(ds: xr.Dataset) -> str:
+    """SHA-256 of every variable's values and every attribute but the digest itself.
+
+    netCDF/HDF5 keep no checksum of contiguous data, so a flipped byte in a
+    curve reads back as a different number without any error; `write_curve`
+    stores this digest and `read_curve` recomputes it.  Values are hashed as
+    written and read back (strings by their text, attributes as flat lists),
+    so the digest survives the netCDF round trip exactly.
+    """
+    h = hashlib.sha256()
+    for name in sorted(map(str, ds.variables)):
+        values = np.asarray(ds[name].values)
+        h.update(f"{name}|{values.shape}|{values.dtype.kind}|".encode())
+        if values.dtype.kind in "OUS":
+            h.update("\x00".join(map(str, values.ravel().tolist())).encode())
+        else:
+            h.update(np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("<")).tobytes())
+    for key in sorted(k for k in ds.attrs if k != DIGEST_ATTR):
+        h.update(f"{key}={np.ravel(np.asarray(ds.attrs[key])).tolist()!r}|".encode())
+    return h.hexdigest()
+
+
 def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     """Write a curve Dataset to netCDF4 atomically.
 
@@ -37,6 +62,8 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     or a complete one, never half of one.
     """
     path = Path(path)
+    ds = ds.copy(deep=False)  # the caller's attrs stay as they were
+    ds.attrs[DIGEST_ATTR] = content_digest(ds)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
@@ -58,7 +85,9 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
     ------
     CurveFileError
         Naming the file, when it cannot be opened, lacks a variable or
-        attribute of a curve, or holds non-finite values.
+        attribute of a curve, holds non-finite values, or its values differ
+        from the digest `write_curve` stored (files without one are older
+        and are accepted unchecked).
     """
     path = Path(path)
     try:
@@ -70,6 +99,10 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
     missing += [f"attribute {a}" for a in REQUIRED_ATTRS if a not in ds.attrs]
     if missing:
         raise CurveFileError(f"{path}: not a brushcore curve file, missing {', '.join(missing)}")
+    stored = ds.attrs.get(DIGEST_ATTR)
+    if stored is not None and str(stored) != content_digest(ds):
+        raise CurveFileError(f"{path}: corrupt, its values do not match the {DIGEST_ATTR} "
+                             "written with them")
     for name in REQUIRED_VARS:
         if not np.all(np.isfinite(ds[name].values)):
             raise CurveFileError(f"{path}: variable {name} holds NaN or inf")

@@ -40,7 +40,7 @@ class BrushOperator:
     """
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
-                 h: float, e_star: float, use_block: bool = True) -> None:
+                 h: float, e_star: float, use_block: bool = True, coarse: bool = True) -> None:
         self.conv = convolver
         flat = labels.ravel()
         self.elements = np.flatnonzero(flat >= 0)  # flat n x n indices of pillar elements
@@ -52,7 +52,7 @@ class BrushOperator:
         self.conv.buffer[...] = 0.0
         self.attached = np.ones(self.elements.size, dtype=bool)
         self.block = (BlockInverse(self.elements, self.pillar_of, convolver.n,
-                                   self.compliance, h, e_star)
+                                   self.compliance, h, e_star, coarse)
                       if use_block and BlockInverse.fits(self.pillar_of) else None)
         self._update()
 

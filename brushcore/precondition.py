@@ -10,11 +10,22 @@ inverse of the reduced block follows from a rank-|D| downdate,
 
 which leaves exact zeros in the rows and columns of D, so no refactorisation
 is ever needed.
+
+What the blocks miss is the pillars' interaction through the half space.
+Its slowest part is collective: pillar forces acting on each other through
+the far field.  A coarse space with one vector per pillar, z_p = G_p 1 (the
+pillar's own response to a unit displacement), carries it: Z^T A Z is
+diag(c) + C R C with c_p = 1^T G_p 1 and R the influence coefficient between
+pillar centroids (monopole approximation of the off-diagonal blocks).  The
+two-level additive preconditioner G + Z E^-1 Z^T stays symmetric positive
+definite whatever the approximation, so CG still converges to the exact
+solution; E is refactorised only when the pillars' c have drifted.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg as sla
 
 from .kernel import love_coefficient
 
@@ -29,10 +40,12 @@ class BlockInverse:
     n : grid size
     compliance : h^2 / k_p per pillar [length / stress]
     h, e_star : element size [length] and modulus [stress]
+    coarse : add the pillar-level coarse space (used for 1 < N <= MAX_COARSE)
     """
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
-                 compliance: np.ndarray, h: float, e_star: float) -> None:
+                 compliance: np.ndarray, h: float, e_star: float,
+                 coarse: bool = True) -> None:
         n_pillars = compliance.size
         order = np.argsort(pillar_of, kind="stable")
         counts = np.bincount(pillar_of, minlength=n_pillars)
@@ -46,8 +59,6 @@ class BlockInverse:
         xx = np.zeros((n_pillars, self.m))
         yy.ravel()[self.pos] = iy * h
         xx.ravel()[self.pos] = ix * h
-        valid = np.zeros((n_pillars, self.m), dtype=bool)
-        valid.ravel()[self.pos] = True
         self.inv = np.zeros((n_pillars, self.m, self.m))
         # Pillars with the same footprint up to translation share one inverse.
         shapes: dict[bytes, list[int]] = {}
@@ -63,6 +74,30 @@ class BlockInverse:
             block = love_coefficient(dy, dx, h, e_star) + compliance[p]
             self.inv[group, :k, :k] = np.linalg.inv(block)
         self._work = np.zeros((n_pillars, self.m))
+        self.coarse = coarse and 1 < n_pillars <= self.MAX_COARSE
+        if self.coarse:
+            cy = yy.sum(axis=1) / counts
+            cx = xx.sum(axis=1) / counts
+            self._r = love_coefficient(cy[:, None] - cy[None], cx[:, None] - cx[None], h, e_star)
+            np.fill_diagonal(self._r, 0.0)
+            self._z = self.inv.sum(axis=2)
+            self._factorise()
+
+    #: Largest pillar count with a coarse space (its dense N x N factor).
+    MAX_COARSE = 1000
+    #: Refactorise E once this fraction of pillars changed c by > 25 %.
+    REFACTOR_FRACTION = 0.02
+
+    def _factorise(self) -> None:
+        c = self._z.sum(axis=1)
+        e = np.diag(c) + c[:, None] * self._r * c[None, :]
+        dead = c <= 0.0
+        e[dead, :] = 0.0
+        e[:, dead] = 0.0
+        e[dead, dead] = 1.0
+        self._chol = sla.cho_factor(e, check_finite=False)
+        self._c_factor = c
+        self.factorisations = getattr(self, "factorisations", 0) + 1
 
     @staticmethod
     def fits(pillar_of: np.ndarray, budget_bytes: float = 4.0e8, max_block: int = 2500) -> bool:
@@ -99,6 +134,15 @@ class BlockInverse:
             if w is not None:
                 w[p] -= cols @ x[:, self.m]
                 w[p, d] = 0.0
+        if self.coarse:
+            touched = np.unique(pil)
+            self._z[touched] = self.inv[touched].sum(axis=2)
+            c = self._z[touched].sum(axis=1)
+            drift = np.abs(c - self._c_factor[touched]) > 0.25 * self._c_factor[touched]
+            self._drifted = getattr(self, "_drifted", set()) | set(touched[drift].tolist())
+            if len(self._drifted) > self.REFACTOR_FRACTION * self._z.shape[0]:
+                self._factorise()
+                self._drifted = set()
         if w is None:
             return None
         out = w.ravel()[attached_pos].copy()
@@ -109,6 +153,17 @@ class BlockInverse:
         """z = blockdiag(G_p) r for a compressed residual over the attached elements."""
         w = self._work
         w.ravel()[attached_pos] = r
+        if self.coarse:
+            # balancing: P = Z E^-1 Z^T + (I - Z E^-1 W^T) G (I - W E^-1 Z^T), W ~ A Z
+            c = self._c_factor
+            y1 = sla.cho_solve(self._chol, (self._z * w).sum(axis=1), check_finite=False)
+            wy = y1 + self._r @ (c * y1)
+            w.ravel()[attached_pos] -= wy[attached_pos // self.m]
         z = np.matmul(self.inv, w[:, :, None])[:, :, 0]
         w.ravel()[attached_pos] = 0.0
+        if self.coarse:
+            s_ = z.sum(axis=1)
+            wt = s_ + c * (self._r @ s_)
+            y2 = sla.cho_solve(self._chol, wt, check_finite=False)
+            z += self._z * (y1 - y2)[:, None]
         return z.ravel()[attached_pos]

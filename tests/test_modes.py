@@ -12,7 +12,18 @@ CASES = [("regular", 256, 0.455, 128), ("regular", 64, 1e-3, 128), ("regular", 6
 
 @pytest.fixture(scope="module")
 def reference():
-    return {c: simulate(BrushParams(c[0], c[1], c[2], c[3], seed=1)) for c in CASES}
+    return {c: simulate(BrushParams(c[0], c[1], c[2], c[3], seed=1), SolverOptions.exact())
+            for c in CASES}
+
+
+@pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
+def test_default_tolerance_is_harmless(reference, case):
+    """CG to 1e-4 (default) against 1e-8: measured < 1e-4 on 512 grids, 0.2 % allowed."""
+    ref = reference[case]
+    ds = simulate(BrushParams(case[0], case[1], case[2], case[3], seed=1))
+    for name in ("adhesive_force", "work_of_separation"):
+        assert float(ds[name]) == pytest.approx(float(ref[name]), rel=2e-3), name
+    assert ds.attrs["operator_applications"] < ref.attrs["operator_applications"]
 
 
 @pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
@@ -28,8 +39,9 @@ def test_local_cascade_agrees_with_global(reference, case):
     assert fast.attrs["operator_applications"] < ref.attrs["operator_applications"]
 
 
-@pytest.mark.parametrize("option", [dict(rtol=1e-6), dict(lookahead=1e-3)])
-def test_looser_options_change_little(reference, option):
+@pytest.mark.parametrize("option", [dict(lookahead=1e-3), dict(lookahead=1e-2)])
+def test_lookahead_changes_little(reference, option):
+    """Detaching within a window of the next event: its effect on F_ad and W is bounded."""
     case = CASES[0]
     ref = reference[case]
     ds = simulate(BrushParams(*case[:4]), SolverOptions(**option))

@@ -76,7 +76,7 @@ def test_operator_symmetric_and_matches_dense(seed, use_block):
 @given(seed=st.integers(0, 2**32 - 1))
 def test_block_preconditioner_is_exact_block_inverse_after_downdates(seed):
     rng, labels, compliance = _random_problem(seed)
-    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, use_block=True)
+    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
     for _ in range(2):
         drop = rng.random(op.size) < 0.3
         drop[0] = False
@@ -86,6 +86,21 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(seed):
     blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
     r = rng.standard_normal(op.size)
     assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_two_level_preconditioner_is_symmetric_positive_definite(seed):
+    """CG needs an SPD preconditioner; the approximate coarse space must not break that."""
+    rng, labels, compliance = _random_problem(seed, n=12, n_pillars=5)
+    op = BrushOperator(Convolver(12), labels, compliance, 1.0, 1.0)
+    assert op.block.coarse
+    drop = rng.random(op.size) < 0.3
+    drop[0] = False
+    op.detach(drop)
+    p = np.column_stack([op.precondition(e) for e in np.eye(op.size)])
+    assert np.allclose(p, p.T, rtol=1e-10, atol=1e-12 * np.abs(p).max())
+    assert np.linalg.eigvalsh(0.5 * (p + p.T)).min() > 0
 
 
 def test_sherman_morrison_preconditioner_inverts_diagonal_plus_spring():

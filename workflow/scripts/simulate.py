@@ -9,6 +9,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import traceback  # noqa: E402
 from contextlib import redirect_stderr, redirect_stdout  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from brushcore import BrushParams, SolverOptions, simulate  # noqa: E402
 from brushcore.io import write_curve  # noqa: E402
@@ -16,6 +17,11 @@ from brushcore.threads import pin_threads  # noqa: E402
 
 
 def main(smk) -> None:
+    # A job killed inside write_curve leaves its hidden temporary file
+    # (.<name>.*.tmp) behind; one job per output, so any such file is stale.
+    out = Path(smk.output[0])
+    for stale in out.parent.glob(f".{out.name}.*.tmp"):
+        stale.unlink(missing_ok=True)
     pin_threads(smk.threads)
     w = smk.wildcards
     params = BrushParams(

@@ -1,0 +1,455 @@
+"""Reliability (issue 5): kills, corrupt files, determinism and loud failures.
+
+* A sweep of ``config/test.yaml`` killed with SIGKILL (Snakemake and its jobs)
+  after its first curve file resumes to the same ``sweep.nc`` as a clean run.
+* Aggregation refuses truncated, bit-flipped, foreign and non-finite curve
+  files with an error naming the file, also through the Snakemake rule.
+* Identical inputs give bit-identical curves, in one process, in another, and
+  with an identical job running beside it.
+* Solver failures raise with the problem in the message; the CLI then exits
+  non-zero and leaves no curve file.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+xr = pytest.importorskip("xarray")
+
+from brushcore import BrushParams, SolverOptions, simulate  # noqa: E402
+from brushcore.aggregate import AggregationError, build_sweep  # noqa: E402
+from brushcore.cg import ConvergenceError  # noqa: E402
+from brushcore.io import CurveFileError, read_curve, write_curve  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake"]
+CLI = [sys.executable, "-m", "brushcore.cli"]
+TEST_SWEEP = ["--cores", "2", "--configfile", "config/test.yaml"]
+# Things a run leaves behind that must not leak into a copy of the repository.
+IGNORE = shutil.ignore_patterns(
+    ".git", ".snakemake", "results", "logs", "__pycache__", "*.egg-info", ".pytest_cache",
+    ".hypothesis", "report.html",
+)
+# Sweep variables that legitimately differ between runs.
+VOLATILE = ("wall_time_s",)
+# Counts stored as float (NaN = case not run); compared exactly.
+COUNTS = ("events", "operator_applications", "cg_iterations", "n_steps", "attached_pillars")
+# Attributes of a curve file that legitimately differ between runs.
+VOLATILE_ATTRS = ("wall_time_s", "history", "date_created", "content_sha256")
+# A small problem with a few detachment events and cascades (< 1 s).
+SMALL = dict(layout="random", n_pillars=16, kbar=0.1, grid=48, phi=0.12, seed=3)
+SMALL_ARGS = ["--layout", "random", "--pillars", "16", "--kbar", "0.1", "--grid", "48",
+              "--seed", "3", "--quiet"]
+
+
+def copy_repo(dest: Path) -> Path:
+    """The repository without results, Snakemake state or git."""
+    shutil.copytree(REPO, dest, ignore=IGNORE)
+    return dest
+
+
+def snakemake(workdir: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([*SNAKEMAKE, *args], cwd=workdir, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def output(proc: subprocess.CompletedProcess) -> str:
+    return proc.stdout + proc.stderr
+
+
+def curve_files(workdir: Path) -> list[Path]:
+    return sorted((workdir / "results/curves").rglob("*.nc"))
+
+
+def live_group_members(pgid: int) -> list[int]:
+    """Processes of a process group that are still running (zombies excluded)."""
+    alive = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # exited meanwhile
+        state, group = fields[0], int(fields[2])
+        if group == pgid and state != "Z":
+            alive.append(int(stat.parent.name))
+    return alive
+
+
+def assert_same_sweep(got: xr.Dataset, ref: xr.Dataset) -> None:
+    """Same variables and coordinates; counts exact, floats to 1e-12, NaN where ref has NaN."""
+    assert set(got.variables) == set(ref.variables), (
+        f"variables differ: {sorted(set(got.variables) ^ set(ref.variables))}")
+    assert dict(got.sizes) == dict(ref.sizes), f"sizes {dict(got.sizes)} != {dict(ref.sizes)}"
+    for name in ref.variables:
+        if name in VOLATILE:
+            continue
+        a, b = got[name].values, ref[name].values
+        if b.dtype.kind in "OUS":
+            assert a.tolist() == b.tolist(), f"{name}: {a} != {b}"
+        elif b.dtype.kind in "iub" or name in COUNTS:
+            assert np.array_equal(a, b, equal_nan=b.dtype.kind == "f"), f"{name} differs"
+        else:
+            assert np.array_equal(np.isnan(a), np.isnan(b)), f"{name}: NaN positions differ"
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=0.0, equal_nan=True,
+                                       err_msg=f"sweep variable {name}")
+
+
+def assert_identical_curves(got: xr.Dataset, ref: xr.Dataset, what: str) -> None:
+    """Bit-identical variables and identical non-volatile attributes."""
+    assert set(got.variables) == set(ref.variables), what
+    for name in ref.variables:
+        a, b = got[name].values, ref[name].values
+        if b.dtype.kind in "OUS":
+            assert a.tolist() == b.tolist(), f"{what}: {name} differs"
+        else:
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), f"{what}: {name} differs"
+    for key in set(ref.attrs) | set(got.attrs):
+        if key not in VOLATILE_ATTRS:
+            assert str(got.attrs.get(key)) == str(ref.attrs.get(key)), f"{what}: attr {key}"
+
+
+# -- kill and resume -----------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The test sweep run once without interruption."""
+    work = copy_repo(tmp_path_factory.mktemp("clean") / "repo")
+    proc = snakemake(work, *TEST_SWEEP)
+    assert proc.returncode == 0, f"clean test sweep failed:\n{output(proc)[-6000:]}"
+    return work
+
+
+def test_killed_sweep_resumes_to_the_same_sweep(clean_run: Path, tmp_path: Path) -> None:
+    work = copy_repo(tmp_path / "repo")
+    with open(tmp_path / "killed.log", "w") as log:
+        proc = subprocess.Popen([*SNAKEMAKE, *TEST_SWEEP], cwd=work, stdout=log,
+                                stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.monotonic() + 180
+        try:
+            while not curve_files(work):
+                assert proc.poll() is None, (
+                    "Snakemake ended before writing a curve:\n"
+                    + (tmp_path / "killed.log").read_text()[-4000:])
+                assert time.monotonic() < deadline, "no curve file within 180 s"
+                time.sleep(0.05)
+        finally:
+            os.killpg(proc.pid, signal.SIGKILL)  # Snakemake and every job it started
+            proc.wait(timeout=60)
+    if Path("/proc/self/stat").exists():  # no job may survive and keep writing
+        deadline = time.monotonic() + 30
+        while live_group_members(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not live_group_members(proc.pid), "processes survived SIGKILL of the group"
+
+    expected = {p.relative_to(clean_run) for p in curve_files(clean_run)}
+    done = {p.relative_to(work) for p in curve_files(work)}
+    assert done and done < expected, (
+        f"the kill should have hit a running sweep: {len(done)} of {len(expected)} curves")
+    assert not (work / "results/sweep.nc").exists(), "sweep.nc written before all curves"
+    for path in curve_files(work):  # whatever exists is complete
+        read_curve(path)
+    leftovers = [p for p in (work / "results/curves").rglob("*")
+                 if p.is_file() and p.suffix != ".nc"]
+    assert all(p.name.startswith(".") and p.name.endswith(".tmp") for p in leftovers), (
+        f"unexpected files after the kill: {leftovers}")
+    # A job killed inside write_curve leaves such a hidden temporary file; plant one for
+    # a curve that is still missing to check the rerun ignores and removes it.
+    missing = work / sorted(expected - done)[0]
+    stale = missing.parent / f".{missing.name}.killed.tmp"
+    stale.parent.mkdir(parents=True, exist_ok=True)
+    stale.write_bytes(b"\x89HDF\r\n\x1a\n half a file")
+
+    # SIGKILL leaves Snakemake's lock on the directory: it must be released by hand.
+    unlock = snakemake(work, "--configfile", "config/test.yaml", "--unlock")
+    assert unlock.returncode == 0, output(unlock)
+    proc2 = snakemake(work, *TEST_SWEEP, "--rerun-incomplete")
+    assert proc2.returncode == 0, f"resumed sweep failed:\n{output(proc2)[-6000:]}"
+    assert {p.relative_to(work) for p in curve_files(work)} == expected
+    leftovers = [p for p in (work / "results").rglob("*.tmp")]
+    assert not leftovers, f"temporary files left after the resumed sweep: {leftovers}"
+    with xr.open_dataset(work / "results/sweep.nc") as got, \
+            xr.open_dataset(clean_run / "results/sweep.nc") as ref:
+        assert_same_sweep(got.load(), ref.load())
+
+
+# -- corrupt, truncated and foreign curve files --------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def cli_curves(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """Three curve files of one small sweep written by the CLI (grid 32)."""
+    root = tmp_path_factory.mktemp("cli_curves")
+    cases = [("regular", "4", "0.01", "0"), ("regular", "4", "1.0", "0"),
+             ("random", "4", "1.0", "1")]
+    paths = []
+    for layout, n, kbar, seed in cases:
+        out = root / f"{layout}_N{n}_kbar{kbar}_seed{seed}.nc"
+        proc = subprocess.run([*CLI, "simulate", "--layout", layout, "--pillars", n,
+                               "--kbar", kbar, "--grid", "32", "--seed", seed, "--quiet",
+                               "--out", str(out)], capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0, output(proc)
+        paths.append(out)
+    return paths
+
+
+def _truncated(src: Path, dest: Path, keep: float) -> None:
+    data = src.read_bytes()
+    dest.write_bytes(data[: int(len(data) * keep)])
+
+
+def _flipped(src: Path, dest: Path) -> None:
+    """One byte changed inside the force values: a valid HDF5 file with a wrong number."""
+    ds = read_curve(src)
+    data = bytearray(src.read_bytes())
+    needle = np.asarray(ds["force"].values[1:], dtype="<f8").tobytes()
+    at = data.find(needle)
+    assert at > 0, "force values not found stored contiguously"
+    data[at + 3] ^= 0x5A
+    dest.write_bytes(bytes(data))
+
+
+def _foreign(src: Path, dest: Path) -> None:
+    xr.Dataset({"temperature": ("time", np.arange(5.0))},
+               attrs={"title": "not a curve"}).to_netcdf(dest)
+
+
+def _non_finite(src: Path, dest: Path) -> None:
+    ds = read_curve(src)
+    ds["force"].values[1] = np.nan  # written without the digest: an older or foreign writer
+    ds.attrs.pop("content_sha256", None)
+    ds.to_netcdf(dest)
+
+
+def _missing_attr(src: Path, dest: Path) -> None:
+    ds = read_curve(src)
+    del ds.attrs["kbar"]
+    write_curve(ds, dest)
+
+
+CORRUPTIONS = {
+    "empty": lambda src, dest: dest.write_bytes(b""),
+    "truncated_header": lambda src, dest: _truncated(src, dest, 0.01),
+    "truncated_half": lambda src, dest: _truncated(src, dest, 0.5),
+    "truncated_last_byte": lambda src, dest: dest.write_bytes(src.read_bytes()[:-1]),
+    "byte_flipped": _flipped,
+    "foreign_netcdf": _foreign,
+    "non_finite_force": _non_finite,
+    "missing_kbar_attribute": _missing_attr,
+    "text_file": lambda src, dest: dest.write_text("force,displacement\n1,2\n"),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(CORRUPTIONS))
+def test_aggregation_refuses_a_bad_curve_file(cli_curves: list[Path], tmp_path: Path,
+                                              kind: str) -> None:
+    good = build_sweep(cli_curves)  # the good files alone aggregate
+    assert int(np.isfinite(good["adhesive_force_normalized"].values).sum()) == len(cli_curves)
+    bad = tmp_path / f"bad_{kind}.nc"
+    CORRUPTIONS[kind](cli_curves[-1], bad)
+    with pytest.raises(CurveFileError, match=bad.name):
+        read_curve(bad)
+    with pytest.raises(AggregationError) as info:
+        build_sweep([*cli_curves[:-1], bad])
+    assert bad.name in str(info.value), f"error does not name the file: {info.value}"
+
+
+def test_aggregate_rule_fails_on_a_truncated_curve(clean_run: Path, tmp_path: Path) -> None:
+    work = tmp_path / "repo"
+    shutil.copytree(clean_run, work, symlinks=True)  # results and .snakemake included
+    victim = curve_files(work)[0]
+    victim.write_bytes(victim.read_bytes()[:1000])
+    os.utime(victim)  # newer than sweep.nc
+    proc = snakemake(work, "--cores", "1", "--configfile", "config/test.yaml",
+                     "--forcerun", "aggregate")
+    log = (work / "logs/aggregate.log").read_text() if (work / "logs/aggregate.log").exists() \
+        else ""
+    assert proc.returncode != 0, f"aggregation accepted a truncated curve:\n{output(proc)}"
+    assert victim.name in output(proc) + log, (
+        f"neither Snakemake nor the log names {victim.name}:\n{output(proc)[-4000:]}\n{log}")
+    assert not (work / "results/sweep.nc").exists(), "a failed aggregation left sweep.nc"
+    assert "rule simulate" not in output(proc), "a truncated curve must not trigger a rerun"
+
+
+# -- determinism ---------------------------------------------------------------------------
+
+SUBPROCESS_SIMULATE = textwrap.dedent("""
+    import sys
+    from brushcore import BrushParams, SolverOptions, simulate
+    from brushcore.io import write_curve
+    write_curve(simulate(BrushParams(**{params!r}), SolverOptions()), sys.argv[1])
+""")
+
+
+def test_same_params_give_bit_identical_curves(tmp_path: Path) -> None:
+    params = BrushParams(**SMALL)
+    first = simulate(params, SolverOptions())
+    second = simulate(params, SolverOptions())
+    out = tmp_path / "subprocess.nc"
+    proc = subprocess.run([sys.executable, "-c", SUBPROCESS_SIMULATE.format(params=SMALL),
+                           str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, output(proc)
+    other = read_curve(out)
+    assert first.attrs["events"] > 1, "the determinism case should have several events"
+    for label, ds in (("second run in the process", second), ("another process", other)):
+        assert first["force"].values.tobytes() == ds["force"].values.tobytes(), (
+            f"force differs in the {label}")
+        for name in ("adhesive_force", "work_of_separation", "displacement_at_adhesive_force",
+                     "adhesive_force_normalized", "work_of_separation_normalized"):
+            assert float(first[name]) == float(ds[name]), f"{name} differs in the {label}"
+        assert_identical_curves(ds, first, label)
+
+
+def test_concurrent_identical_jobs_match_a_lone_one(tmp_path: Path) -> None:
+    # A fresh FFTW wisdom cache: the two concurrent jobs both have to plan.
+    env = {**os.environ, "BRUSHCORE_WISDOM_DIR": str(tmp_path / "wisdom")}
+    outs = [tmp_path / f"concurrent{i}.nc" for i in (1, 2)]
+    procs = [subprocess.Popen([*CLI, "simulate", *SMALL_ARGS, "--out", str(out)], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+             for out in outs]
+    texts = [p.communicate(timeout=120)[0] for p in procs]
+    assert all(p.returncode == 0 for p in procs), texts
+    alone = tmp_path / "alone.nc"
+    proc = subprocess.run([*CLI, "simulate", *SMALL_ARGS, "--out", str(alone)], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, output(proc)
+    ref = read_curve(alone)
+    for out in outs:
+        assert_identical_curves(read_curve(out), ref, f"{out.name} vs a job run alone")
+
+
+# -- loud failures -------------------------------------------------------------------------
+
+
+def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
+    params = BrushParams(**SMALL)
+    with pytest.raises(ConvergenceError) as info:
+        simulate(params, SolverOptions(max_iter=1))
+    message = str(info.value)
+    for part in ("did not converge in 1 iterations", "size ", "at event 0", "elements attached"):
+        assert part in message, f"{part!r} missing from: {message}"
+
+
+def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:
+    import brushcore.pulloff as pulloff
+
+    real_pcg = pulloff.pcg
+    calls = []
+
+    def poisoned(apply, precondition, b, x0, rtol, max_iter):
+        calls.append(1)
+        if len(calls) < 3:
+            return real_pcg(apply, precondition, b, x0, rtol, max_iter)
+        return real_pcg(lambda x: apply(x) * np.nan, precondition, b, x0, rtol, max_iter)
+
+    monkeypatch.setattr(pulloff, "pcg", poisoned)
+    with pytest.raises(ConvergenceError, match="non-finite") as info:
+        simulate(BrushParams(**SMALL), SolverOptions())
+    assert "at event" in str(info.value), str(info.value)
+
+
+CLI_FAILING = textwrap.dedent("""
+    import sys
+    import brushcore.cg, brushcore.pulloff, brushcore.cli
+
+    def fail(*args, **kwargs):
+        raise brushcore.cg.ConvergenceError("injected CG failure")
+
+    brushcore.cg.pcg = brushcore.pulloff.pcg = fail
+    sys.exit(brushcore.cli.main(sys.argv[1:]))
+""")
+
+
+def test_cli_failure_exits_non_zero_without_output(tmp_path: Path) -> None:
+    out = tmp_path / "curves" / "failed.nc"
+    proc = subprocess.run([sys.executable, "-c", CLI_FAILING, "simulate", *SMALL_ARGS,
+                           "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0, f"CLI exited 0 after a solver failure:\n{output(proc)}"
+    assert "injected CG failure" in proc.stderr, output(proc)
+    left = list(out.parent.iterdir()) if out.parent.exists() else []
+    assert not left, f"a failed solve left files: {left}"
+
+
+KILL_IN_WRITE = textwrap.dedent("""
+    import os, signal, sys
+    import numpy as np, xarray as xr
+    from brushcore.io import write_curve
+
+    real = xr.Dataset.to_netcdf
+
+    def dying(self, path, *args, **kwargs):
+        real(self, path, *args, **kwargs)
+        with open(path, "r+b") as fh:  # the file is half flushed when the kill comes
+            fh.truncate(os.path.getsize(path) // 2)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    xr.Dataset.to_netcdf = dying
+    write_curve(xr.Dataset({"force": ("step", np.arange(3.0))}), sys.argv[1])
+""")
+
+
+def test_kill_inside_write_curve_keeps_the_old_file(cli_curves: list[Path], tmp_path: Path
+                                                    ) -> None:
+    target = tmp_path / "curve.nc"
+    shutil.copy(cli_curves[0], target)
+    before = target.read_bytes()
+    proc = subprocess.run([sys.executable, "-c", KILL_IN_WRITE, str(target)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -signal.SIGKILL, output(proc)
+    assert target.read_bytes() == before, "a killed write changed the existing curve"
+    read_curve(target)
+    others = [p.name for p in tmp_path.iterdir() if p != target]
+    assert others and all(n.startswith(".curve.nc.") and n.endswith(".tmp") for n in others), (
+        f"a killed write should leave only its hidden temporary file, found {others}")
+    assert not [n for n in others if n.endswith(".nc")], others
+
+
+def test_failed_write_leaves_neither_file_nor_temporary(cli_curves: list[Path], tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A full disk (ENOSPC half way through the write) raises and cleans up."""
+    import errno
+
+    target = tmp_path / "curve.nc"
+    shutil.copy(cli_curves[0], target)
+    before = target.read_bytes()
+    real = xr.Dataset.to_netcdf
+
+    def disk_full(self, path, *args, **kwargs):
+        real(self, path, *args, **kwargs)
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        write_curve(read_curve(cli_curves[1]), target)
+    with pytest.raises(OSError, match="No space left"):
+        write_curve(read_curve(cli_curves[1]), tmp_path / "new.nc")
+    assert target.read_bytes() == before, "a failed write changed the existing curve"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["curve.nc"], (
+        f"a failed write left files: {sorted(p.name for p in tmp_path.iterdir())}")
+
+
+def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
+    """A job whose layout cannot be built: Snakemake fails, names it, writes no curve for it."""
+    work = copy_repo(tmp_path / "repo")
+    config = work / "config/unfit.yaml"
+    config.write_text("grid: 64\nphi: 0.5\nkbar: [1.0]\nregular: [4]\nrandom: [1620]\n"
+                      "seeds: [0]\nfig5: {n_pillars: 4, kbar: [1.0]}\nthreads: 1\n")
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/unfit.yaml")
+    text = output(proc)
+    assert proc.returncode != 0, f"the sweep succeeded with an unfit layout:\n{text[-4000:]}"
+    assert "Error in rule simulate" in text and "N1620_kbar1.0_seed0" in text, text[-4000:]
+    log = (work / "logs/simulate/random/N1620_kbar1.0_seed0.log").read_text()
+    assert "n_pillars=1620" in log and "ParameterError" in log, log
+    assert not (work / "results/curves/random").exists() or not list(
+        (work / "results/curves/random").iterdir()), "the failed job left files"
+    assert not (work / "results/sweep.nc").exists(), "sweep.nc written despite a failed job"
