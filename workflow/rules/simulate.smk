@@ -18,5 +18,6 @@ rule simulate:
     params:
         grid=config["grid"],
         phi=config["phi"],
+        solver=config["solver"],
     script:
         "../scripts/simulate.py"

@@ -33,7 +33,7 @@ def main(smk) -> None:
         seed=int(w.seed),
     )
     print(f"{params} on {smk.threads} thread(s)", flush=True)
-    curve = simulate(params, SolverOptions())
+    curve = simulate(params, SolverOptions(**smk.params.solver))
     write_curve(curve, smk.output[0])
     print(
         f"F_ad = {float(curve['adhesive_force_normalized']):.6g}, "
