@@ -14,6 +14,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import math
+import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -342,8 +343,14 @@ def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    sweep.to_netcdf(tmp, engine="netcdf4", encoding=encoding(sweep))
-    tmp.replace(path)
+    try:
+        sweep.to_netcdf(tmp, engine="netcdf4", encoding=encoding(sweep))
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())  # on disk before it replaces the old sweep
+        tmp.replace(path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0):

@@ -453,3 +453,26 @@ def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
     assert not (work / "results/curves/random").exists() or not list(
         (work / "results/curves/random").iterdir()), "the failed job left files"
     assert not (work / "results/sweep.nc").exists(), "sweep.nc written despite a failed job"
+
+
+def test_failed_sweep_write_keeps_the_old_sweep(cli_curves: list[Path], tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    from brushcore.aggregate import write_sweep
+
+    target = tmp_path / "sweep.nc"
+    write_sweep(build_sweep(cli_curves[:2]), target)
+    before = target.read_bytes()
+    real = xr.Dataset.to_netcdf
+
+    def disk_full(self, path, *args, **kwargs):
+        real(self, path, *args, **kwargs)
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        write_sweep(build_sweep(cli_curves), target)
+    assert target.read_bytes() == before, "a failed write changed the existing sweep"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.nc"], (
+        f"a failed sweep write left files: {sorted(p.name for p in tmp_path.iterdir())}")
