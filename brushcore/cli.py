@@ -39,9 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=0.0,
                      help="approximate: detach within this relative window (default exact)")
-    sim.add_argument("--cascade", choices=("global", "local"), default="global",
-                     help="global: re-solve everything after each detachment (reference); "
-                          "local: per-pillar cascades, verified globally (faster)")
+    sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
+                     help="local: per-pillar cascades where they provably do not change "
+                          "the result (default); global: re-solve after every round (reference)")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
     sim.add_argument("--out", type=Path, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")

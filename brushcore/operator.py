@@ -89,6 +89,12 @@ class BrushOperator:
         self._update()
         return None if local is None else local[~which]
 
+    def far_field_uncertainty(self, pillar_change: np.ndarray) -> np.ndarray | None:
+        """See `BlockInverse.far_field_uncertainty` (None without blocks)."""
+        if self.block is None:
+            return None
+        return self.block.far_field_uncertainty(pillar_change, self._bpos)
+
     @property
     def has_local_solver(self) -> bool:
         """Whether per-pillar exact inverses are available (see `detach`)."""

@@ -17,9 +17,12 @@ the far field.  A coarse space with one vector per pillar, z_p = G_p 1 (the
 pillar's own response to a unit displacement), carries it: Z^T A Z is
 diag(c) + C R C with c_p = 1^T G_p 1 and R the influence coefficient between
 pillar centroids (monopole approximation of the off-diagonal blocks).  The
-two-level additive preconditioner G + Z E^-1 Z^T stays symmetric positive
+balancing two-level preconditioner built on it stays symmetric positive
 definite whatever the approximation, so CG still converges to the exact
-solution; E is refactorised only when the pillars' c have drifted.
+solution; E is refactorised only when the pillars' c have drifted.  The same
+monopole model bounds how much the far field of other pillars can move an
+element's stress (`far_field_uncertainty`), which lets cascades run pillar
+by pillar without changing their outcome.
 """
 
 from __future__ import annotations
@@ -74,17 +77,29 @@ class BlockInverse:
             block = love_coefficient(dy, dx, h, e_star) + compliance[p]
             self.inv[group, :k, :k] = np.linalg.inv(block)
         self._work = np.zeros((n_pillars, self.m))
+        self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and 1 < n_pillars <= self.MAX_COARSE
-        if self.coarse:
+        if self.interacting:
             cy = yy.sum(axis=1) / counts
             cx = xx.sum(axis=1) / counts
-            self._r = love_coefficient(cy[:, None] - cy[None], cx[:, None] - cx[None], h, e_star)
+            dy, dx = cy[:, None] - cy[None], cx[:, None] - cx[None]
+            self._r = love_coefficient(dy, dx, h, e_star)
             np.fill_diagonal(self._r, 0.0)
+            # For the uncertainty bound: the influence at the closest approach
+            # of two footprints, not at their centroids (close random pillars).
+            reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)
+                            * (np.arange(self.m)[None, :] < counts[:, None])).max(axis=1)
+            gap = np.maximum(np.hypot(dy, dx) - reach[:, None] - reach[None, :], h)
+            self._r_near = love_coefficient(gap, 0.0, h, e_star)
+            np.fill_diagonal(self._r_near, 0.0)
             self._z = self.inv.sum(axis=2)
+        if self.coarse:
             self._factorise()
 
     #: Largest pillar count with a coarse space (its dense N x N factor).
     MAX_COARSE = 1000
+    #: Largest pillar count with the N x N pillar interaction matrix.
+    MAX_INTERACTION = 4000
     #: Refactorise E once this fraction of pillars changed c by > 25 %.
     REFACTOR_FRACTION = 0.02
 
@@ -134,9 +149,10 @@ class BlockInverse:
             if w is not None:
                 w[p] -= cols @ x[:, self.m]
                 w[p, d] = 0.0
-        if self.coarse:
+        if self.interacting:
             touched = np.unique(pil)
             self._z[touched] = self.inv[touched].sum(axis=2)
+        if self.coarse:
             c = self._z[touched].sum(axis=1)
             drift = np.abs(c - self._c_factor[touched]) > 0.25 * self._c_factor[touched]
             self._drifted = getattr(self, "_drifted", set()) | set(touched[drift].tolist())
@@ -148,6 +164,25 @@ class BlockInverse:
         out = w.ravel()[attached_pos].copy()
         w.ravel()[attached_pos] = 0.0
         return out
+
+    def _z_missing(self) -> bool:
+        return not self.interacting
+
+    def far_field_uncertainty(self, pillar_change: np.ndarray,
+                              attached_pos: np.ndarray) -> np.ndarray | None:
+        """Bound on the stress change the other pillars' far field can cause.
+
+        A change dS_q of pillar q's summed stress moves the surface under
+        pillar p by at most R_pq |dS_q|, R taken at the closest approach of
+        the two footprints, to which p's elements respond with z_p = G_p 1
+        per unit displacement.  Returns |z_p| (R |dS|)_p per attached element
+        (compressed), or None without the interaction matrix.  Callers add a
+        safety factor for the non-uniform part of the response.
+        """
+        if self._z_missing():
+            return None if self.inv.shape[0] > 1 else np.zeros(attached_pos.size)
+        shift = self._r_near @ np.abs(pillar_change)
+        return (np.abs(self._z) * shift[:, None]).ravel()[attached_pos]
 
     def apply(self, r: np.ndarray, attached_pos: np.ndarray) -> np.ndarray:
         """z = blockdiag(G_p) r for a compressed residual over the attached elements."""

@@ -7,7 +7,8 @@ import pytest
 from brushcore import BrushParams, SolverOptions, simulate
 
 CASES = [("regular", 256, 0.455, 128), ("regular", 64, 1e-3, 128), ("regular", 64, 1e-4, 256),
-         ("regular", 16, float("inf"), 128), ("random", 30, 0.01, 96)]
+         ("regular", 16, float("inf"), 128), ("random", 30, 0.01, 96),
+         ("random", 220, 1e-3, 256)]
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +19,7 @@ def reference():
 
 @pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
 def test_default_tolerance_is_harmless(reference, case):
-    """CG to 1e-4 (default) against 1e-8: measured < 1e-4 on 512 grids, 0.2 % allowed."""
+    """Defaults (CG to 1e-4, local cascades) against the exact settings: 0.2 % allowed."""
     ref = reference[case]
     ds = simulate(BrushParams(case[0], case[1], case[2], case[3], seed=1))
     for name in ("adhesive_force", "work_of_separation"):
@@ -28,15 +29,15 @@ def test_default_tolerance_is_harmless(reference, case):
 
 @pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
 def test_local_cascade_agrees_with_global(reference, case):
+    """Certified local cascades reach the global cascade's contact sets."""
     ref = reference[case]
     fast = simulate(BrushParams(case[0], case[1], case[2], case[3], seed=1),
-                    SolverOptions(cascade="local"))
+                    SolverOptions(rtol=1e-8, cascade="local"))
     df = float(fast.adhesive_force) / float(ref.adhesive_force) - 1
     dw = float(fast.work_of_separation) / float(ref.work_of_separation) - 1
-    # Measured (grids 96-512): F_ad to 1e-7 on regular brushes and up to 0.5 % on a
-    # random one; W within 0.9 %, where nearly equal soft pillars let go in another order.
-    assert abs(df) < 1e-2 and abs(dw) < 1.5e-2, f"dF = {df:.2e}, dW = {dw:.2e}"
-    assert fast.attrs["operator_applications"] < ref.attrs["operator_applications"]
+    # Measured (grids 96-512): both within 2e-4.
+    assert abs(df) < 1e-3 and abs(dw) < 1e-3, f"dF = {df:.2e}, dW = {dw:.2e}"
+    assert fast.attrs["operator_applications"] <= ref.attrs["operator_applications"]
 
 
 @pytest.mark.parametrize("option", [dict(lookahead=1e-3), dict(lookahead=1e-2)])
