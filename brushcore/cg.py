@@ -50,7 +50,8 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         if not np.isfinite(zmax):
             raise ConvergenceError(f"CG produced a non-finite correction after "
                                    f"{len(history)} iterations")
-        history.append(zmax / xmax if xmax > 0 else np.inf)
+        if xmax > 0:
+            history.append(zmax / xmax)
         return zmax <= rtol * xmax
 
     if converged():
@@ -75,5 +76,6 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         rz = rz_new
     raise ConvergenceError(
         f"CG did not converge in {max_iter} iterations: relative correction "
-        f"{history[-1]:.3e} > rtol {rtol:.1e} (size {b.size}; last values "
+        f"{history[-1] if history else float('nan'):.3e} > rtol {rtol:.1e} (size {b.size}; "
+        f"last values "
         f"{', '.join(f'{h:.2e}' for h in history[-5:])})")

@@ -7,7 +7,9 @@ import sys
 import time
 from pathlib import Path
 
+from .cg import ConvergenceError
 from .params import LAYOUTS, BrushParams, ParameterError, SolverOptions
+from .pulloff import SolverError
 
 
 def _kbar(text: str) -> float:
@@ -81,6 +83,9 @@ def _simulate(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         print(f"brushcore: error: {exc}", file=sys.stderr)
         return 2
+    except (ConvergenceError, SolverError) as exc:
+        print(f"\nbrushcore: solver failed: {exc}", file=sys.stderr)
+        return 1
     write_curve(ds, args.out)
     if not args.quiet:
         print("", file=sys.stderr)

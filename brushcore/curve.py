@@ -8,6 +8,7 @@ from dataclasses import asdict
 
 import numpy as np
 import xarray as xr
+from threadpoolctl import threadpool_limits
 
 from . import theory
 from .convolution import cached_convolver
@@ -15,7 +16,8 @@ from .layout import build_labels
 from .operator import BrushOperator
 from .params import BrushParams, SolverOptions
 from .provenance import git_commit, parameter_hash, version
-from .pulloff import Progress, PullOffCurve, pull_off
+from .cg import ConvergenceError
+from .pulloff import Progress, PullOffCurve, SolverError, pull_off
 from .threads import fft_threads
 
 SNAPSHOT_LABELS = ("start", "before maximum", "maximum force", "after maximum",
@@ -70,7 +72,12 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     op = BrushOperator(conv, labels, spring_compliance(params, params.n_pillars),
                        params.h, params.e_star)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
-    curve = pull_off(op, sigma_c, params.h, options, progress)
+    try:
+        # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
+        with threadpool_limits(limits=1, user_api="blas"):
+            curve = pull_off(op, sigma_c, params.h, options, progress)
+    except (ConvergenceError, SolverError) as exc:
+        raise type(exc)(f"{exc}; problem: {params}; options: {options}") from None
     detach = np.full(labels.size, -1, dtype=np.int32)
     detach[op.elements] = curve.detach_step
     return detach.reshape(labels.shape), curve, conv.applications - before

@@ -78,6 +78,19 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     return path
 
 
+def remove_stale_temporaries(path: str | os.PathLike) -> int:
+    """Delete temporary files that a killed `write_curve` left for ``path``.
+
+    Safe when one writer owns ``path`` (one Snakemake job per output).
+    Returns the number of files removed.
+    """
+    path = Path(path)
+    stale = list(path.parent.glob(f".{path.name}.*.tmp"))
+    for tmp in stale:
+        tmp.unlink(missing_ok=True)
+    return len(stale)
+
+
 def read_curve(path: str | os.PathLike) -> xr.Dataset:
     """Load a curve file fully into memory and check that it is a complete curve.
 

@@ -110,7 +110,13 @@ class BlockInverse:
         e[dead, :] = 0.0
         e[:, dead] = 0.0
         e[dead, dead] = 1.0
-        self._chol = sla.cho_factor(e, check_finite=False)
+        try:
+            self._chol = sla.cho_factor(e, check_finite=False)
+        except np.linalg.LinAlgError:
+            # Monopoles of overlapping or interleaved footprints need not give
+            # a positive definite E; the blocks alone remain a valid preconditioner.
+            self.coarse = False
+            return
         self._c_factor = c
         self.factorisations = getattr(self, "factorisations", 0) + 1
 

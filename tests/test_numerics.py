@@ -92,8 +92,13 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(seed):
 @given(seed=st.integers(0, 2**32 - 1))
 def test_two_level_preconditioner_is_symmetric_positive_definite(seed):
     """CG needs an SPD preconditioner; the approximate coarse space must not break that."""
-    rng, labels, compliance = _random_problem(seed, n=12, n_pillars=5)
-    op = BrushOperator(Convolver(12), labels, compliance, 1.0, 1.0)
+    from brushcore import BrushParams
+    from brushcore.layout import build_labels
+
+    rng = np.random.default_rng(seed)
+    labels = build_labels(BrushParams("random", 6, 1.0, 32, phi=0.2, seed=seed % 1000))
+    compliance = rng.uniform(0.0, 50.0, 6)
+    op = BrushOperator(Convolver(32), labels, compliance, 1.0, 1.0)
     assert op.block.coarse
     drop = rng.random(op.size) < 0.3
     drop[0] = False

@@ -414,14 +414,10 @@ def test_kill_inside_write_curve_keeps_the_old_file(cli_curves: list[Path], tmp_
     assert not [n for n in others if n.endswith(".nc")], others
 
 
-def test_failed_write_leaves_neither_file_nor_temporary(cli_curves: list[Path], tmp_path: Path,
-                                                        monkeypatch: pytest.MonkeyPatch) -> None:
-    """A full disk (ENOSPC half way through the write) raises and cleans up."""
+def _fill_disk_on_write(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make every netCDF write fail with ENOSPC after writing its bytes."""
     import errno
 
-    target = tmp_path / "curve.nc"
-    shutil.copy(cli_curves[0], target)
-    before = target.read_bytes()
     real = xr.Dataset.to_netcdf
 
     def disk_full(self, path, *args, **kwargs):
@@ -429,6 +425,15 @@ def test_failed_write_leaves_neither_file_nor_temporary(cli_curves: list[Path], 
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
     monkeypatch.setattr(xr.Dataset, "to_netcdf", disk_full)
+
+
+def test_failed_write_leaves_neither_file_nor_temporary(cli_curves: list[Path], tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A full disk (ENOSPC half way through the write) raises and cleans up."""
+    target = tmp_path / "curve.nc"
+    shutil.copy(cli_curves[0], target)
+    before = target.read_bytes()
+    _fill_disk_on_write(monkeypatch)
     with pytest.raises(OSError, match="No space left"):
         write_curve(read_curve(cli_curves[1]), target)
     with pytest.raises(OSError, match="No space left"):
@@ -457,20 +462,12 @@ def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
 
 def test_failed_sweep_write_keeps_the_old_sweep(cli_curves: list[Path], tmp_path: Path,
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    import errno
-
     from brushcore.aggregate import write_sweep
 
     target = tmp_path / "sweep.nc"
     write_sweep(build_sweep(cli_curves[:2]), target)
     before = target.read_bytes()
-    real = xr.Dataset.to_netcdf
-
-    def disk_full(self, path, *args, **kwargs):
-        real(self, path, *args, **kwargs)
-        raise OSError(errno.ENOSPC, "No space left on device", str(path))
-
-    monkeypatch.setattr(xr.Dataset, "to_netcdf", disk_full)
+    _fill_disk_on_write(monkeypatch)
     with pytest.raises(OSError, match="No space left"):
         write_sweep(build_sweep(cli_curves), target)
     assert target.read_bytes() == before, "a failed write changed the existing sweep"

@@ -1,9 +1,7 @@
 """Script of rule `aggregate`: all curve files -> results/sweep.nc."""
 
-import traceback
-from contextlib import redirect_stderr, redirect_stdout
-
 from brushcore.aggregate import build_sweep, write_sweep
+from brushcore.joblog import logged
 
 
 def main(smk) -> None:
@@ -14,9 +12,5 @@ def main(smk) -> None:
     print(sweep)
 
 
-with open(snakemake.log[0], "w") as log, redirect_stdout(log), redirect_stderr(log):  # noqa: F821
-    try:
-        main(snakemake)  # noqa: F821
-    except Exception:
-        traceback.print_exc()
-        raise
+with logged(snakemake.log[0]):  # noqa: F821
+    main(snakemake)  # noqa: F821

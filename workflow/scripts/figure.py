@@ -1,11 +1,9 @@
 """Script of rules `fig5`-`fig8`: results/sweep.nc -> one figure (PNG + PDF)."""
 
-import traceback
-from contextlib import redirect_stderr, redirect_stdout
-
 import xarray as xr
 
 from brushcore import figures
+from brushcore.joblog import logged
 
 
 def main(smk) -> None:
@@ -17,9 +15,5 @@ def main(smk) -> None:
         print(f"wrote {path}")
 
 
-with open(snakemake.log[0], "w") as log, redirect_stdout(log), redirect_stderr(log):  # noqa: F821
-    try:
-        main(snakemake)  # noqa: F821
-    except Exception:
-        traceback.print_exc()
-        raise
+with logged(snakemake.log[0]):  # noqa: F821
+    main(snakemake)  # noqa: F821

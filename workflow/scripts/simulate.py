@@ -7,21 +7,14 @@ import os
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = str(snakemake.threads)  # noqa: F821
 
-import traceback  # noqa: E402
-from contextlib import redirect_stderr, redirect_stdout  # noqa: E402
-from pathlib import Path  # noqa: E402
-
 from brushcore import BrushParams, SolverOptions, simulate  # noqa: E402
-from brushcore.io import write_curve  # noqa: E402
+from brushcore.io import remove_stale_temporaries, write_curve  # noqa: E402
+from brushcore.joblog import logged  # noqa: E402
 from brushcore.threads import pin_threads  # noqa: E402
 
 
 def main(smk) -> None:
-    # A job killed inside write_curve leaves its hidden temporary file
-    # (.<name>.*.tmp) behind; one job per output, so any such file is stale.
-    out = Path(smk.output[0])
-    for stale in out.parent.glob(f".{out.name}.*.tmp"):
-        stale.unlink(missing_ok=True)
+    remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)
     w = smk.wildcards
     params = BrushParams(
@@ -42,9 +35,5 @@ def main(smk) -> None:
     )
 
 
-with open(snakemake.log[0], "w") as log, redirect_stdout(log), redirect_stderr(log):  # noqa: F821
-    try:
-        main(snakemake)  # noqa: F821
-    except Exception:
-        traceback.print_exc()
-        raise
+with logged(snakemake.log[0]):  # noqa: F821
+    main(snakemake)  # noqa: F821

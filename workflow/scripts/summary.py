@@ -1,11 +1,9 @@
 """Script of rule `summary`: results/sweep.nc -> headline table (CSV, Markdown)."""
 
-import traceback
-from contextlib import redirect_stderr, redirect_stdout
-
 import xarray as xr
 
 from brushcore.summary import headline_rows, write_summary
+from brushcore.joblog import logged
 
 
 def main(smk) -> None:
@@ -18,9 +16,5 @@ def main(smk) -> None:
     print(open(smk.output.md).read())
 
 
-with open(snakemake.log[0], "w") as log, redirect_stdout(log), redirect_stderr(log):  # noqa: F821
-    try:
-        main(snakemake)  # noqa: F821
-    except Exception:
-        traceback.print_exc()
-        raise
+with logged(snakemake.log[0]):  # noqa: F821
+    main(snakemake)  # noqa: F821
