@@ -125,10 +125,3 @@ class BrushOperator:
         if self.block is not None:
             return self.block.apply(r, self._bpos)
         return (r - self._sm * self.pillar_sums(r)[self.pl]) / self.diag
-
-    def expand(self, x: np.ndarray, fill: float = 0.0) -> np.ndarray:
-        """Compressed vector -> n x n field (fill outside the attached set)."""
-        n = self.conv.n
-        out = np.full(n * n, fill)
-        out[self.elements[self.attached]] = x
-        return out.reshape(n, n)

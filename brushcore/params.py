@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+from .theory import stiffness_from_kbar
+
 LAYOUTS = ("regular", "random")
 
 
@@ -105,7 +107,7 @@ class BrushParams:
     @property
     def stiffness(self) -> float:
         """Spring stiffness k = kbar E* L [force / length] (inf when rigid)."""
-        return self.kbar * self.e_star * self.side
+        return stiffness_from_kbar(self.kbar, self.e_star, self.side)
 
     def as_attrs(self) -> dict[str, float | int | str]:
         """All fields as netCDF-safe attributes (inf kept as a float)."""
@@ -130,7 +132,6 @@ class SolverOptions:
     lookahead : extra relative window of the next event whose elements are
         detached in the same batch; 0 (default) is the exact event-driven
         result, > 0 trades accuracy of F_ad and W for fewer solves.
-    n_snapshots : contact snapshots stored for figures, >= 3.
     cascade : "local" (default) or "global" (the paper's algorithm, the
         reference).  Both detach, at fixed d, every element above sigma_c
         and re-solve until none is.  "global" re-solves the whole system
@@ -147,7 +148,6 @@ class SolverOptions:
     max_iter: int = 5000
     tie_rtol: float = 1e-7
     lookahead: float = 0.0
-    n_snapshots: int = 5
     cascade: str = "local"
 
     @classmethod
@@ -164,7 +164,5 @@ class SolverOptions:
                  self.tie_rtol, "a number in [0, 1e-6]")
         _require(_is_number(self.lookahead) and 0 <= self.lookahead <= 0.1, "lookahead",
                  self.lookahead, "a number in [0, 0.1]")
-        _require(isinstance(self.n_snapshots, int) and self.n_snapshots >= 3,
-                 "n_snapshots", self.n_snapshots, "an integer >= 3")
         _require(self.cascade in ("local", "global"), "cascade", self.cascade,
                  "'local' or 'global'")

@@ -171,9 +171,6 @@ class BlockInverse:
         w.ravel()[attached_pos] = 0.0
         return out
 
-    def _z_missing(self) -> bool:
-        return not self.interacting
-
     def far_field_uncertainty(self, pillar_change: np.ndarray,
                               attached_pos: np.ndarray) -> np.ndarray | None:
         """Bound on the stress change the other pillars' far field can cause.
@@ -185,7 +182,7 @@ class BlockInverse:
         (compressed), or None without the interaction matrix.  Callers add a
         safety factor for the non-uniform part of the response.
         """
-        if self._z_missing():
+        if not self.interacting:
             return None if self.inv.shape[0] > 1 else np.zeros(attached_pos.size)
         shift = self._r_near @ np.abs(pillar_change)
         return (np.abs(self._z) * shift[:, None]).ravel()[attached_pos]
