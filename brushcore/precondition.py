@@ -121,7 +121,7 @@ class BlockInverse:
         self.factorisations = getattr(self, "factorisations", 0) + 1
 
     @staticmethod
-    def fits(pillar_of: np.ndarray, budget_bytes: float = 4.0e8, max_block: int = 2500) -> bool:
+    def fits(pillar_of: np.ndarray, budget_bytes: float = 1.2e9, max_block: int = 2500) -> bool:
         """Whether the stacked inverses fit the memory budget and block size limit."""
         counts = np.bincount(pillar_of)
         m = int(counts.max())
