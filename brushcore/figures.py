@@ -133,6 +133,20 @@ def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, 
     return fig, dict(zip(layouts, axes))
 
 
+def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, xr.DataArray]]:
+    """(N, seed-mean of `name` against kbar) for every brush of a layout that ran."""
+    series = [(int(n), seed_mean(sweep, name, layout, int(n))) for n in sweep.n_pillars.values]
+    return [(n, s) for n, s in series if s.size]
+
+
+def _kbar_axes(ax, layout: str, ylabel: str) -> None:
+    """Log kbar axis, panel title and labels shared by Figs. 6 and 8."""
+    ax.set_xscale("log")
+    ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")
+    ax.set_xlabel(K_LABEL)
+    ax.set_ylabel(ylabel)
+
+
 def fig6(sweep: xr.Dataset) -> Figure:
     """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
 
@@ -143,22 +157,15 @@ def fig6(sweep: xr.Dataset) -> Figure:
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
     for layout, ax in axes.items():
-        drawn = False
-        for n in sweep.n_pillars.values:
-            series = seed_mean(sweep, "adhesive_force_normalized", layout, int(n))
-            if series.size == 0:
-                continue
-            drawn = True
+        brushes = _brush_series(sweep, "adhesive_force_normalized", layout)
+        for n, series in brushes:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
             runs = runs.sel(kbar=series.kbar)
             low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
             ax.errorbar(series.kbar, series, yerr=[series - low, high - series], marker="o",
-                        ms=4, capsize=2, color=colors[int(n)], label=f"N = {int(n)}")
-        ax.set_xscale("log")
-        ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")
-        ax.set_xlabel(K_LABEL)
-        ax.set_ylabel(FAD_LABEL)
-        if not drawn:
+                        ms=4, capsize=2, color=colors[n], label=f"N = {n}")
+        _kbar_axes(ax, layout, FAD_LABEL)
+        if not brushes:
             _no_data(ax, f"no {layout} runs")
             continue
         if math.isfinite(phi):
@@ -227,25 +234,18 @@ def fig8(sweep: xr.Dataset) -> Figure:
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
     for layout, ax in axes.items():
-        drawn = False
-        for n in sweep.n_pillars.values:
-            series = seed_mean(sweep, "work_of_separation_normalized", layout, int(n))
-            if series.size == 0:
-                continue
-            drawn = True
-            ax.plot(series.kbar, series, "o-", ms=4, color=colors[int(n)], label=f"N = {int(n)}")
+        brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
+        for n, series in brushes:
+            ax.plot(series.kbar, series, "o-", ms=4, color=colors[n], label=f"N = {n}")
             if math.isfinite(phi):
                 # Only where the springs' energy matters; it falls as 1/kbar.
                 kbar = series.kbar.values
-                soft = np.asarray(theory.soft_work(int(n), phi, kbar))
+                soft = np.asarray(theory.soft_work(n, phi, kbar))
                 keep = soft >= SOFT_WORK_FLOOR
-                ax.plot(kbar[keep], soft[keep], "--", lw=1, color=colors[int(n)])
-        ax.set_xscale("log")
+                ax.plot(kbar[keep], soft[keep], "--", lw=1, color=colors[n])
         ax.set_yscale("log")
-        ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")
-        ax.set_xlabel(K_LABEL)
-        ax.set_ylabel(W_LABEL)
-        if not drawn:
+        _kbar_axes(ax, layout, W_LABEL)
+        if not brushes:
             _no_data(ax, f"no {layout} runs")
             continue
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
