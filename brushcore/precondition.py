@@ -77,6 +77,8 @@ class BlockInverse:
             block = love_coefficient(dy, dx, h, e_star) + compliance[p]
             self.inv[group, :k, :k] = np.linalg.inv(block)
         self._work = np.zeros((n_pillars, self.m))
+        self._drifted: set[int] = set()  # pillars whose c moved since the last factorisation
+        self.factorisations = 0
         self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and 1 < n_pillars <= self.MAX_COARSE
         if self.interacting:
@@ -118,7 +120,7 @@ class BlockInverse:
             self.coarse = False
             return
         self._c_factor = c
-        self.factorisations = getattr(self, "factorisations", 0) + 1
+        self.factorisations += 1
 
     @staticmethod
     def fits(pillar_of: np.ndarray, budget_bytes: float = 1.2e9, max_block: int = 2500) -> bool:
@@ -143,7 +145,8 @@ class BlockInverse:
         if stress is not None:
             w = self._work
             w.ravel()[attached_pos] = stress
-        for p in np.unique(pil):
+        touched = np.unique(pil)
+        for p in touched:
             d = slot[pil == p]
             g = self.inv[p]
             cols = g[:, d]
@@ -156,12 +159,11 @@ class BlockInverse:
                 w[p] -= cols @ x[:, self.m]
                 w[p, d] = 0.0
         if self.interacting:
-            touched = np.unique(pil)
             self._z[touched] = self.inv[touched].sum(axis=2)
         if self.coarse:
             c = self._z[touched].sum(axis=1)
             drift = np.abs(c - self._c_factor[touched]) > 0.25 * self._c_factor[touched]
-            self._drifted = getattr(self, "_drifted", set()) | set(touched[drift].tolist())
+            self._drifted.update(touched[drift].tolist())
             if len(self._drifted) > self.REFACTOR_FRACTION * self._z.shape[0]:
                 self._factorise()
                 self._drifted = set()
@@ -188,7 +190,10 @@ class BlockInverse:
         return (np.abs(self._z) * shift[:, None]).ravel()[attached_pos]
 
     def apply(self, r: np.ndarray, attached_pos: np.ndarray) -> np.ndarray:
-        """z = blockdiag(G_p) r for a compressed residual over the attached elements."""
+        """Preconditioned residual for a compressed residual over the attached elements.
+
+        blockdiag(G_p) r, balanced with the coarse space when it is on.
+        """
         w = self._work
         w.ravel()[attached_pos] = r
         if self.coarse:

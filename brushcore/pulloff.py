@@ -133,7 +133,7 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         step = len(disp)  # the next recorded step is the first without them
         positions = np.flatnonzero(op.attached)[mask]
         detach_step[positions] = step
-        updated = op.detach(mask, stress if op.has_local_solver else None)
+        updated = op.detach(mask, stress)
         return stress[~mask] if updated is None else updated
 
     sigma1 = solve(sigma1)
