@@ -90,22 +90,48 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(seed):
 
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_two_level_preconditioner_is_symmetric_positive_definite(seed):
-    """CG needs an SPD preconditioner; the approximate coarse space must not break that."""
+def test_two_level_preconditioner_is_spd_and_the_balancing_formula(seed):
+    """CG needs an SPD preconditioner; the approximate coarse space must not break
+    that, and the one-solve application must equal the textbook balancing form
+    P = Z E^-1 Z^T + (I - Z E^-1 W^T) G (I - W E^-1 Z^T), E = C (I + R C)."""
     from brushcore import BrushParams
     from brushcore.layout import build_labels
+    from brushcore.precondition import BlockInverse
 
     rng = np.random.default_rng(seed)
     labels = build_labels(BrushParams("random", 6, 1.0, 32, phi=0.2, seed=seed % 1000))
     compliance = rng.uniform(0.0, 50.0, 6)
-    op = BrushOperator(Convolver(32), labels, compliance, 1.0, 1.0)
-    assert op.block.coarse
-    drop = rng.random(op.size) < 0.3
-    drop[0] = False
-    op.detach(drop)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(BlockInverse, "COUPLING_PER_PILLAR", 0.0)  # on whatever the springs
+        # keep E from before the detachments: the general case, Z^T W != E
+        mp.setattr(BlockInverse, "REFACTOR_FRACTION", 1.0)
+        op = BrushOperator(Convolver(32), labels, compliance, 1.0, 1.0)
+        block = op.block
+        assert block.coarse
+        drop = rng.random(op.size) < 0.3
+        drop[0] = False
+        drop |= op.pl == op.pl[-1]  # one pillar detaches entirely
+        op.detach(drop)
+        assert block.factorisations == 1
     p = np.column_stack([op.precondition(e) for e in np.eye(op.size)])
     assert np.allclose(p, p.T, rtol=1e-10, atol=1e-12 * np.abs(p).max())
     assert np.linalg.eigvalsh(0.5 * (p + p.T)).min() > 0
+
+    pil, slot = np.divmod(op._bpos, block.m)
+    same = pil[:, None] == pil[None, :]
+    g = np.where(same, block.inv[pil[:, None], slot[:, None], slot[None, :]], 0.0)
+    z = np.zeros((op.size, block.inv.shape[0]))
+    z[np.arange(op.size), pil] = block._z[pil, slot]
+    c = block._c_factor
+    live = c > 0
+    z, c, r = z[:, live], c[live], block._r[np.ix_(live, live)]
+    e = np.diag(c) + c[:, None] * r * c[None, :]
+    # W = A Z in the monopole model: row i is row p(i) of (I + R C)
+    w = (np.eye(c.size) + r * c[None, :])[np.searchsorted(np.flatnonzero(live), pil)]
+    einv = np.linalg.inv(e)
+    q = np.eye(op.size) - z @ einv @ w.T
+    textbook = z @ einv @ z.T + q @ g @ q.T
+    assert np.allclose(p, textbook, rtol=1e-9, atol=1e-9 * np.abs(textbook).max())
 
 
 def test_sherman_morrison_preconditioner_inverts_diagonal_plus_spring():
