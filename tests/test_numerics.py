@@ -72,11 +72,18 @@ def test_operator_symmetric_and_matches_dense(seed, use_block):
     assert np.all(np.linalg.eigvalsh(dense) > 0), "operator must be positive definite"
 
 
+@pytest.mark.parametrize("packed", [False, True], ids=["matmul", "packed"])
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_block_preconditioner_is_exact_block_inverse_after_downdates(seed):
+def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, seed):
+    from brushcore.precondition import BlockInverse
+
     rng, labels, compliance = _random_problem(seed)
-    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
+    with pytest.MonkeyPatch.context() as mp:
+        # packed storage (BLAS spmv) is used for large blocks only; force it
+        mp.setattr(BlockInverse, "PACKED_MIN_BLOCK", 1 if packed else 10**9)
+        op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
+    assert (op.block._packed is not None) == packed
     for _ in range(2):
         drop = rng.random(op.size) < 0.3
         drop[0] = False
