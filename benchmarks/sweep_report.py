@@ -16,9 +16,19 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import re
 from collections import defaultdict
 from pathlib import Path
+
+
+def _number(text: str | None) -> float:
+    """A benchmark column as a float; NaN for 'NA' (job shorter than a sample)."""
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return float("nan")
+
 
 def read_jobs(root: Path) -> list[dict]:
     """One record per benchmark file: name, wall s, peak RSS MB, end time (file mtime)."""
@@ -31,7 +41,7 @@ def read_jobs(root: Path) -> list[dict]:
         row = rows[-1]  # --benchmark-repeats would give several rows
         jobs.append({"name": str(path.relative_to(root).with_suffix("")),
                      "wall": float(row["s"]),
-                     "rss_mb": float(row.get("max_rss", "nan") or "nan"),
+                     "rss_mb": _number(row.get("max_rss")),
                      "end": path.stat().st_mtime})
     return jobs
 
@@ -52,7 +62,8 @@ def main() -> None:
     wall = sum(j["wall"] for j in jobs)
     span = max(j["end"] for j in jobs) - min(j["end"] - j["wall"] for j in jobs)
     print(f"{len(jobs)} jobs; span {span:.0f} s ({span / 60:.1f} min); "
-          f"summed job wall time {wall:.0f} s; peak RSS {max(j['rss_mb'] for j in jobs):.0f} MB")
+          f"summed job wall time {wall:.0f} s; peak RSS "
+          f"{max((j['rss_mb'] for j in jobs if not math.isnan(j['rss_mb'])), default=math.nan):.0f} MB")
     groups: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
     for j in jobs:
         g = groups[group_of(j["name"])]
