@@ -36,7 +36,8 @@ class BrushOperator:
     -----
     Vectors are compressed to the attached elements in the order of
     `elements[attached]`.  `detach` shrinks the set; it never grows during
-    a pull-off.
+    a pull-off.  `attach` grows it again (approach and re-attachment, see
+    `brushcore.protocol`).
     """
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
@@ -88,6 +89,30 @@ class BrushOperator:
         self.attached[pos] = False
         self._update()
         return None if local is None else local[~which]
+
+    def attach(self, positions: np.ndarray) -> None:
+        """Attach detached elements given by operator-order indices (into `elements`).
+
+        Their buffer entries are already zero (`detach` cleared them); the
+        block preconditioner is bordered with the new elements.
+        """
+        positions = np.asarray(positions, dtype=np.intp)
+        if positions.size == 0:
+            return
+        if self.attached[positions].any():
+            raise ValueError("attach: some elements are already attached")
+        if self.block is not None:
+            self.block.attach(positions)
+        self.attached[positions] = True
+        self._update()
+
+    def field(self, x: np.ndarray) -> np.ndarray:
+        """Half-space displacement K x [length] at every pillar element
+        (operator order) from attached-element stresses x [stress]; one
+        operator application."""
+        buf = self.conv.buffer.ravel()
+        buf[self.idx] = x
+        return self.conv.apply_buffer().ravel()[self._padded]
 
     def far_field_uncertainty(self, pillar_change: np.ndarray) -> np.ndarray | None:
         """See `BlockInverse.far_field_uncertainty` (None without blocks)."""

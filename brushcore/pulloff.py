@@ -40,6 +40,8 @@ class PullOffCurve:
         which it is detached
     events : detachment events (jumps in d)
     cg_iterations : CG iterations over all solves
+    pillar_force_at_peak : force of each pillar [force] at the largest force
+        (load sharing at F_ad)
     """
 
     displacement: np.ndarray
@@ -49,6 +51,7 @@ class PullOffCurve:
     detach_step: np.ndarray
     events: int
     cg_iterations: int
+    pillar_force_at_peak: np.ndarray | None = None
 
 
 Progress = Callable[[int, int, int], None]
@@ -115,9 +118,13 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         cg_iters += it
         return x
 
+    best = [-np.inf, np.zeros(op.n_pillars)]  # largest force and its pillar forces
+
     def record(x: np.ndarray) -> None:
         disp.append(d)
         force.append(d * h * h * float(x.sum()))
+        if force[-1] > best[0]:  # one bincount per event: free next to a solve
+            best[0], best[1] = force[-1], d * h * h * op.pillar_sums(x)
         n_el.append(op.size)
         n_pil.append(int(np.count_nonzero(op.counts)))
 
@@ -176,4 +183,4 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     n_el.append(0)
     n_pil.append(0)
     return PullOffCurve(np.asarray(disp), np.asarray(force), np.asarray(n_el),
-                        np.asarray(n_pil), detach_step, events, cg_iters)
+                        np.asarray(n_pil), detach_step, events, cg_iters, best[1])

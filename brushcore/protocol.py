@@ -1,0 +1,490 @@
+"""Event-driven loading protocols: approach to a preload, retraction, cycles.
+
+The brush may be rough (an offset z_i per element, per-pillar protrusion
+being the common case) and graded (a spring compliance h^2 / k_p per
+pillar).  With the tip of pillar p at t_p = d - z_i - f_p / k_p (offsets
+taken per element), an attached element satisfies u_i + f_p / k_p = d - z_i,
+a detached one keeps the gap g_i = d - z_i - f_p / k_p - u_i >= 0.  An
+element attaches when its gap closes (g_i <= 0, zero-range adhesion) and
+detaches when its tensile stress exceeds sigma_c; compression never
+detaches (DESIGN.md, "Rough, graded and preloaded brushes").
+
+For a fixed attached set everything is affine in d:
+
+    sigma(d) = sigma(d_now) + (d - d_now) sigma_1,  A sigma_1 = 1,
+
+and so are the surface displacement u = K sigma and the gaps.  The next
+event, an element reaching sigma_c or a gap closing, or the waypoint (a
+target force or displacement), is therefore found exactly from two
+solutions: no step size on either branch.  At an attachment the new
+element carries no stress (its gap is zero), so sigma(d) is unchanged and
+only sigma_1 is re-solved.  After a detachment the stresses are re-solved
+at the same d until nothing exceeds sigma_c and no gap is closed (the
+unstable cascades), exactly as in `pulloff.pull_off`.
+
+A flat brush (all offsets equal) under the standard protocol (approach to
+a preload, retract to separation) is dispatched to `pulloff.pull_off`: its
+retraction branch is today's pull-off shifted by the first-touch position,
+its approach a straight line, and it costs exactly what today's does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cg import ConvergenceError, pcg
+from .operator import BrushOperator
+from .params import SolverOptions
+from .pulloff import Progress, SolverError, pull_off
+
+APPROACH, START, RETRACT = -1, 0, 1
+KINDS = ("force", "displacement", "separation")
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """One leg of a protocol: move d until the target is reached.
+
+    Parameters
+    ----------
+    kind : "force" (reach the total force ``value`` [force], tensile
+        positive, so a preload P is ``Waypoint("force", -P)``),
+        "displacement" (reach d = ``value`` [length]) or "separation"
+        (retract until no element is attached; ``value`` unused).
+    value : the target [force or length]
+
+    The direction follows from the state: towards the target.  A force
+    target that cannot be reached (the brush lets go first on retraction)
+    ends the leg at complete separation.
+    """
+
+    kind: str
+    value: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"waypoint kind={self.kind!r} is invalid: allowed one of {KINDS}")
+        if not np.isfinite(self.value):
+            raise ValueError(f"waypoint value={self.value!r} is invalid: allowed a finite number")
+
+
+def preload_protocol(preload: float) -> tuple[Waypoint, ...]:
+    """Approach until the compressive force is ``preload`` [force], then retract
+    until everything has let go."""
+    if not preload >= 0.0:
+        raise ValueError(f"preload={preload!r} is invalid: allowed a number >= 0")
+    return (Waypoint("force", -float(preload)), Waypoint("separation"))
+
+
+@dataclass(frozen=True)
+class ProtocolCurve:
+    """Raw result of one protocol run (units of the inputs).
+
+    Attributes
+    ----------
+    displacement, force : d [length] and F [force, tensile positive] per step
+    attached_elements, attached_pillars : contact per step
+    branch : index of the waypoint being followed per step (-1 at first touch)
+    direction : -1 approach, +1 retraction, 0 first touch, per step
+    waypoint_step : the step at which each waypoint was reached
+    attach_step, detach_step : per pillar element (operator order), the last
+        step at which it attached (-1: never) and the first step without it
+        after its last detachment (-1: never detached)
+    pillar_force_at_peak : per pillar, force [force] at the largest tensile
+        force of the last retraction leg (load sharing at F_ad)
+    peak_step : the step of that force
+    let_go : per pillar, d [length] at which its last element detached (NaN:
+        still attached or never touched)
+    attached_at_waypoint : per waypoint, attached elements (operator order)
+    attached_at_peak : attached elements at ``peak_step``
+    retraction : per step, whether it belongs to the last retraction leg
+        (its starting point included): F_ad and W are taken over it
+    events, cg_iterations : counts over the run
+    """
+
+    displacement: np.ndarray
+    force: np.ndarray
+    attached_elements: np.ndarray
+    attached_pillars: np.ndarray
+    branch: np.ndarray
+    direction: np.ndarray
+    waypoint_step: np.ndarray
+    attach_step: np.ndarray
+    detach_step: np.ndarray
+    pillar_force_at_peak: np.ndarray
+    peak_step: int
+    let_go: np.ndarray
+    attached_at_waypoint: tuple[np.ndarray, ...]
+    attached_at_peak: np.ndarray
+    events: int
+    cg_iterations: int
+    retraction: np.ndarray
+
+
+def positive_work(displacement: np.ndarray, force: np.ndarray) -> float:
+    """Exact integral of max(F, 0) dd over a piecewise linear curve [energy].
+
+    Segments that cross zero are split at the crossing; vertical drops (at
+    fixed d) contribute nothing.
+    """
+    d0, d1 = displacement[:-1], displacement[1:]
+    f0, f1 = force[:-1], force[1:]
+    dd = d1 - d0
+    both = (f0 >= 0) & (f1 >= 0)
+    work = np.where(both, 0.5 * (f0 + f1) * dd, 0.0)
+    cross = (f0 > 0) != (f1 > 0)
+    cross &= ~both
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pos = np.maximum(f0, f1)
+        frac = np.where(cross, pos / np.abs(f1 - f0), 0.0)
+    work += np.where(cross, 0.5 * pos * frac * dd, 0.0)
+    return float(work.sum())
+
+
+def loop_energy(displacement: np.ndarray, force: np.ndarray) -> float:
+    """Work done on the brush along the path, the integral of F dd [energy].
+
+    Over a protocol from first touch (no contact, no stress) to complete
+    separation it is the energy dissipated, >= 0; over a closed cycle in
+    which the contact does not change it is zero.
+    """
+    return float(np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(displacement)))
+
+
+def is_flat(offsets: np.ndarray) -> bool:
+    """Whether every element sits at the same height (today's brush)."""
+    return bool(offsets.size == 0 or np.all(offsets == offsets.flat[0]))
+
+
+def _standard_preload(protocol: tuple[Waypoint, ...]) -> float | None:
+    """The preload of an (approach to force <= 0, separation) protocol, else None."""
+    if (len(protocol) == 2 and protocol[0].kind == "force" and protocol[0].value <= 0
+            and protocol[1].kind == "separation"):
+        return -protocol[0].value
+    return None
+
+
+def run_protocol(op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: float,
+                 options: SolverOptions, protocol: tuple[Waypoint, ...],
+                 progress: Progress | None = None, dispatch: bool = True) -> ProtocolCurve:
+    """Run a protocol from first touch.
+
+    Parameters
+    ----------
+    op : operator over all pillar elements, all attached (as built)
+    offsets : z_i per pillar element in operator order [length]; larger z
+        reaches the substrate first
+    sigma_c : critical tensile stress [stress]
+    h : element size [length]
+    options : tolerances (``lookahead`` is not used: events are exact)
+    protocol : waypoints, see `Waypoint` and `preload_protocol`
+    progress : called as progress(events, attached, total) after each event
+    dispatch : send a flat brush under the standard protocol to
+        `pulloff.pull_off` (identical result and cost); False forces the
+        general engine (for tests)
+
+    Returns
+    -------
+    ProtocolCurve
+    """
+    offsets = np.asarray(offsets, dtype=float)
+    if offsets.shape != (op.size,) or not op.attached.all():
+        raise ValueError("run_protocol needs a fully attached operator and one offset per "
+                         "pillar element")
+    if not np.all(np.isfinite(offsets)):
+        raise ValueError("offsets must be finite")
+    preload = _standard_preload(protocol)
+    if dispatch and preload is not None and is_flat(offsets):
+        return _flat(op, float(offsets.flat[0]) if offsets.size else 0.0, preload,
+                     sigma_c, h, options, progress)
+    return _Engine(op, offsets, sigma_c, h, options, progress).run(protocol)
+
+
+def _flat(op: BrushOperator, z0: float, preload: float, sigma_c: float, h: float,
+          options: SolverOptions, progress: Progress | None) -> ProtocolCurve:
+    """Today's pull-off, shifted to first touch at d = z0, behind a linear approach.
+
+    In full contact sigma = (d - z0) sigma_1, so the preload is reached at
+    d_P = z0 - P / k with k = F/d of the first segment, and the retraction
+    back to z0 retraces the same line: the pull-off after it is today's.
+    """
+    total = op.size
+    curve = pull_off(op, sigma_c, h, options, progress)
+    d_rel, f = curve.displacement, curve.force
+    head = 0
+    if preload > 0:  # first touch and the preload point precede today's curve
+        head = 2
+        d_rel = np.concatenate([[0.0, -preload * d_rel[1] / f[1]], d_rel])
+        f = np.concatenate([[0.0, -preload], f])
+    n_el = np.concatenate([np.full(head, total), curve.attached_elements])
+    n_pil = np.concatenate([np.full(head, curve.attached_pillars[0]), curve.attached_pillars])
+    steps = d_rel.size
+    branch = np.ones(steps, dtype=np.int64)
+    direction = np.full(steps, RETRACT, dtype=np.int64)
+    branch[0], direction[0] = -1, START
+    if preload > 0:
+        branch[1], direction[1] = 0, APPROACH
+    retraction = np.zeros(steps, dtype=bool)
+    retraction[head // 2:] = True  # from the preload point on
+    disp = d_rel + z0
+    detach_step = curve.detach_step + head
+    peak = int(np.argmax(f))
+    last = np.zeros(op.n_pillars, dtype=np.int64)
+    np.maximum.at(last, op.pillar_of, detach_step)
+    return ProtocolCurve(
+        displacement=disp, force=f, attached_elements=n_el, attached_pillars=n_pil,
+        branch=branch, direction=direction, waypoint_step=np.array([head // 2, steps - 1]),
+        attach_step=np.zeros(total, dtype=np.int64), detach_step=detach_step,
+        pillar_force_at_peak=curve.pillar_force_at_peak, peak_step=peak, let_go=disp[last],
+        attached_at_waypoint=(np.ones(total, dtype=bool), np.zeros(total, dtype=bool)),
+        attached_at_peak=detach_step > peak, events=curve.events,
+        cg_iterations=curve.cg_iterations, retraction=retraction)
+
+
+class _Engine:
+    """State of one general protocol run (see `run_protocol`).
+
+    Full-length arrays (operator order, every pillar element) hold the
+    stresses at the current d (`sig`), the unit response (`sig1`), and the
+    surface displacements they cause (`u`, `u1`); detached entries of the
+    stresses are zero.
+    """
+
+    MAX_CASCADE = 100_000
+
+    def __init__(self, op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: float,
+                 options: SolverOptions, progress: Progress | None) -> None:
+        self.op, self.z, self.sigma_c, self.h = op, offsets, sigma_c, h
+        self.options, self.progress = options, progress
+        self.total = op.size
+        self.cp = op.compliance[op.pillar_of]  # spring compliance per element
+        # Displacement scale of one element at sigma_c: the unit of the gap
+        # tolerance and of the tie window between events.
+        self.scale = sigma_c * op.diag
+        self.gap_tol = options.tie_rtol * self.scale
+        self.cg_iters = 0
+        self.events = 0
+        n = self.total
+        self.sig = np.zeros(n)
+        self.sig1 = np.zeros(n)
+        self.u = np.zeros(n)
+        self.u1 = np.zeros(n)
+        self.attach_step = np.full(n, -1, dtype=np.int64)
+        self.detach_step = np.full(n, -1, dtype=np.int64)
+        self.let_go = np.full(op.n_pillars, np.nan)
+        self.rec: dict[str, list] = {k: [] for k in ("d", "f", "el", "pil", "br", "dir")}
+        self.leg, self.dir = -1, START
+        self.peak = (-np.inf, -1, np.zeros(op.n_pillars), np.zeros(n, dtype=bool))
+        self.d = float(offsets.max()) if n else 0.0
+
+    # --- linear algebra -------------------------------------------------
+    def _solve(self, rhs: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        op = self.op
+        if op.size == 0:
+            return np.zeros(0)
+        try:
+            x, it = pcg(op.apply, op.precondition, rhs, x0, self.options.rtol,
+                        self.options.max_iter)
+        except ConvergenceError as exc:
+            raise ConvergenceError(f"{exc} at event {self.events}, d = {self.d:.6g}, "
+                                   f"{op.size} of {self.total} elements attached") from None
+        self.cg_iters += it
+        return x
+
+    def _field(self, x: np.ndarray) -> np.ndarray:
+        return self.op.field(x) if self.op.size else np.zeros(self.total)
+
+    def _solve_state(self) -> None:
+        """sigma at the current d on the current set, and its field."""
+        att = self.op.attached
+        self.sig[att] = self._solve(self.d - self.z[att], self.sig[att])
+        self.sig[~att] = 0.0
+        self.u = self._field(self.sig[att])
+
+    def _solve_unit(self) -> None:
+        """sigma_1 (unit displacement response) on the current set, and its field."""
+        att = self.op.attached
+        self.sig1[att] = self._solve(np.ones(int(att.sum())), self.sig1[att])
+        self.sig1[~att] = 0.0
+        self.u1 = self._field(self.sig1[att])
+
+    # --- bookkeeping ------------------------------------------------------
+    def _pillar_force(self) -> np.ndarray:
+        att = self.op.attached
+        return self.h**2 * np.bincount(self.op.pillar_of[att], weights=self.sig[att],
+                                       minlength=self.op.n_pillars)
+
+    def _force(self) -> float:
+        return self.h**2 * float(self.sig.sum())
+
+    def _record(self) -> None:
+        r, op = self.rec, self.op
+        f = self._force()
+        r["d"].append(self.d)
+        r["f"].append(f)
+        r["el"].append(op.size)
+        r["pil"].append(int(np.count_nonzero(op.counts)))
+        r["br"].append(self.leg)
+        r["dir"].append(self.dir)
+        if self.dir == RETRACT and f > self.peak[0]:
+            self.peak = (f, len(r["d"]) - 1, self._pillar_force(), op.attached.copy())
+
+    def _gaps(self) -> tuple[np.ndarray, np.ndarray]:
+        """Gap and its rate d g / d d of every element (meaningful where detached)."""
+        op = self.op
+        s = np.bincount(op.pillar_of, weights=self.sig, minlength=op.n_pillars)
+        s1 = np.bincount(op.pillar_of, weights=self.sig1, minlength=op.n_pillars)
+        g = self.d - self.z - self.cp * s[op.pillar_of] - self.u
+        g1 = 1.0 - self.cp * s1[op.pillar_of] - self.u1
+        return g, g1
+
+    # --- events -------------------------------------------------------------
+    def _attach(self, which: np.ndarray) -> None:
+        """Attach elements (full-length mask) whose gap is closed: they carry
+        no stress yet, so sigma at this d is unchanged."""
+        pos = np.flatnonzero(which)
+        self.op.attach(pos)
+        self.attach_step[pos] = len(self.rec["d"])  # the next record holds them
+        self.detach_step[pos] = -1
+
+    def _detach(self, which: np.ndarray) -> None:
+        """Detach elements (full-length mask), warm-starting sigma with each
+        pillar's exact local response."""
+        op = self.op
+        att = op.attached
+        mask = which[att]
+        before = op.counts > 0
+        local = op.detach(mask, self.sig[att])
+        self.detach_step[which] = len(self.rec["d"])  # the next record lacks them
+        self.sig[which] = 0.0
+        if local is not None:
+            self.sig[op.attached] = local
+        gone = before & (op.counts == 0)
+        self.let_go[gone] = self.d
+
+    def _cascade(self) -> None:
+        """At fixed d: attach closed gaps, detach overloaded elements, re-solve,
+        until the state is consistent; then the unit response for the next leg."""
+        threshold = self.sigma_c * (1.0 - self.options.tie_rtol)
+        recorded = False
+        for _ in range(self.MAX_CASCADE):
+            att = self.op.attached
+            g, _ = self._gaps()
+            close = ~att & (g <= self.gap_tol)
+            over = att & (self.sig >= threshold)
+            if close.any():
+                self._attach(close)
+            if not recorded:  # the event point, after attaching, before detaching
+                self._record()
+                recorded = True
+            if not over.any():
+                break
+            self._detach(over)
+            self._solve_state()
+            self._record()
+        else:
+            raise SolverError(f"cascade at d = {self.d:.9g} did not settle in "
+                              f"{self.MAX_CASCADE} rounds")
+        self._solve_unit()
+
+    def _next(self, s: int, wp: Waypoint) -> tuple[float, bool]:
+        """Distance t >= 0 along direction s to the next event or the target,
+        and whether the target is what comes first."""
+        op = self.op
+        att = op.attached
+        t_event = np.inf
+        rate = s * self.sig1[att]
+        up = rate > 0
+        if up.any():
+            t = (self.sigma_c - self.sig[att][up]) / rate[up]
+            t_event = min(t_event, float(np.maximum(t, 0.0).min()))
+        if not att.all():
+            g, g1 = self._gaps()
+            rate_g = s * g1[~att]
+            closing = rate_g < 0
+            if closing.any():
+                t = g[~att][closing] / -rate_g[closing]
+                t_event = min(t_event, float(np.maximum(t, 0.0).min()))
+        t_target = np.inf
+        if wp.kind == "force":
+            f1 = self.h**2 * float(self.sig1.sum())
+            t = (wp.value - self._force()) / (s * f1) if f1 != 0 else -1.0
+            if t >= 0:  # otherwise the force moves away from the target
+                t_target = t
+        elif wp.kind == "displacement":
+            t_target = abs(wp.value - self.d)
+        tie = self.options.tie_rtol * (abs(self.d) + self.scale)
+        if t_target <= t_event + tie and np.isfinite(t_target):
+            return t_target, True
+        return t_event, False
+
+    def _direction(self, wp: Waypoint) -> int:
+        """+1 retract, -1 approach, 0 when the target is reached."""
+        if wp.kind == "separation":
+            return 0 if self.op.size == 0 else RETRACT
+        if wp.kind == "displacement":
+            return int(np.sign(wp.value - self.d))
+        f = self._force()
+        tol = self.options.rtol * max(abs(wp.value), self.h**2 * self.sigma_c)
+        if abs(f - wp.value) <= tol:
+            return 0
+        return APPROACH if f > wp.value else RETRACT
+
+    def _move(self, s: int, t: float) -> None:
+        self.d += s * t
+        self.sig += s * t * self.sig1
+        self.u += s * t * self.u1
+
+    def run(self, protocol: tuple[Waypoint, ...]) -> ProtocolCurve:
+        op = self.op
+        touch = self.z >= self.d - self.gap_tol
+        if (~touch).any():
+            op.detach(~touch)
+        self.attach_step[touch] = 0
+        self._solve_unit()
+        self._record()  # first touch: no force
+        waypoint_step, at_waypoint = [], []
+        retraction_start = 0
+        for k, wp in enumerate(protocol):
+            self.leg = k
+            s = self._direction(wp)
+            if s == RETRACT:
+                retraction_start = len(self.rec["d"]) - 1
+                self.peak = (-np.inf, -1, np.zeros(op.n_pillars), np.zeros(self.total, bool))
+            while s != 0:
+                self.dir = s
+                t, reached = self._next(s, wp)
+                if not np.isfinite(t):
+                    if op.size == 0 and s == RETRACT:
+                        break  # let go before a tensile target: nothing more to pull
+                    raise SolverError(f"waypoint {k} ({wp}) cannot be reached from d = "
+                                      f"{self.d:.9g}: no event and no target ahead")
+                self._move(s, t)
+                if reached:
+                    if wp.kind == "displacement":
+                        self.d = wp.value  # no round-off drift
+                    self._record()
+                    break
+                self.events += 1
+                self._cascade()
+                if self.progress is not None:
+                    self.progress(self.events, op.size, self.total)
+                if wp.kind == "separation" and op.size == 0:
+                    break
+            waypoint_step.append(len(self.rec["d"]) - 1)
+            at_waypoint.append(op.attached.copy())
+        r = self.rec
+        retraction = np.zeros(len(r["d"]), dtype=bool)
+        retraction[retraction_start:] = True
+        f_peak, i_peak, pillar_force, attached_peak = self.peak
+        return ProtocolCurve(
+            displacement=np.asarray(r["d"]), force=np.asarray(r["f"]),
+            attached_elements=np.asarray(r["el"]), attached_pillars=np.asarray(r["pil"]),
+            branch=np.asarray(r["br"]), direction=np.asarray(r["dir"]),
+            waypoint_step=np.asarray(waypoint_step), attach_step=self.attach_step,
+            detach_step=self.detach_step, pillar_force_at_peak=pillar_force,
+            peak_step=i_peak, let_go=self.let_go, attached_at_waypoint=tuple(at_waypoint),
+            attached_at_peak=attached_peak, events=self.events, cg_iterations=self.cg_iters,
+            retraction=retraction)
