@@ -79,3 +79,67 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         f"{history[-1] if history else float('nan'):.3e} > rtol {rtol:.1e} (size {b.size}; "
         f"last values "
         f"{', '.join(f'{h:.2e}' for h in history[-5:])})")
+
+
+def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+              precondition: Callable[[np.ndarray], np.ndarray],
+              b: np.ndarray, x0: np.ndarray, ax0: np.ndarray, y0: np.ndarray,
+              rtol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """`pcg` that also carries a linear image y = Y x of the iterate.
+
+    The brush operator's application computes the half-space field on the
+    whole grid, of which A keeps the attached elements; the protocol engine
+    also needs that field at the detached ones (their gaps).  Carrying it
+    along (y += alpha Y p) costs nothing, and a warm start whose A x0 and
+    Y x0 are known (from the previous state) costs no application either.
+
+    Parameters
+    ----------
+    apply : p -> (A p, Y p)
+    precondition, b, x0, rtol, max_iter : as in `pcg`
+    ax0, y0 : A x0 and Y x0
+
+    Returns
+    -------
+    x, Y x, iterations
+    """
+    x, y = x0.copy(), y0.copy()
+    r = b - ax0
+    z = precondition(r)
+    history: list[float] = []
+
+    def converged() -> bool:
+        xmax = float(np.abs(x).max()) if x.size else 0.0
+        zmax = float(np.abs(z).max()) if z.size else 0.0
+        if not np.isfinite(zmax):
+            raise ConvergenceError(f"CG produced a non-finite correction after "
+                                   f"{len(history)} iterations")
+        if xmax > 0:
+            history.append(zmax / xmax)
+        return zmax <= rtol * xmax
+
+    if converged():
+        return x, y, 0
+    p = z.copy()
+    rz = float(r @ z)
+    for it in range(1, max_iter + 1):
+        q, yq = apply(p)
+        pq = float(p @ q)
+        if not np.isfinite(pq) or pq <= 0.0:
+            raise ConvergenceError(f"CG broke down at iteration {it}: p.Ap = {pq!r} "
+                                   f"(operator not positive definite or non-finite)")
+        alpha = rz / pq
+        x += alpha * p
+        y += alpha * yq
+        r -= alpha * q
+        z = precondition(r)
+        if converged():
+            return x, y, it
+        rz_new = float(r @ z)
+        p *= rz_new / rz
+        p += z
+        rz = rz_new
+    raise ConvergenceError(
+        f"CG did not converge in {max_iter} iterations: relative correction "
+        f"{history[-1] if history else float('nan'):.3e} > rtol {rtol:.1e} (size {b.size}; "
+        f"last values {', '.join(f'{h:.2e}' for h in history[-5:])})")

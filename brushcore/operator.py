@@ -114,6 +114,17 @@ class BrushOperator:
         buf[self.idx] = x
         return self.conv.apply_buffer().ravel()[self._padded]
 
+    def spring(self, x: np.ndarray) -> np.ndarray:
+        """Spring part S x of A x (compressed) [length]."""
+        if self.compliance.any():
+            return (self.compliance * self.pillar_sums(x))[self.pl]
+        return np.zeros_like(x)
+
+    def apply_with_field(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(A x, K x at every pillar element) from one operator application."""
+        full = self.field(x)
+        return full[self.attached] + self.spring(x), full
+
     def far_field_uncertainty(self, pillar_change: np.ndarray) -> np.ndarray | None:
         """See `BlockInverse.far_field_uncertainty` (None without blocks)."""
         if self.block is None:

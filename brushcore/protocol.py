@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cg import ConvergenceError, pcg
+from .cg import ConvergenceError, pcg_image
 from .operator import BrushOperator
 from .params import SolverOptions
 from .pulloff import Progress, SolverError, pull_off
@@ -178,7 +178,8 @@ def run_protocol(op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: floa
         reaches the substrate first
     sigma_c : critical tensile stress [stress]
     h : element size [length]
-    options : tolerances (``lookahead`` is not used: events are exact)
+    options : tolerances; ``lookahead`` > 0 batches near events (see
+        `_Engine._cascade`), 0 (default) is exact
     protocol : waypoints, see `Waypoint` and `preload_protocol`
     progress : called as progress(events, attached, total) after each event
     dispatch : send a flat brush under the standard protocol to
@@ -278,37 +279,47 @@ class _Engine:
         self.leg, self.dir = -1, START
         self.peak = (-np.inf, -1, np.zeros(op.n_pillars), np.zeros(n, dtype=bool))
         self.d = float(offsets.max()) if n else 0.0
+        # Whether u, u1 are no longer K sig, K sig1 (after detachments, which
+        # zero entries and update sig locally); attaching keeps them exact.
+        self._stale_u = self._stale_u1 = False
 
     # --- linear algebra -------------------------------------------------
-    def _solve(self, rhs: np.ndarray, x0: np.ndarray) -> np.ndarray:
+    def _solve(self, rhs: np.ndarray, x: np.ndarray, y: np.ndarray | None
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Solve A x = rhs on the attached set from the full-length warm start
+        x (zero where detached) whose field y = K x is given, or None when
+        unknown (one application).  Returns x and its field, full length."""
         op = self.op
+        att = op.attached
         if op.size == 0:
-            return np.zeros(0)
+            return np.zeros(self.total), np.zeros(self.total)
+        x0 = x[att]
+        if y is None:
+            y = op.field(x0)
+        ax0 = y[att] + op.spring(x0)
         try:
-            x, it = pcg(op.apply, op.precondition, rhs, x0, self.options.rtol,
-                        self.options.max_iter)
+            xs, y, it = pcg_image(op.apply_with_field, op.precondition, rhs, x0, ax0, y,
+                                  self.options.rtol, self.options.max_iter)
         except ConvergenceError as exc:
             raise ConvergenceError(f"{exc} at event {self.events}, d = {self.d:.6g}, "
                                    f"{op.size} of {self.total} elements attached") from None
         self.cg_iters += it
-        return x
-
-    def _field(self, x: np.ndarray) -> np.ndarray:
-        return self.op.field(x) if self.op.size else np.zeros(self.total)
+        out = np.zeros(self.total)
+        out[att] = xs
+        return out, y
 
     def _solve_state(self) -> None:
         """sigma at the current d on the current set, and its field."""
         att = self.op.attached
-        self.sig[att] = self._solve(self.d - self.z[att], self.sig[att])
-        self.sig[~att] = 0.0
-        self.u = self._field(self.sig[att])
+        self.sig, self.u = self._solve(self.d - self.z[att], self.sig,
+                                       None if self._stale_u else self.u)
+        self._stale_u = False
 
     def _solve_unit(self) -> None:
         """sigma_1 (unit displacement response) on the current set, and its field."""
-        att = self.op.attached
-        self.sig1[att] = self._solve(np.ones(int(att.sum())), self.sig1[att])
-        self.sig1[~att] = 0.0
-        self.u1 = self._field(self.sig1[att])
+        self.sig1, self.u1 = self._solve(np.ones(self.op.size), self.sig1,
+                                         None if self._stale_u1 else self.u1)
+        self._stale_u1 = False
 
     # --- bookkeeping ------------------------------------------------------
     def _pillar_force(self) -> np.ndarray:
@@ -359,29 +370,39 @@ class _Engine:
         local = op.detach(mask, self.sig[att])
         self.detach_step[which] = len(self.rec["d"])  # the next record lacks them
         self.sig[which] = 0.0
+        self.sig1[which] = 0.0
         if local is not None:
             self.sig[op.attached] = local
+        self._stale_u = self._stale_u1 = True
         gone = before & (op.counts == 0)
         self.let_go[gone] = self.d
 
     def _cascade(self) -> None:
         """At fixed d: attach closed gaps, detach overloaded elements, re-solve,
-        until the state is consistent; then the unit response for the next leg."""
-        threshold = self.sigma_c * (1.0 - self.options.tie_rtol)
+        until the state is consistent; then the unit response for the next leg.
+
+        With ``options.lookahead`` > 0 the first round also attaches gaps
+        below lookahead x (sigma_c K_ii) and detaches stresses above
+        (1 - lookahead) sigma_c: fewer events, approximate (default 0: exact).
+        """
+        tie, ahead = self.options.tie_rtol, self.options.lookahead
         recorded = False
         for _ in range(self.MAX_CASCADE):
             att = self.op.attached
             g, _ = self._gaps()
-            close = ~att & (g <= self.gap_tol)
-            over = att & (self.sig >= threshold)
+            close = ~att & (g <= self.gap_tol + ahead * self.scale)
+            jump = close & (g > self.gap_tol)  # attached early: sigma jumps
+            over = att & (self.sig >= self.sigma_c * (1.0 - tie - ahead))
+            ahead = 0.0  # only the event itself is batched
             if close.any():
                 self._attach(close)
             if not recorded:  # the event point, after attaching, before detaching
                 self._record()
                 recorded = True
-            if not over.any():
+            if not (over.any() or jump.any()):
                 break
-            self._detach(over)
+            if over.any():
+                self._detach(over)
             self._solve_state()
             self._record()
         else:
@@ -442,6 +463,7 @@ class _Engine:
         touch = self.z >= self.d - self.gap_tol
         if (~touch).any():
             op.detach(~touch)
+        self.u1[:] = 0.0  # of sig1 = 0, the warm start
         self.attach_step[touch] = 0
         self._solve_unit()
         self._record()  # first touch: no force

@@ -111,3 +111,99 @@ def spring_punch_work(pull_off: float, spring: float, contact: float) -> float:
     force and then drops to zero: W = f^2 (1/k + 1/k_c) / 2.
     """
     return 0.5 * pull_off**2 * (1.0 / spring + 1.0 / contact)
+
+
+# --- Rough, graded and preloaded brushes: the elastic-foundation limit --------
+# Separated soft pillars do not interact: pillar i carries k_eff,i (d - d0_i)
+# (tensile positive) from its zero-force position d0_i until it lets go at its
+# own critical force f_c, i.e. at d0_i + lambda_i with lambda_i = f_c / k_eff,i
+# (a flat punch on a spring lets go at f_c whatever the spring; DESIGN.md,
+# "Rough, graded and preloaded brushes").  Pillars in compression count with
+# their (negative) force and never let go.
+
+
+def series_stiffness(spring: float | np.ndarray, contact: float) -> float | np.ndarray:
+    """Effective stiffness 1 / (1/k + 1/k_c) of a spring in series with its
+    contact [force / length]; k = inf gives k_c."""
+    return 1.0 / (1.0 / np.asarray(spring, dtype=float) + 1.0 / contact)
+
+
+def displacement_unit(area: float, e_star: float, dgamma: float) -> float:
+    """Unit of heights and roughness, d_K = sqrt(2 pi dgamma a0 / E*) [length]
+    (the same as `displacement_scale`, named for its use with heights)."""
+    return displacement_scale(area, e_star, dgamma)
+
+
+def foundation_pull_off(d0: np.ndarray, k_eff: np.ndarray, f_c: float | np.ndarray
+                        ) -> float:
+    """Adhesive force of independent pillars, all attached [force].
+
+    F_ad = max_j sum_{i : d_i >= d_j} k_eff,i (d_j - d0_i), with d_j =
+    d0_j + f_c,j / k_eff,j the displacement at which pillar j lets go (the
+    force just before it does).  Exact for the elastic-foundation model.
+
+    Parameters
+    ----------
+    d0 : zero-force displacement of each pillar [length] (its first-touch d;
+        larger means it lets go later)
+    k_eff : effective stiffness of each pillar [force / length]
+    f_c : critical force of each pillar (or one for all) [force]
+    """
+    d0 = np.asarray(d0, dtype=float)
+    k = np.asarray(k_eff, dtype=float)
+    let_go = d0 + np.broadcast_to(np.asarray(f_c, dtype=float), d0.shape) / k
+    attached = let_go[None, :] >= let_go[:, None]  # [j, i]: i still holds at d_j
+    force = (attached * k[None, :] * (let_go[:, None] - d0[None, :])).sum(axis=1)
+    return float(force.max())
+
+
+def uniform_spread_pull_off(width: float | np.ndarray) -> float | np.ndarray:
+    """F_ad / (N f_c) of many equal pillars with heights uniform over a band
+    of width w, in units of the stretch lambda = f_c / k_eff:
+    1 - w / 2 for w <= 1, 1 / (2 w) beyond."""
+    w = np.asarray(width, dtype=float)
+    return np.where(w <= 1.0, 1.0 - 0.5 * w, 0.5 / np.maximum(w, 1.0))
+
+
+def gaussian_spread_pull_off(s: float) -> float:
+    """F_ad / (N f_c) of many equal pillars with Gaussian heights of standard
+    deviation s (units of lambda = f_c / k_eff), large N.
+
+    With x = (d - z) / lambda ~ Normal(mu, s), F / (N f_c) = E[x; x < 1] =
+    mu Phi(a) - s phi(a), a = (1 - mu) / s, maximised over mu numerically.
+    Values 0.784, 0.634, 0.343, 0.115 at s = 0.1, 0.2, 0.5, 1.
+    """
+    from scipy.optimize import minimize_scalar
+    from scipy.stats import norm
+
+    if s == 0:
+        return 1.0
+
+    def minus_force(mu: float) -> float:
+        a = (1.0 - mu) / s
+        return -(mu * norm.cdf(a) - s * norm.pdf(a))
+
+    res = minimize_scalar(minus_force, bounds=(1.0 - 10.0 * s, 1.0 + 10.0 * s),
+                          method="bounded", options={"xatol": 1e-12})
+    return float(-res.fun)
+
+
+def bimodal_stiffness_pull_off(ratio: float = 2.0, fraction: float = 0.5) -> float:
+    """F_ad / (N f_c) of equal-height pillars, a fraction q with stiffness k
+    and the rest with ratio * k (ratio >= 1): the stiff ones let go at
+    lambda / ratio, the soft ones at lambda; 0.75 for half k, half 2k."""
+    at_stiff = fraction / ratio + (1.0 - fraction)
+    at_soft = fraction
+    return max(at_stiff, at_soft)
+
+
+def jkr_pull_off(radius: float, dgamma: float) -> float:
+    """JKR pull-off force 1.5 pi R dgamma of a sphere under load control, or of
+    a sphere on any spring once the contact is unstable [force]."""
+    return 1.5 * math.pi * radius * dgamma
+
+
+def jkr_fixed_grips_pull_off(radius: float, dgamma: float) -> float:
+    """Force (5/6) pi R dgamma at which a JKR sphere on a rigid mount
+    (displacement control) jumps out of contact [force]."""
+    return 5.0 / 6.0 * math.pi * radius * dgamma
