@@ -17,6 +17,7 @@ from .operator import BrushOperator
 from .params import BrushParams, SolverOptions
 from .provenance import git_commit, parameter_hash, version
 from .cg import ConvergenceError
+from .protocol import ProtocolCurve, Waypoint, run_protocol
 from .pulloff import Progress, PullOffCurve, SolverError, pull_off
 from .threads import fft_threads
 
@@ -81,6 +82,56 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     detach = np.full(labels.size, -1, dtype=np.int32)
     detach[op.elements] = curve.detach_step
     return detach.reshape(labels.shape), curve, conv.applications - before
+
+
+def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
+                       options: SolverOptions = SolverOptions(),
+                       heights: np.ndarray | None = None, gap_map: np.ndarray | None = None,
+                       compliance: np.ndarray | None = None,
+                       progress: Progress | None = None, labels: np.ndarray | None = None,
+                       dispatch: bool = True,
+                       ) -> tuple[np.ndarray, BrushOperator, ProtocolCurve, int]:
+    """Run a loading protocol on a rough and graded brush.
+
+    Parameters
+    ----------
+    params, options : the problem and the numerics
+    protocol : waypoints (see `brushcore.protocol`), e.g. `preload_protocol(P)`
+    heights : protrusion z_p per pillar in label order [length] (default 0);
+        a larger z reaches the substrate first
+    gap_map : extra gap per element, shape (n, n) [length] (default 0): the
+        element offset is z_i = z_p - gap_i (a spherical tip is r^2 / 2R)
+    compliance : h^2 / k_p per pillar [length / stress] (default: every
+        pillar on the spring of ``params.kbar``)
+    progress, labels : as in `run`
+    dispatch : see `protocol.run_protocol`
+
+    Returns
+    -------
+    label map, the operator (its `elements` and `pillar_of` give the order
+    of the per-element outputs), the curve, and the operator applications.
+    """
+    labels = build_labels(params) if labels is None else labels
+    n_pillars = int(labels.max()) + 1
+    conv = cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+    before = conv.applications
+    if compliance is None:
+        compliance = spring_compliance(params, n_pillars)
+    op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
+                       params.e_star)
+    z = np.zeros(op.size)
+    if heights is not None:
+        z += np.asarray(heights, dtype=float)[op.pillar_of]
+    if gap_map is not None:
+        z -= np.asarray(gap_map, dtype=float).ravel()[op.elements]
+    sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            curve = run_protocol(op, z, sigma_c, params.h, options, protocol, progress,
+                                 dispatch=dispatch)
+    except (ConvergenceError, SolverError) as exc:
+        raise type(exc)(f"{exc}; problem: {params}; options: {options}") from None
+    return labels, op, curve, conv.applications - before
 
 
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
