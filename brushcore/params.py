@@ -7,11 +7,12 @@ naming the parameter and its allowed range before any computation starts.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import numbers
 import re
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -120,6 +121,25 @@ class BrushParams:
         pillar radius under MIN_RADIUS_ELEMENTS elements, or a realised
         filling factor more than MAX_PHI_ERROR off the requested one);
         such runs are refused by default.
+    roughness : standard deviation S >= 0 of Gaussian pillar heights, in
+        units of d_K = sqrt(2 pi dgamma a0 / E*) (a0 = sqrt(A / pi), A the
+        discretised pillar area), drawn from ``seed`` (also for regular
+        brushes); 0 (default) is today's flat brush.
+    preload : compressive force P >= 0 the approach stops at, in units of
+        F_K = sqrt(8 pi E* dgamma a0^3); 0 stops at first touch.
+    kbar_spread : coefficient of variation C >= 0 of a lognormal per-pillar
+        kbar with mean ``kbar`` (finite kbar only), drawn from ``seed``.
+    heights : protrusion of each pillar in units of d_K, in label order
+        (see `brushcore.layout.regular_centres`; larger reaches the
+        substrate first); exclusive with ``roughness``.
+    kbar_values : kbar of each pillar in (0, inf], label order; exclusive
+        with ``kbar_spread`` (``kbar`` then only names the brush).
+    gap_map : extra gap of every element, shape (grid, grid), in units of
+        d_K, added below the pillar heights: element offset z_i = z_p -
+        gap_i (a spherical tip is r^2 / 2R, a tilt a linear ramp).
+
+    Arrays are copied, stored read-only, and compared through their digest
+    (``inputs_digest``), so equal parameters compare and hash equal.
 
     Integer and real parameters accept NumPy scalars and are stored as
     Python ``int`` / ``float``.  Dimensional parameters are in one
@@ -139,10 +159,18 @@ class BrushParams:
     dgamma: float = 1.0
     h: float = 1.0
     allow_coarse: bool = False
+    roughness: float = 0.0
+    preload: float = 0.0
+    kbar_spread: float = 0.0
+    heights: np.ndarray | None = field(default=None, compare=False, repr=False)
+    kbar_values: np.ndarray | None = field(default=None, compare=False, repr=False)
+    gap_map: np.ndarray | None = field(default=None, compare=False, repr=False)
+    inputs_digest: str = field(default="", init=False)
 
     def __post_init__(self) -> None:
         _normalise(self, ("n_pillars", "grid", "seed"),
-                   ("kbar", "phi", "min_gap", "e_star", "dgamma", "h"))
+                   ("kbar", "phi", "min_gap", "e_star", "dgamma", "h", "roughness",
+                    "preload", "kbar_spread"))
         _require(self.layout in LAYOUTS, "layout", self.layout, f"one of {LAYOUTS}")
         _require(_is_integer(self.n_pillars) and self.n_pillars >= 1,
                  "n_pillars", self.n_pillars, "an integer N >= 1")
@@ -167,6 +195,7 @@ class BrushParams:
         _require(isinstance(self.allow_coarse, (bool, np.bool_)), "allow_coarse",
                  self.allow_coarse, "True or False")
         object.__setattr__(self, "allow_coarse", bool(self.allow_coarse))
+        self._check_rough()
         r = self.pillar_radius_elements
         floor = FLOOR_RADIUS_ELEMENTS if self.allow_coarse else MIN_RADIUS_ELEMENTS
         _require(r >= floor, "grid", self.grid,
@@ -175,6 +204,54 @@ class BrushParams:
                  f"a pillar radius spans {r:.3g} elements, under the {floor:.3g} "
                  + ("that cover an element centre" if self.allow_coarse else
                     "needed for a meaningful detachment criterion"))
+
+    def _check_rough(self) -> None:
+        """Roughness, preload, stiffness spread and the per-pillar arrays."""
+        for name in ("roughness", "preload", "kbar_spread"):
+            value = getattr(self, name)
+            _require(_is_real(value) and math.isfinite(value) and value >= 0, name, value,
+                     "a finite number >= 0")
+        _require(self.kbar_spread == 0 or math.isfinite(self.kbar), "kbar_spread",
+                 self.kbar_spread, "0 for rigid pillars (kbar = inf)")
+        n = self.n_pillars
+        digest = hashlib.sha256()
+        for name, shape, low in (("heights", (n,), None), ("kbar_values", (n,), 0.0),
+                                 ("gap_map", (self.grid, self.grid), None)):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            what = (f"an array of shape {shape}" if name == "gap_map" else
+                    f"one value per pillar ({n}), in label order")
+            try:
+                arr = np.array(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ParameterError(name, type(value).__name__, what) from None
+            _require(arr.shape == shape, name, f"<array of shape {arr.shape}>", what)
+            ok = np.isfinite(arr) if low is None else (np.isfinite(arr) | (arr == np.inf))
+            if low is not None:
+                ok &= ~(arr <= low)
+            bad = np.argwhere(~ok)
+            if bad.size:
+                where = ", ".join(str(int(i)) for i in bad[0])
+                kind = "element (y, x)" if name == "gap_map" else "pillar"
+                _require(False, name, f"<array with {len(bad)} invalid values>",
+                         what + (", each in (0, inf]" if low is not None else ", all finite"),
+                         f"{kind} {where} is {float(arr[tuple(bad[0])])!r}")
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+            digest.update(name.encode() + arr.tobytes())
+        _require(self.heights is None or self.roughness == 0, "roughness", self.roughness,
+                 "0 when heights are given (they are exclusive)")
+        _require(self.kbar_values is None or self.kbar_spread == 0, "kbar_spread",
+                 self.kbar_spread, "0 when kbar_values are given (they are exclusive)")
+        object.__setattr__(self, "inputs_digest", digest.hexdigest()[:16]
+                           if any(getattr(self, k) is not None for k in ARRAY_FIELDS) else "")
+
+    @property
+    def is_flat(self) -> bool:
+        """Today's problem: equal heights and springs, pulled from full contact."""
+        return (self.roughness == 0 and self.preload == 0 and self.kbar_spread == 0
+                and all(getattr(self, k) is None for k in ARRAY_FIELDS))
 
     @property
     def side(self) -> float:
@@ -197,8 +274,28 @@ class BrushParams:
         return stiffness_from_kbar(self.kbar, self.e_star, self.side)
 
     def as_attrs(self) -> dict[str, float | int | str]:
-        """All fields as netCDF-safe attributes (inf kept as a float)."""
-        return {k: (int(v) if isinstance(v, bool) else v) for k, v in asdict(self).items()}
+        """All fields as netCDF-safe attributes (inf kept as a float).
+
+        The rough-brush fields appear only where they differ from their
+        defaults, so a flat brush keeps today's attributes and parameter
+        hash; arrays are represented by ``inputs_digest`` (their values are
+        curve variables).
+        """
+        out = {}
+        for k, v in asdict(self).items():
+            if k in ARRAY_FIELDS:
+                continue
+            if k in ROUGH_FIELDS and v == ROUGH_DEFAULTS[k]:
+                continue
+            out[k] = int(v) if isinstance(v, bool) else v
+        return out
+
+
+#: Per-pillar and per-element inputs (arrays) of `BrushParams`.
+ARRAY_FIELDS = ("heights", "kbar_values", "gap_map")
+#: Rough-brush fields and the defaults that reproduce today's flat brush.
+ROUGH_DEFAULTS = {"roughness": 0.0, "preload": 0.0, "kbar_spread": 0.0, "inputs_digest": ""}
+ROUGH_FIELDS = tuple(ROUGH_DEFAULTS)
 
 
 @dataclass(frozen=True)
