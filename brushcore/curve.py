@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import time
+from collections.abc import Sequence
 from dataclasses import asdict
 
 import numpy as np
@@ -17,7 +18,9 @@ from .operator import BrushOperator
 from .params import BrushParams, SolverOptions
 from .provenance import git_commit, parameter_hash, version
 from .cg import ConvergenceError
-from .protocol import ProtocolCurve, Waypoint, run_protocol
+from .protocol import (APPROACH, RETRACT, START, ProtocolCurve, Waypoint, loop_energy,
+                       positive_work, preload_protocol, run_protocol)
+from .rough import pillar_centroids, pillar_inputs
 from .pulloff import Progress, PullOffCurve, SolverError, pull_off
 from .threads import fft_threads
 
@@ -146,14 +149,24 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
 
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
              progress: Progress | None = None, labels: np.ndarray | None = None,
-             ) -> xr.Dataset:
+             protocol: Sequence[Waypoint] | None = None) -> xr.Dataset:
     """Pull-off curve, adhesive force and work of separation as a Dataset.
 
     ``labels`` (optional) is the label map to use, see `run`.
 
+    A flat brush (`BrushParams.is_flat`) without ``protocol`` is today's
+    pull-off from full contact.  Otherwise the brush is approached from
+    first touch to ``params.preload`` and retracted until it has let go,
+    or follows ``protocol``: waypoints whose values are normalised, forces
+    in F_K (a preload P is ``Waypoint("force", -P)``) and displacements in
+    d_K, the units of the curve's normalised variables.  See
+    `simulate_protocol` for the extra outputs.
+
     Signs: d > 0 pulls the brush away, F > 0 is tensile.  Normalised values
     follow the paper (eqs. 20-24) with A the discretised real contact area.
     """
+    if protocol is not None or not params.is_flat:
+        return simulate_protocol(params, options, progress, labels, protocol)
     t0 = time.perf_counter()
     detach, curve, applications = run(params, options, progress, labels)
     wall = time.perf_counter() - t0
@@ -235,4 +248,189 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "x": var("x", coord, "element centre x", "m"),
         "snapshot": var("snapshot", np.arange(snaps.size, dtype=np.int32),
                         "contact snapshot index", "1"),
+    }, attrs=attrs)
+
+
+def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOptions(),
+                      progress: Progress | None = None, labels: np.ndarray | None = None,
+                      protocol: Sequence[Waypoint] | None = None) -> xr.Dataset:
+    """Approach, preload and retraction (or any waypoint protocol) as a Dataset.
+
+    Beyond today's variables (same names, units and meaning, now over both
+    branches of the loop): per step ``branch`` (waypoint index, -1 at first
+    touch), ``direction`` (-1 approach, 0 first touch, +1 retraction) and
+    ``retraction`` (1 on the last retraction leg, where ``adhesive_force``
+    and ``work_of_separation`` = integral of max(F, 0) dd are taken); per
+    pillar (dimension ``pillar``, label order) centre, height, kbar, force
+    at F_ad and let-go displacement; scalars ``dissipated_energy`` (the
+    integral of F dd over the whole loop) and ``pillars_in_contact_at_preload``.
+    Waypoint values in ``protocol`` are normalised (F_K, d_K).
+    """
+    t0 = time.perf_counter()
+    labels = build_labels(params) if labels is None else labels
+    inputs = pillar_inputs(params, labels)
+    fs, ds_ = inputs.f_unit, inputs.d_unit
+    if protocol is None:
+        waypoints = preload_protocol(inputs.preload)
+    else:
+        if params.preload != 0:
+            from .params import ParameterError
+            raise ParameterError("preload", params.preload,
+                                 "0 when a protocol is given (its first waypoint is the load)")
+        waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
+                          for w in protocol)
+    _, op, curve, applications = run_protocol_curve(
+        params, waypoints, options, heights=inputs.heights, gap_map=inputs.gap_map,
+        compliance=inputs.compliance, progress=progress, labels=labels)
+    wall = time.perf_counter() - t0
+    h, es, dg = params.h, params.e_star, params.dgamma
+    area_total = float(np.count_nonzero(labels >= 0)) * h * h
+    ws = theory.work_scale(area_total, dg)
+    d, f = curve.displacement, curve.force
+    ret = curve.retraction
+    i_max = int(np.flatnonzero(ret)[np.argmax(f[ret])])
+    f_ad = float(f[i_max])
+    work = positive_work(d[ret], f[ret])
+    dissipated = loop_energy(d, f)
+    area = curve.attached_elements * h * h
+    n_pillars = op.n_pillars
+
+    def on_grid(values: np.ndarray, fill, dtype) -> np.ndarray:
+        out = np.full(labels.size, fill, dtype=dtype)
+        out[op.elements] = values
+        return out.reshape(labels.shape)
+
+    # Contact maps at every waypoint and at F_ad (1 attached, 0 not, -1 no pillar).
+    masks = list(curve.attached_at_waypoint) + [curve.attached_at_peak]
+    names = [f"waypoint {k}: {w.kind}" + (f" {w.value:g}" if w.kind != "separation" else "")
+             for k, w in enumerate(protocol if protocol is not None else waypoints)]
+    if protocol is None:
+        names[0] = "preload"
+        names[1] = "separated"
+    names.append("maximum force")
+    steps = list(curve.waypoint_step) + [i_max]
+    states = np.stack([on_grid(m.astype(np.int8), -1, np.int8) for m in masks])
+    centre = pillar_centroids(labels, h)
+    preload_step = int(curve.waypoint_step[0])
+    in_contact = int(np.count_nonzero(np.bincount(
+        op.pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
+    pillar_force = curve.pillar_force_at_peak
+    if pillar_force is None:
+        pillar_force = np.full(n_pillars, np.nan)
+
+    def var(dims, data, name, units, **extra):
+        return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
+
+    coord = (np.arange(params.grid) + 0.5) * h
+    data = {
+        "displacement": var("step", d, "displacement d of the backing plate", "m"),
+        "force": var("step", f, "tensile normal force F", "N"),
+        "contact_area": var("step", area, "real contact area", "m2"),
+        "attached_pillars": var("step", curve.attached_pillars.astype(np.int32),
+                                "pillars with attached elements", "1"),
+        "displacement_normalized": var("step", d / ds_,
+                                       "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
+        "force_normalized": var("step", f / fs, "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)",
+                                "1"),
+        "branch": var("step", curve.branch.astype(np.int32),
+                      "index of the protocol waypoint being followed", "1",
+                      comment="-1 at first touch"),
+        "direction": var("step", curve.direction.astype(np.int8), "direction of motion",
+                         "1", flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
+                         flag_meanings="approach first_touch retraction"),
+        "retraction": var("step", ret.astype(np.int8),
+                          "step belongs to the last retraction leg", "1",
+                          flag_values=np.array([0, 1], dtype=np.int8),
+                          flag_meanings="other last_retraction"),
+        "attachment_step": var(("y", "x"), on_grid(curve.attach_step, -1, np.int32),
+                               "last step at which the element attached", "1",
+                               comment="-1 outside pillars or never in contact"),
+        "detachment_step": var(("y", "x"), on_grid(curve.detach_step, -1, np.int32),
+                               "first step without the element after its last detachment",
+                               "1", comment="-1 outside pillars, never detached"),
+        "contact_snapshot": var(("snapshot", "y", "x"), states, "contact state", "1",
+                                flag_values=np.array([-1, 0, 1], dtype=np.int8),
+                                flag_meanings="no_pillar detached attached"),
+        "snapshot_step": var("snapshot", np.asarray(steps, dtype=np.int32),
+                             "step of the snapshot", "1"),
+        "snapshot_label": xr.Variable("snapshot", np.array(names),
+                                      {"long_name": "stage of the protocol"}),
+        "pillar_y": var("pillar", centre[:, 0], "pillar centroid y", "m"),
+        "pillar_x": var("pillar", centre[:, 1], "pillar centroid x", "m"),
+        "pillar_height": var("pillar", inputs.heights, "pillar protrusion z_p "
+                             "(larger reaches the substrate first)", "m"),
+        "pillar_height_normalized": var("pillar", inputs.heights / ds_, "z_p / d_K", "1"),
+        "pillar_kbar": var("pillar", inputs.kbar, "pillar spring stiffness k_p / (E* L)",
+                           "1"),
+        "pillar_force_at_adhesive_force": var("pillar", pillar_force,
+                                              "pillar force at F_ad (tensile positive)", "N"),
+        "pillar_let_go_displacement": var("pillar", curve.let_go,
+                                          "d at which the pillar's last element detached",
+                                          "m", comment="NaN: never in contact"),
+        "adhesive_force": var((), f_ad, "adhesive force (maximum tensile force of the "
+                              "last retraction)", "N"),
+        "adhesive_force_normalized": var((), f_ad / fs, "F_ad / F_K", "1"),
+        "displacement_at_adhesive_force": var((), float(d[i_max]), "d at the adhesive force",
+                                              "m"),
+        "work_of_separation": var((), work, "work of separation, integral of max(F, 0) dd "
+                                  "over the last retraction", "J"),
+        "work_of_separation_normalized": var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
+                                             "1"),
+        "dissipated_energy": var((), dissipated, "energy dissipated over the protocol, "
+                                 "integral of F dd", "J"),
+        "dissipated_energy_normalized": var((), dissipated / ws, "dissipated energy / W_K",
+                                            "1"),
+        "pillars_in_contact_at_preload": var((), np.int32(in_contact),
+                                             "pillars with attached elements at the end of "
+                                             "the first waypoint", "1"),
+        "contact_area_at_preload": var((), float(area[preload_step]),
+                                       "real contact area at the end of the first waypoint",
+                                       "m2"),
+    }
+    if inputs.gap_map is not None:
+        data["gap_map"] = var(("y", "x"), inputs.gap_map, "extra gap of each element", "m")
+    attrs = {
+        **params.as_attrs(),
+        **{k: v for k, v in asdict(options).items()},
+        "phi_actual": area_total / params.side**2,
+        "real_contact_area": area_total,
+        "pillar_radius": params.pillar_radius,
+        "pillar_radius_elements": params.pillar_radius_elements,
+        "side_length": params.side,
+        "critical_stress": theory.critical_stress(es, dg, h),
+        "displacement_unit_d_K": ds_,
+        "force_unit_F_K": fs,
+        "preload_force": float(-waypoints[0].value) if waypoints[0].kind == "force" else 0.0,
+        "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
+        "pillar_order": "label order: regular brushes row-major, pillar i*sqrt(N)+j at "
+                        "((i+1/2) L/sqrt(N), (j+1/2) L/sqrt(N)) along (y, x); random brushes "
+                        "in placement order",
+        "events": curve.events,
+        "steps": int(d.size),
+        "operator_applications": applications,
+        "cg_iterations": curve.cg_iterations,
+        "wall_time_s": wall,
+        "brushcore_version": version(),
+        "git_commit": git_commit(),
+        "parameter_hash": parameter_hash(params.as_attrs(), asdict(options),
+                                         {"protocol": [(w.kind, w.value) for w in waypoints]}),
+        "Conventions": "CF-1.10",
+        "title": "Approach, preload and pull-off of a rough, graded pillar brush",
+        "references": "He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
+                      "Facta Univ. Mech. Eng. 13 (2015) 3; He, Li & Popov, J. Adhesion (2021)",
+        "history": f"{dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} "
+                   f"brushcore {version()} simulate",
+        "sign_convention": "d > 0 pulls away from the half space; F > 0 is tensile",
+        "units_convention": UNITS_CONVENTION,
+        "symbols": SYMBOLS,
+    }
+    return xr.Dataset(data, coords={
+        "step": var("step", np.arange(d.size, dtype=np.int32),
+                    "step of the protocol (one per event or solve)", "1"),
+        "y": var("y", coord, "element centre y", "m"),
+        "x": var("x", coord, "element centre x", "m"),
+        "snapshot": var("snapshot", np.arange(len(steps), dtype=np.int32),
+                        "contact snapshot index", "1"),
+        "pillar": var("pillar", np.arange(n_pillars, dtype=np.int32),
+                      "pillar index (label order)", "1"),
     }, attrs=attrs)

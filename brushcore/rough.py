@@ -1,0 +1,90 @@
+"""Per-pillar inputs of a rough and graded brush, from its parameters.
+
+Heights, stiffnesses and gap maps are given (or drawn) in normalised units;
+this module turns them into the solver's units once the label map, and
+with it the discretised pillar area A that defines d_K and F_K, is known.
+Random draws use their own streams of ``seed`` ([seed, 1] heights, [seed, 2]
+stiffness), so they do not depend on the random layout's draws.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import theory
+from .params import BrushParams
+
+
+@dataclass(frozen=True)
+class PillarInputs:
+    """What the protocol engine needs beyond the label map.
+
+    Attributes
+    ----------
+    heights : protrusion z_p per pillar [length], label order
+    kbar : normalised stiffness per pillar (inf: rigid)
+    compliance : h^2 / k_p per pillar [length / stress] (0: rigid)
+    gap_map : extra gap per element [length], shape (n, n), or None
+    d_unit, f_unit : d_K [length] and F_K [force] of the discretised area
+    preload : P [force]
+    """
+
+    heights: np.ndarray
+    kbar: np.ndarray
+    compliance: np.ndarray
+    gap_map: np.ndarray | None
+    d_unit: float
+    f_unit: float
+    preload: float
+
+
+def lognormal_kbar(mean: float, cv: float, n: int, seed: int) -> np.ndarray:
+    """n lognormal values with the given mean and coefficient of variation."""
+    if cv == 0:
+        return np.full(n, mean)
+    s2 = math.log1p(cv * cv)
+    rng = np.random.default_rng([seed, 2])
+    return mean * np.exp(rng.normal(-0.5 * s2, math.sqrt(s2), n))
+
+
+def gaussian_heights(std: float, n: int, seed: int) -> np.ndarray:
+    """n heights of zero mean and standard deviation ``std`` (zeros for 0)."""
+    if std == 0:
+        return np.zeros(n)
+    return np.random.default_rng([seed, 1]).normal(0.0, std, n)
+
+
+def pillar_inputs(params: BrushParams, labels: np.ndarray) -> PillarInputs:
+    """Heights, stiffnesses, gap map and units of a brush on its label map."""
+    n = params.n_pillars
+    area = float(np.count_nonzero(labels >= 0)) * params.h**2
+    d_unit = theory.displacement_scale(area, params.e_star, params.dgamma)
+    f_unit = theory.force_scale(area, params.e_star, params.dgamma)
+    if params.heights is not None:
+        heights = np.asarray(params.heights, dtype=float) * d_unit
+    else:
+        heights = gaussian_heights(params.roughness, n, params.seed) * d_unit
+    if params.kbar_values is not None:
+        kbar = np.asarray(params.kbar_values, dtype=float)
+    else:
+        kbar = lognormal_kbar(params.kbar, params.kbar_spread, n, params.seed)
+    k = theory.stiffness_from_kbar(kbar, params.e_star, params.side)
+    with np.errstate(divide="ignore"):
+        compliance = np.where(np.isinf(k), 0.0, params.h**2 / k)
+    gap = None if params.gap_map is None else np.asarray(params.gap_map) * d_unit
+    return PillarInputs(heights, kbar, compliance, gap, d_unit, f_unit,
+                        params.preload * f_unit)
+
+
+def pillar_centroids(labels: np.ndarray, h: float) -> np.ndarray:
+    """Centroid (y, x) of each pillar's elements [length], shape (N, 2)."""
+    n_pillars = int(labels.max()) + 1
+    iy, ix = np.nonzero(labels >= 0)
+    lab = labels[iy, ix]
+    count = np.bincount(lab, minlength=n_pillars)
+    y = np.bincount(lab, weights=iy + 0.5, minlength=n_pillars) / count
+    x = np.bincount(lab, weights=ix + 0.5, minlength=n_pillars) / count
+    return np.column_stack([y, x]) * h
