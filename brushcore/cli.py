@@ -9,6 +9,7 @@ line and exit status 130.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import difflib
 import re
 import sys
@@ -27,7 +28,9 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "seed": "--seed", "min_gap": "--min-gap", "e_star": "--e-star",
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
          "lookahead": "--lookahead", "cascade": "--cascade", "threads": "--threads",
-         "out": "--out", "allow_coarse": "--allow-coarse"}
+         "out": "--out", "allow_coarse": "--allow-coarse", "roughness": "--roughness",
+         "preload": "--preload", "kbar_spread": "--kbar-spread", "heights": "--heights",
+         "kbar_values": "--kbar-file", "gap_map": "--gap-map"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
 
@@ -94,6 +97,27 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--allow-coarse", action="store_true",
                      help="run even if the pillars are under 2 elements in radius or phi "
                           "is realised more than 5 %% off")
+    rough = sim.add_argument_group(
+        "rough, graded and preloaded brushes",
+        "Heights in units of d_K = sqrt(2 pi dgamma a0 / E*), forces in F_K = sqrt(8 pi E* "
+        "dgamma a0^3), a0 = sqrt(A / pi) of the discretised pillar area A. Any of these runs "
+        "an approach from first touch to the preload, then the pull-off. Per-pillar files: "
+        "one value per pillar in label order (regular: row-major, first axis slowest; the "
+        "curve file lists every pillar's centre), text ('#' comments) or .npy.")
+    rough.add_argument("--roughness", type=float, default=0.0,
+                       help="standard deviation of Gaussian pillar heights [d_K], drawn "
+                            "from --seed")
+    rough.add_argument("--preload", type=float, default=0.0,
+                       help="compressive force the approach stops at [F_K]")
+    rough.add_argument("--kbar-spread", type=float, default=0.0,
+                       help="coefficient of variation of a lognormal per-pillar kbar "
+                            "(mean --kbar), drawn from --seed")
+    rough.add_argument("--heights", type=Path, default=None, metavar="FILE",
+                       help="pillar heights [d_K], one per pillar")
+    rough.add_argument("--kbar-file", type=Path, default=None, metavar="FILE",
+                       help="pillar kbar in (0, inf], one per pillar")
+    rough.add_argument("--gap-map", type=Path, default=None, metavar="FILE",
+                       help="extra gap of every element [d_K], grid x grid (rows y)")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
                      help="approximate: detach within this relative window (0 = exact)")
@@ -153,12 +177,26 @@ def _simulate(args: argparse.Namespace) -> int:
     from .layout import build_labels
     from .threads import pin_threads
 
+    from .inputs import read_gap_map, read_pillar_values
+
     progress = None if args.quiet else _Progress()
     try:
-        params = BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
-                             grid=args.grid, phi=args.phi, seed=args.seed,
-                             min_gap=args.min_gap, e_star=args.e_star, dgamma=args.dgamma,
-                             h=args.h, allow_coarse=args.allow_coarse)
+        # Files are checked against the counts the plain parameters imply.
+        shape = BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
+                            grid=args.grid, phi=args.phi, seed=args.seed,
+                            min_gap=args.min_gap, e_star=args.e_star, dgamma=args.dgamma,
+                            h=args.h, allow_coarse=args.allow_coarse,
+                            roughness=args.roughness, preload=args.preload,
+                            kbar_spread=args.kbar_spread)
+        arrays = {}
+        if args.heights is not None:
+            arrays["heights"] = read_pillar_values(args.heights, shape.n_pillars, "heights")
+        if args.kbar_file is not None:
+            arrays["kbar_values"] = read_pillar_values(args.kbar_file, shape.n_pillars,
+                                                       "kbar_values", positive=True)
+        if args.gap_map is not None:
+            arrays["gap_map"] = read_gap_map(args.gap_map, shape.grid)
+        params = dataclasses.replace(shape, **arrays) if arrays else shape
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade)
         if args.threads < 1:
             raise ParameterError("threads", args.threads, "an integer >= 1")

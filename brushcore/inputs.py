@@ -1,0 +1,122 @@
+"""Reading per-pillar values and gap maps that users hand in, as data only.
+
+Text files hold numbers separated by white space or commas, '#' starts a
+comment; ``.npy`` files are read with ``allow_pickle=False``.  Whatever does
+not fit (wrong count or shape, NaN or inf, a non-positive stiffness, text
+that is no number) is refused with a `ParameterError` naming the file and
+the line (or the entry of a ``.npy`` array), before any computation.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .params import ParameterError
+
+
+def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
+    """(line number, values) of every non-empty line of a text file."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterError(name, str(path), "a readable text or .npy file",
+                             type(exc).__name__ + ": " + str(exc).split(":")[0]) from None
+    rows = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        line = line.split("#", 1)[0].replace(",", " ").strip()
+        if not line:
+            continue
+        values = []
+        for token in line.split():
+            try:
+                values.append(float(token))
+            except ValueError:
+                raise ParameterError(name, str(path), "numbers only",
+                                     f"line {number}: {token!r} is not a number") from None
+        rows.append((number, values))
+    return rows
+
+
+def _check_values(path: Path, name: str, where: str, values, positive: bool) -> None:
+    for value in values:
+        if math.isnan(value) or (math.isinf(value) and not (positive and value > 0)):
+            raise ParameterError(name, str(path), "finite numbers"
+                                 + (" in (0, inf]" if positive else ""),
+                                 f"{where} holds {value!r}")
+        if positive and value <= 0:
+            raise ParameterError(name, str(path), "stiffness values in (0, inf]",
+                                 f"{where} holds {value!r}")
+
+
+def read_pillar_values(path: str | Path, n_pillars: int, name: str,
+                       positive: bool = False) -> np.ndarray:
+    """One value per pillar (label order) from a text or .npy file.
+
+    Parameters
+    ----------
+    path : the file
+    n_pillars : the count expected
+    name : the parameter it sets (for messages: "heights", "kbar_values")
+    positive : values must lie in (0, inf] (stiffness); otherwise finite
+    """
+    path = Path(path)
+    if path.suffix == ".npy":
+        arr = _load_npy(path, name)
+        if arr.ndim != 1 or arr.size != n_pillars:
+            raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
+                                 f"it holds an array of shape {arr.shape}")
+        for i, value in enumerate(arr):
+            _check_values(path, name, f"entry {i}", [float(value)], positive)
+        return arr.astype(float)
+    rows = _rows(path, name)
+    values, lines = [], []
+    for number, row in rows:
+        _check_values(path, name, f"line {number}", row, positive)
+        values.extend(row)
+        lines.extend([number] * len(row))
+    if len(values) != n_pillars:
+        extra = f"; value {n_pillars + 1} is on line {lines[n_pillars]}" \
+            if len(values) > n_pillars else ""
+        raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
+                             f"it holds {len(values)}{extra}")
+    return np.array(values)
+
+
+def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarray:
+    """An n x n map (row y, column x) from a text file of n lines or a .npy array."""
+    path = Path(path)
+    if path.suffix == ".npy":
+        arr = _load_npy(path, name)
+        if arr.shape != (grid, grid):
+            raise ParameterError(name, str(path), f"an array of shape ({grid}, {grid})",
+                                 f"it has shape {arr.shape}")
+        bad = np.argwhere(~np.isfinite(arr))
+        if bad.size:
+            raise ParameterError(name, str(path), "finite numbers",
+                                 f"element (y, x) = {tuple(int(i) for i in bad[0])} holds "
+                                 f"{float(arr[tuple(bad[0])])!r}")
+        return arr.astype(float)
+    rows = _rows(path, name)
+    for number, row in rows:
+        if len(row) != grid:
+            raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
+                                 f"line {number} holds {len(row)} numbers")
+        _check_values(path, name, f"line {number}", row, False)
+    if len(rows) != grid:
+        raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
+                             f"it holds {len(rows)} lines of numbers")
+    return np.array([row for _, row in rows])
+
+
+def _load_npy(path: Path, name: str) -> np.ndarray:
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise ParameterError(name, str(path), "a readable .npy file of numbers "
+                             "(no pickles)", str(exc).splitlines()[0][:120]) from None
+    if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise ParameterError(name, str(path), "real numbers", f"its dtype is {arr.dtype}")
+    return np.asarray(arr, dtype=float)
