@@ -179,7 +179,10 @@ def run_protocol(op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: floa
     sigma_c : critical tensile stress [stress]
     h : element size [length]
     options : tolerances; ``lookahead`` > 0 batches near events (see
-        `_Engine._cascade`), 0 (default) is exact
+        `_Engine._cascade`), 0 (default) is exact; ``cascade`` applies to
+        the dispatched flat case only, the general engine always re-solves
+        globally after a detachment (with each pillar's local response as
+        the warm start)
     protocol : waypoints, see `Waypoint` and `preload_protocol`
     progress : called as progress(events, attached, total) after each event
     dispatch : send a flat brush under the standard protocol to
