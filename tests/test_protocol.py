@@ -446,3 +446,20 @@ def test_gap_map_file_shape_is_checked(tmp_path):
     (tmp_path / "g.txt").write_text("0 0\n0 inf\n")
     with pytest.raises(Exception, match="line 2 holds inf"):
         read_gap_map(tmp_path / "g.txt", 2)
+
+
+def test_cg_carries_the_field_of_its_iterate():
+    """pcg_image: the same iterate as pcg, and y = K x at every pillar element
+    without applying K to x (what the engine reads the gaps from)."""
+    from brushcore.cg import pcg, pcg_image
+
+    params = BrushParams("regular", 4, 0.01, 64, phi=0.2)
+    op = BrushOperator(Convolver(64), build_labels(params), np.full(4, 1 / 0.64), 1.0, 1.0)
+    op.detach(np.random.default_rng(1).random(op.size) < 0.3)
+    b = np.linspace(1.0, 2.0, op.size)
+    x0 = np.zeros(op.size)
+    x, _ = pcg(op.apply, op.precondition, b, x0, 1e-10, 500)
+    xi, y, _ = pcg_image(op.apply_with_field, op.precondition, b, x0, np.zeros(op.size),
+                         np.zeros(op.elements.size), 1e-10, 500)
+    assert np.allclose(xi, x, rtol=1e-8, atol=1e-12 * np.abs(x).max())
+    assert np.allclose(y, op.field(xi), rtol=1e-9, atol=1e-12 * np.abs(y).max())
