@@ -120,7 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="extra gap of every element [d_K], grid x grid (rows y)")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
-                     help="approximate: detach within this relative window (0 = exact)")
+                     help="approximate: detach (rough brushes: also attach) within this relative "
+                          "window of the next event (0 = exact)")
     sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
                      help="local: per-pillar cascades where they provably do not change "
                           "the result; global: re-solve after every round (reference)")
