@@ -27,6 +27,11 @@ from brushcore.io import publish, read_curve
 
 LAYOUTS = ("regular", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
+#: Extra case dimensions of rough, preloaded or graded brushes (issue 11).  A
+#: sweep of flat brushes only keeps today's four dimensions.
+ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
+#: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are.
+ROUGH_SCALARS = ("dissipated_energy_normalized", "pillars_in_contact_at_preload")
 
 #: Scalar variables copied from each curve file.
 SCALAR_VARIABLES = (
@@ -76,12 +81,21 @@ class CaseKey:
     n_pillars: int
     kbar: float
     seed: int
+    roughness: float = 0.0
+    preload: float = 0.0
+    kbar_spread: float = 0.0
+
+    @property
+    def is_flat(self) -> bool:
+        """Today's brush: no roughness, preload or stiffness spread."""
+        return self.roughness == 0 and self.preload == 0 and self.kbar_spread == 0
 
 
 def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
-    return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]))
+    return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
+                   *(float(a.get(name, 0.0)) for name in ROUGH_DIMS))
 
 
 def file_sha256(path: str | Path) -> str:
@@ -131,22 +145,29 @@ def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> o
     return next(iter(values))
 
 
+def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:
+    """Today's four case dimensions, plus ROUGH_DIMS when any case is not flat."""
+    return CASE_DIMS if all(k.is_flat for k in keys) else CASE_DIMS + ROUGH_DIMS
+
+
 def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
     keys = list(keys)
     layouts = [lay for lay in LAYOUTS if any(k.layout == lay for k in keys)]
     layouts += sorted({k.layout for k in keys} - set(LAYOUTS))
-    return {
+    coords = {
         "layout": np.array(layouts, dtype=object),
         "n_pillars": np.array(sorted({k.n_pillars for k in keys}), dtype=np.int64),
         "kbar": np.array(sorted({k.kbar for k in keys}), dtype=np.float64),
         "seed": np.array(sorted({k.seed for k in keys}), dtype=np.int64),
     }
+    for dim in ROUGH_DIMS:
+        coords[dim] = np.array(sorted({getattr(k, dim) for k in keys}), dtype=np.float64)
+    return coords
 
 
-def _index(coords: dict[str, np.ndarray], key: CaseKey) -> tuple[int, int, int, int]:
-    return tuple(  # type: ignore[return-value]
-        int(np.flatnonzero(coords[dim] == getattr(key, dim))[0]) for dim in CASE_DIMS
-    )
+def _index(coords: dict[str, np.ndarray], key: CaseKey,
+           dims: Sequence[str] = CASE_DIMS) -> tuple[int, ...]:
+    return tuple(int(np.flatnonzero(coords[dim] == getattr(key, dim))[0]) for dim in dims)
 
 
 def snapshot_filter(
@@ -195,18 +216,22 @@ def build_sweep(
     grid = _common_attr(curves, "grid")
     phi = _common_attr(curves, "phi")
     coords = _case_coords(curves)
-    shape = tuple(len(coords[d]) for d in CASE_DIMS)
+    dims = case_dims(curves)
+    shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
     first = next(iter(curves.values()))[1]
+    rough_scalars = ROUGH_SCALARS if dims != CASE_DIMS else ()
 
     data: dict[str, xr.DataArray] = {}
-    scalars = {name: np.full(shape, np.nan) for name in (*SCALAR_VARIABLES, *ATTRIBUTE_SCALARS)}
+    scalars = {name: np.full(shape, np.nan)
+               for name in (*SCALAR_VARIABLES, *ATTRIBUTE_SCALARS, *rough_scalars)}
     scalars["n_steps"] = np.full(shape, np.nan)
     lines = {name: np.full((*shape, n_steps), np.nan) for name in CURVE_VARIABLES}
     for key, (_, curve) in curves.items():
-        at = _index(coords, key)
-        for name in SCALAR_VARIABLES:
-            scalars[name][at] = float(curve[name])
+        at = _index(coords, key, dims)
+        for name in (*SCALAR_VARIABLES, *rough_scalars):
+            if name in curve:
+                scalars[name][at] = float(curve[name])
         for name in ATTRIBUTE_SCALARS:
             scalars[name][at] = float(curve.attrs.get(name, np.nan))
         scalars["n_steps"][at] = curve.sizes["step"]
@@ -215,36 +240,43 @@ def build_sweep(
             lines[name][at][: values.size] = values
 
     for name in SCALAR_VARIABLES:
-        data[name] = xr.DataArray(scalars[name], dims=CASE_DIMS, attrs=dict(first[name].attrs))
+        data[name] = xr.DataArray(scalars[name], dims=dims, attrs=dict(first[name].attrs))
+    for name in rough_scalars:
+        attrs = next((dict(c[name].attrs) for _, c in curves.values() if name in c), {})
+        data[name] = xr.DataArray(scalars[name], dims=dims, attrs=attrs)
     for name, (units, long_name) in ATTRIBUTE_SCALARS.items():
         data[name] = xr.DataArray(
-            scalars[name], dims=CASE_DIMS, attrs={"units": units, "long_name": long_name}
+            scalars[name], dims=dims, attrs={"units": units, "long_name": long_name}
         )
     data["n_steps"] = xr.DataArray(
-        scalars["n_steps"], dims=CASE_DIMS,
+        scalars["n_steps"], dims=dims,
         attrs={"units": "1", "long_name": "valid entries along step (rest is NaN padding)"},
     )
     for name in CURVE_VARIABLES:
         data[name] = xr.DataArray(
-            lines[name], dims=(*CASE_DIMS, "step"), attrs=dict(first[name].attrs)
+            lines[name], dims=(*dims, "step"), attrs=dict(first[name].attrs)
         )
-    data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb))
+    data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb, dims))
 
-    sweep = xr.Dataset(data, coords=_coordinate_arrays(coords))
+    sweep = xr.Dataset(data, coords=_coordinate_arrays(coords, dims))
     # The stacked snapshot cases are labels, not data: make them coordinates.
     sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
     sweep.attrs = _provenance(curves, grid=grid, phi=phi)
     return sweep
 
 
-def _coordinate_arrays(coords: dict[str, np.ndarray]) -> dict[str, xr.DataArray]:
+def _coordinate_arrays(coords: dict[str, np.ndarray],
+                       dims: Sequence[str] = CASE_DIMS) -> dict[str, xr.DataArray]:
     attrs = {
         "layout": {"long_name": "pillar layout"},
         "n_pillars": {"units": "1", "long_name": "number of pillars N"},
         "kbar": {"units": "1", "long_name": "normalised spring stiffness k / (E* L)"},
-        "seed": {"units": "1", "long_name": "random-layout seed (0 for regular)"},
+        "seed": {"units": "1", "long_name": "random-layout seed (0 for flat regular brushes)"},
+        "roughness": {"units": "1", "long_name": "std of pillar heights / d_K"},
+        "preload": {"units": "1", "long_name": "preload / F_K"},
+        "kbar_spread": {"units": "1", "long_name": "coefficient of variation of kbar"},
     }
-    out = {d: xr.DataArray(coords[d], dims=d, attrs=attrs[d]) for d in CASE_DIMS}
+    out = {d: xr.DataArray(coords[d], dims=d, attrs=attrs[d]) for d in dims}
     out["layout"] = out["layout"].astype(str)
     return out
 
@@ -253,6 +285,7 @@ def _snapshots(
     curves: dict[CaseKey, tuple[Path, xr.Dataset]],
     keep: Iterable[tuple[str, int]],
     all_below_mb: float,
+    dims: Sequence[str] = CASE_DIMS,
 ) -> dict[str, xr.DataArray]:
     with_snaps = {k: c for k, (_, c) in curves.items() if "contact_snapshot" in c}
     if not with_snaps:
@@ -289,6 +322,8 @@ def _snapshots(
         "case_kbar": xr.DataArray(np.array([k.kbar for k in keys]), dims="case"),
         "case_seed": xr.DataArray(np.array([k.seed for k in keys]), dims="case"),
     }
+    for dim in dims[len(CASE_DIMS):]:
+        out[f"case_{dim}"] = xr.DataArray(np.array([getattr(k, dim) for k in keys]), dims="case")
     if "detachment_step" in first:
         out["detachment_step"] = xr.DataArray(
             detach, dims=("case", "y", "x"), attrs=dict(first["detachment_step"].attrs)
@@ -349,6 +384,24 @@ def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def flat_slice(sweep: xr.Dataset) -> xr.Dataset:
+    """The flat brushes of a sweep (roughness, preload, kbar_spread all 0).
+
+    A sweep of flat brushes is returned as it is; in one with rough cases the
+    ROUGH_DIMS are selected at 0 (NaN everywhere when no flat case ran), so
+    that the paper's figures and summary see today's four dimensions.
+    """
+    if not set(ROUGH_DIMS) & set(sweep.dims):
+        return sweep
+    flat = sweep.reindex({d: [0.0] for d in ROUGH_DIMS}).isel({d: 0 for d in ROUGH_DIMS})
+    flat = flat.drop_vars(list(ROUGH_DIMS))
+    case_vars = [f"case_{d}" for d in ROUGH_DIMS if f"case_{d}" in flat.variables]
+    if case_vars:  # keep the snapshots of flat cases only
+        keep = np.logical_and.reduce([flat[v].values == 0 for v in case_vars])
+        flat = flat.isel(case=np.flatnonzero(keep)).drop_vars(case_vars)
+    return flat
 
 
 def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0):

@@ -230,3 +230,23 @@ def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> N
         build_sweep([*good, bad])
     with pytest.raises(AggregationError, match="same case"):
         build_sweep([good[0], good[0]])
+
+
+def test_rough_keys_plan_suffixed_curves_and_leave_flat_names(repo_copy: Path,
+                                                              tmp_path: Path) -> None:
+    """roughness / preload / kbar_spread: defaults plan today's names; other values
+    add a suffix, and rough regular brushes run every seed (their heights are drawn)."""
+    config = tmp_path / "rough.yaml"
+    config.write_text(yaml.safe_dump({"regular": [16], "random": [], "kbar": [0.01],
+                                      "seeds": [0, 1], "fig5": {"n_pillars": 16, "kbar": [0.01]},
+                                      "roughness": [0.0, 0.2], "preload": [0.0, 1.0]}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config), "--forceall")
+    assert proc.returncode == 0, output(proc)
+    names = set(re.findall(r"results/curves/\S+\.nc", output(proc)))
+    assert names == {
+        "results/curves/regular/N16_kbar0.01_seed0_grid64_phi0.12.nc",
+        "results/curves/regular/N16_kbar0.01_seed0_grid64_phi0.12_S0.0_P1.0_C0.0.nc",
+        *(f"results/curves/regular/N16_kbar0.01_seed{s}_grid64_phi0.12_S0.2_P{p}_C0.0.nc"
+          for s in (0, 1) for p in ("0.0", "1.0")),
+    }, names

@@ -48,14 +48,14 @@ def check_cases(config):
     fails that job.  The geometry does not depend on kbar: checked once.
     """
     seen = set()
-    for layout, n, kbar, seed, grid, phi in sweep_cases(config):
-        if (layout, n, seed, grid, phi) in seen:
+    for layout, n, kbar, seed, grid, phi, rough in sweep_cases(config):
+        if (layout, n, seed, grid, phi, rough) in seen:
             continue
-        seen.add((layout, n, seed, grid, phi))
+        seen.add((layout, n, seed, grid, phi, rough))
         try:
             params = BrushParams(
                 layout, n, float(kbar), grid, phi=phi, seed=seed,
-                allow_coarse=config["allow_coarse"],
+                allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
             )
             if layout == "regular":
                 build_labels(params)
@@ -63,7 +63,7 @@ def check_cases(config):
             keys = {"n_pillars": layout, "allow_coarse": "allow_coarse: true"}
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} "
-                f"(case {layout} N = {n}, grid = {grid}, phi = {phi})"
+                f"(case {layout} N = {n}, grid = {grid}, phi = {phi}{rough})"
             ) from None
 
 
@@ -72,31 +72,67 @@ def kbar_tag(kbar):
     return repr(float(kbar))
 
 
-def sweep_cases(config):
-    """Every (layout, n_pillars, kbar, seed, grid, phi) the config asks for, once.
+def rough_tag(roughness, preload, kbar_spread):
+    """File-name suffix of a rough brush; "" for today's flat brush (names unchanged)."""
+    values = (float(roughness), float(preload), float(kbar_spread))
+    if values == (0.0, 0.0, 0.0):
+        return ""
+    return "_S{!r}_P{!r}_C{!r}".format(*values)
 
-    Regular layouts ignore the seed, so they run with seed 0 only; the Fig. 5
-    brush adds its own kbar values to the regular sweep.
+
+def parse_rough_tag(tag):
+    """BrushParams fields of a `rough_tag` suffix."""
+    if not tag:
+        return {}
+    s, rest = tag[2:].split("_P")
+    p, c = rest.split("_C")
+    return {"roughness": float(s), "preload": float(p), "kbar_spread": float(c)}
+
+
+def _rough_tags(config, kbar):
+    """Suffixes of every (roughness, preload, kbar_spread) asked for; rigid
+    pillars have no stiffness spread."""
+    spreads = [0.0] if float(kbar) == float("inf") else config["kbar_spread"]
+    return sorted({rough_tag(s, p, c) for s in config["roughness"]
+                   for p in config["preload"] for c in spreads})
+
+
+def sweep_cases(config):
+    """Every (layout, n_pillars, kbar, seed, grid, phi, rough) the config asks for, once.
+
+    Flat regular brushes ignore the seed, so they run with seed 0 only; rough
+    or graded ones (heights and stiffness drawn from the seed) run every seed.
+    The Fig. 5 brush adds its own kbar values to the regular sweep.
     """
     grid, phi = config["grid"], config["phi"]
     cases = set()
+
+    def regular(n, kbar):
+        for rough in _rough_tags(config, kbar):
+            drawn = rough and parse_rough_tag(rough)["roughness"] + parse_rough_tag(
+                rough)["kbar_spread"] > 0
+            for seed in (config["seeds"] if drawn else [0]):
+                cases.add(("regular", n, kbar_tag(kbar), seed, rough))
+
     for n in config["regular"]:
         for kbar in config["kbar"]:
-            cases.add(("regular", n, kbar_tag(kbar), 0))
+            regular(n, kbar)
     fig5 = config["fig5"]
     for kbar in fig5["kbar"]:
-        cases.add(("regular", fig5["n_pillars"], kbar_tag(kbar), 0))
+        regular(fig5["n_pillars"], kbar)
     for n in config["random"]:
         for kbar in config["kbar"]:
             for seed in config["seeds"]:
-                cases.add(("random", n, kbar_tag(kbar), seed))
-    ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3]))
-    return [(*case, grid, phi) for case in ordered]
+                for rough in _rough_tags(config, kbar):
+                    cases.add(("random", n, kbar_tag(kbar), seed, rough))
+    ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[4]))
+    return [(*case[:4], grid, phi, case[4]) for case in ordered]
 
 
 #: One curve file per case; every parameter that changes the curve is in its name,
-#: so that a sweep on another grid or filling factor never overwrites it.
-CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}"
+#: so that a sweep on another grid or filling factor never overwrites it.  The
+#: rough suffix is empty for today's flat brush.
+CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{rough}"
 
 
 def curve_files(config):
@@ -104,10 +140,11 @@ def curve_files(config):
     return [
         "results/curves/"
         + CURVE_NAME.format(
-            layout=layout, n_pillars=n, kbar=kbar, seed=seed, grid=grid, phi=repr(float(phi))
+            layout=layout, n_pillars=n, kbar=kbar, seed=seed, grid=grid, phi=repr(float(phi)),
+            rough=rough,
         )
         + ".nc"
-        for layout, n, kbar, seed, grid, phi in sweep_cases(config)
+        for layout, n, kbar, seed, grid, phi, rough in sweep_cases(config)
     ]
 
 

@@ -1,5 +1,5 @@
 rule simulate:
-    """One pull-off simulation: one (layout, N, kbar, seed, grid, phi) -> one curve file."""
+    """One pull-off simulation: one (layout, N, kbar, seed, grid, phi, rough) -> one curve file."""
     output:
         f"results/curves/{CURVE_NAME}.nc",
     log:
@@ -13,12 +13,14 @@ rule simulate:
         seed=r"[0-9]+",
         grid=r"[0-9]+",
         phi=r"[0-9][0-9.e+-]*",
+        rough=r"(_S[0-9][0-9.e+-]*_P[0-9][0-9.e+-]*_C[0-9][0-9.e+-]*)?",
     threads: config["threads"]
     resources:
         mem_mb=simulate_mem_mb,
         runtime=simulate_runtime,
     params:
         solver=config["solver"],
+        rough=lambda wildcards: parse_rough_tag(wildcards.rough),
         allow_coarse=config["allow_coarse"],
     script:
         "../scripts/simulate.py"

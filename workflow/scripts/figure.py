@@ -3,13 +3,14 @@
 import xarray as xr
 
 from brushcore import figures
+from brushcore.aggregate import flat_slice
 from brushcore.joblog import logged
 
 
 def main(smk) -> None:
     draw = getattr(figures, smk.params.figure)
     with xr.open_dataset(smk.input[0]) as sweep:
-        fig = draw(sweep, **dict(smk.params.options))
+        fig = draw(flat_slice(sweep), **dict(smk.params.options))
     for path in smk.output:
         figures.save(fig, path)
         print(f"wrote {path}")

@@ -26,6 +26,7 @@ def main(smk) -> None:
         phi=float(w.phi),
         seed=int(w.seed),
         allow_coarse=bool(smk.params.allow_coarse),
+        **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
     )
     print(f"{params} on {smk.threads} thread(s)", flush=True)
     curve = simulate(params, SolverOptions(**smk.params.solver))

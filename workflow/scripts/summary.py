@@ -2,6 +2,7 @@
 
 import xarray as xr
 
+from brushcore.aggregate import flat_slice
 from brushcore.summary import headline_rows, write_summary
 from brushcore.joblog import logged
 
@@ -10,7 +11,7 @@ def main(smk) -> None:
     fig5 = smk.params.fig5
     with xr.open_dataset(smk.input[0]) as sweep:
         rows = headline_rows(
-            sweep, fig5_n_pillars=int(fig5["n_pillars"]), fig5_kbar=float(fig5["kbar"][0])
+            flat_slice(sweep), fig5_n_pillars=int(fig5["n_pillars"]), fig5_kbar=float(fig5["kbar"][0])
         )
     write_summary(rows, smk.output.csv, smk.output.md)
     print(open(smk.output.md).read())
