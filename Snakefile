@@ -38,6 +38,7 @@ localrules:
     fig6,
     fig7,
     fig8,
+    rough_figure,
 
 
 rule all:
@@ -47,3 +48,4 @@ rule all:
         "results/summary.csv",
         "results/summary.md",
         expand("results/figures/fig{n}.{ext}", n=[5, 6, 7, 8], ext=["png", "pdf"]),
+        rough_figure_files(config),

@@ -254,6 +254,88 @@ def fig8(sweep: xr.Dataset) -> Figure:
     return fig
 
 
+def _rough_series(sweep: xr.Dataset, name: str, layout: str, n: int, kbar: float,
+                  **at: float) -> tuple[xr.DataArray, xr.DataArray, xr.DataArray]:
+    """Seed mean, min and max of a rough-sweep variable for one brush and kbar."""
+    runs = sweep[name].sel(layout=layout, n_pillars=n, kbar=kbar, kbar_spread=0.0, **at)
+    return (runs.mean("seed", skipna=True), runs.min("seed", skipna=True),
+            runs.max("seed", skipna=True))
+
+
+def _rough_ready(sweep: xr.Dataset, fig: Figure) -> bool:
+    if "roughness" in sweep.dims and 0.0 in sweep.kbar_spread.values:
+        return True
+    _no_data(fig.add_subplot(), "no rough runs in this sweep")
+    return False
+
+
+def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
+                    ) -> Figure:
+    """Adhesive force against roughness per kbar, one panel per preload (issue 11).
+
+    Bars span the seeds.  Dashed lines are the soft limit (elastic foundation,
+    every pillar attached, large N): N^(1/4) G(S d_K / lambda) with G
+    `theory.gaussian_spread_pull_off` and lambda `theory.foundation_stretch`,
+    drawn for kbar <= 0.01 where it applies.
+    """
+    fig = _new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)), 3.6)
+    if not _rough_ready(sweep, fig):
+        return fig
+    preloads = [float(p) for p in sweep.preload.values]
+    axes = fig.subplots(1, len(preloads), squeeze=False)[0]
+    phi = float(sweep.attrs.get("phi", 0.12))
+    kbars = [float(k) for k in sweep.kbar.values]
+    colors = {k: f"C{i}" for i, k in enumerate(kbars)}
+    s_axis = np.asarray(sweep.roughness.values, dtype=float)
+    for ax, preload in zip(axes, preloads):
+        for kbar in kbars:
+            mean, low, high = _rough_series(sweep, "adhesive_force_normalized", layout,
+                                            n_pillars, kbar, preload=preload)
+            if not np.isfinite(mean.values).any():
+                continue
+            ax.errorbar(s_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
+                        capsize=2, color=colors[kbar], label=rf"$\bar k$ = {kbar:g}")
+            if np.isfinite(kbar) and kbar <= 0.01 and s_axis.max() > 0:
+                span = np.linspace(0.0, s_axis.max(), 60)
+                lam = float(theory.foundation_stretch(n_pillars, phi, kbar))
+                soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
+                ax.plot(span, n_pillars**0.25 * np.asarray(soft), "--", lw=1,
+                        color=colors[kbar])
+        ax.set_title(f"preload {preload:g} " + r"$F_K$", fontsize=9)
+        ax.set_xlabel(r"roughness $S$ [$d_K$]")
+        ax.set_ylabel(FAD_LABEL)
+        ax.plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
+        ax.legend(fontsize=7)
+    fig.suptitle(f"Adhesive force of a rough {layout} brush, N = {n_pillars}")
+    return fig
+
+
+def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
+                  ) -> Figure:
+    """Adhesive force against preload per kbar, one panel per roughness (issue 11)."""
+    fig = _new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
+    if not _rough_ready(sweep, fig):
+        return fig
+    roughs = [float(r) for r in sweep.roughness.values]
+    axes = fig.subplots(1, len(roughs), squeeze=False)[0]
+    kbars = [float(k) for k in sweep.kbar.values]
+    p_axis = np.asarray(sweep.preload.values, dtype=float)
+    for ax, rough in zip(axes, roughs):
+        for i, kbar in enumerate(kbars):
+            mean, low, high = _rough_series(sweep, "adhesive_force_normalized", layout,
+                                            n_pillars, kbar, roughness=rough)
+            if not np.isfinite(mean.values).any():
+                continue
+            ax.errorbar(p_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
+                        capsize=2, color=f"C{i}", label=rf"$\bar k$ = {kbar:g}")
+        ax.set_title(f"roughness {rough:g} " + r"$d_K$", fontsize=9)
+        ax.set_xlabel(r"preload [$F_K$]")
+        ax.set_ylabel(FAD_LABEL)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"Preload brings adhesion back: rough {layout} brush, N = {n_pillars}")
+    return fig
+
+
 def save(fig: Figure, path: str | Path, dpi: int = 150) -> None:
     """Write a figure (format from the suffix), creating the directory."""
     path = Path(path)

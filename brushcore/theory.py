@@ -207,3 +207,15 @@ def jkr_fixed_grips_pull_off(radius: float, dgamma: float) -> float:
     """Force (5/6) pi R dgamma at which a JKR sphere on a rigid mount
     (displacement control) jumps out of contact [force]."""
     return 5.0 / 6.0 * math.pi * radius * dgamma
+
+
+def foundation_stretch(n_pillars: int, phi: float, kbar: float | np.ndarray
+                       ) -> float | np.ndarray:
+    """Let-go stretch lambda = f_c / k of one soft pillar in units of d_K.
+
+    In the soft limit each of the N pillars holds Kendall's force of its own
+    radius, f_c = N^(-3/4) F_K, on a spring k = kbar E* L; with F_K / d_K =
+    2 E* a0 and a0 = L sqrt(phi / pi): lambda / d_K = 2 N^(-3/4) sqrt(phi /
+    pi) / kbar.  A roughness S (in d_K) is s = S d_K / lambda stretches.
+    """
+    return 2.0 * n_pillars**-0.75 * math.sqrt(phi / math.pi) / np.asarray(kbar, dtype=float)

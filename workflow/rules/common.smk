@@ -166,3 +166,22 @@ def simulate_runtime(wildcards, attempt):
     """
     grid = int(wildcards.grid)
     return int(5 + 15 * (grid / 512) ** 3) * attempt
+
+
+ROUGH_FIGURES = ("rough_roughness", "rough_preload")
+
+
+def rough_brush(config):
+    """(layout, N) the rough figures show: the first regular brush, else the first random."""
+    if config["regular"]:
+        return "regular", int(config["regular"][0])
+    return "random", int(config["random"][0])
+
+
+def rough_figure_files(config):
+    """The rough-brush figures, for configs that ask for rough cases only."""
+    flat = all(float(v) == 0.0 for key in ("roughness", "preload", "kbar_spread")
+               for v in config[key])
+    if flat:
+        return []
+    return [f"results/figures/{name}.{ext}" for name in ROUGH_FIGURES for ext in ("png", "pdf")]

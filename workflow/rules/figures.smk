@@ -96,3 +96,31 @@ rule fig8:
         options={},
     script:
         "../scripts/figure.py"
+
+
+rule rough_figure:
+    """Rough brushes (issue 11): F_ad against roughness with the soft limit, and against preload."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/{rough_figure}.png",
+            caption="../report/rough.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/{rough_figure}.pdf",
+    log:
+        "logs/figures/{rough_figure}.log",
+    benchmark:
+        "results/benchmarks/figures/{rough_figure}.tsv"
+    wildcard_constraints:
+        rough_figure="rough_roughness|rough_preload",
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        figure=lambda wildcards: wildcards.rough_figure,
+        options=lambda wildcards: dict(zip(("layout", "n_pillars"), rough_brush(config))),
+        flat=False,
+    script:
+        "../scripts/figure.py"

@@ -10,7 +10,9 @@ from brushcore.joblog import logged
 def main(smk) -> None:
     draw = getattr(figures, smk.params.figure)
     with xr.open_dataset(smk.input[0]) as sweep:
-        fig = draw(flat_slice(sweep), **dict(smk.params.options))
+        # The paper's figures show the flat brushes; the rough ones the whole sweep.
+        flat = smk.params.get("flat", True)
+        fig = draw(flat_slice(sweep) if flat else sweep, **dict(smk.params.options))
     for path in smk.output:
         figures.save(fig, path)
         print(f"wrote {path}")
