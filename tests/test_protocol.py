@@ -463,3 +463,30 @@ def test_cg_carries_the_field_of_its_iterate():
                          np.zeros(op.elements.size), 1e-10, 500)
     assert np.allclose(xi, x, rtol=1e-8, atol=1e-12 * np.abs(x).max())
     assert np.allclose(y, op.field(xi), rtol=1e-9, atol=1e-12 * np.abs(y).max())
+
+
+def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
+    """The new variables (pillar dimension, flags, NaN let-go) and the sweep's
+    rough dimensions pass the same CF-1.10 check as today's files."""
+    pytest.importorskip("compliance_checker")
+    from test_cf import cf_errors
+
+    from brushcore.aggregate import build_sweep, flat_slice, write_sweep
+    from brushcore.io import write_curve
+
+    files = []
+    for i, (roughness, preload) in enumerate(((0.0, 0.0), (0.2, 1.0), (0.0, 1.0))):
+        path = tmp_path / f"c{i}.nc"
+        gap = np.zeros((64, 64)) if i == 1 else None
+        write_curve(simulate(BrushParams("regular", 4, 0.01, 64, roughness=roughness,
+                                         preload=preload, gap_map=gap)), path)
+        files.append(path)
+    assert cf_errors(files[1], tmp_path) == []
+    sweep = build_sweep(files, keep_snapshots=[("regular", 4)])
+    assert sweep.adhesive_force.dims[-3:] == ("roughness", "preload", "kbar_spread")
+    write_sweep(sweep, tmp_path / "sweep.nc")
+    assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
+    flat = flat_slice(sweep)  # today's four dimensions, the flat case's numbers
+    assert flat.adhesive_force.dims == ("layout", "n_pillars", "kbar", "seed")
+    assert float(flat.adhesive_force.squeeze()) == pytest.approx(
+        float(build_sweep(files[:1]).adhesive_force.squeeze()), rel=1e-12)
