@@ -82,7 +82,7 @@ def _read_png(path: Path) -> np.ndarray:
         raise _refuse(path, "a PNG image", f"not readable as an image: {exc}") from None
     if width * height > MAX_IMAGE_PIXELS:
         raise _refuse(path, f"an image of at most {MAX_IMAGE_PIXELS} pixels",
-                      f"{width} x {height} pixels")
+                      f"is {width} x {height} pixels")
     pixels = np.asarray(mpimg.imread(path), dtype=float)
     if pixels.ndim == 3:
         alpha = pixels[..., 3] if pixels.shape[2] == 4 else np.ones(pixels.shape[:2])
@@ -123,11 +123,11 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
     labels = _read_npy(path) if path.suffix.lower() == ".npy" else _read_png(path)
     unit = "elements" if path.suffix.lower() == ".npy" else "pixels"
     if labels.ndim != 2 or labels.shape[0] != labels.shape[1]:
-        raise _refuse(path, "a square n x n map", f"{labels.shape[0]} x {labels.shape[1]} "
-                      f"{unit} (rows x columns)")
+        raise _refuse(path, "a square n x n map", f"is {labels.shape[0]} x "
+                      f"{labels.shape[1]} {unit} (rows x columns)")
     if grid is not None and labels.shape[0] != grid:
         raise _refuse(path, f"a {grid} x {grid} map (the grid)",
-                      f"{labels.shape[0]} x {labels.shape[1]} {unit}")
+                      f"is {labels.shape[0]} x {labels.shape[1]} {unit}")
     present = np.unique(labels[labels >= 0])
     if present.size == 0:
         raise _refuse(path, "a map with at least one pillar", "no pillar element")
