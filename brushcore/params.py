@@ -219,7 +219,7 @@ class BrushParams:
                      "the path of a .npy label map or .png image for the file layout")
         else:
             _require(self.layout_file == "", "layout_file", self.layout_file,
-                     "'' unless layout is 'file'")
+                     "no layout file unless layout is 'file'")
         _require(self.shape in SHAPES, "shape", self.shape, f"one of {SHAPES}")
         _require(self.layout != "file" or self.shape == "disc", "shape", self.shape,
                  "the default 'disc' for the file layout (its shapes come from the file)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -296,3 +297,57 @@ def test_square_punch_pull_off_against_fine_grid_and_equal_disc(square_punches):
     disc = simulate(punch_params(theory.equivalent_radius(64 * 64)))
     disc_ratio = float(disc.adhesive_force_normalized)
     assert 0.85 < ratios[64] / disc_ratio < 0.95, f"square / disc = {ratios[64] / disc_ratio:.4f}"
+
+
+# -- command line and curve file -----------------------------------------------------
+
+def test_cli_runs_shapes_and_file_layouts_and_records_them(tmp_path):
+    from brushcore.cli import main
+    from brushcore.io import read_curve
+
+    out = tmp_path / "hex.nc"
+    assert main(["simulate", "--layout", "hexagonal", "--pillars", "12", "--kbar", "0.1",
+                 "--grid", "96", "--shape", "ellipse", "--aspect", "2", "--orientation", "30",
+                 "--out", str(out), "--quiet"]) == 0
+    ds = read_curve(out)
+    assert (ds.attrs["shape"], ds.attrs["aspect"], ds.attrs["orientation"]) == ("ellipse", 2, 30)
+    assert (ds.attrs["lattice_rows"], ds.attrs["lattice_columns"]) == (4, 3)
+    assert ds.attrs["n_pillars_realised"] == 12 and ds.attrs["layout_file"] == ""
+    labels = np.where(ds.detachment_step.values >= 0, 0, -1)
+    path = save_label_map(build_labels(_ellipse_brush()), tmp_path / "m.npy")
+    out_file = tmp_path / "file.nc"
+    assert main(["simulate", "--layout", "file", "--layout-file", str(path), "--kbar", "0.05",
+                 "--out", str(out_file), "--quiet"]) == 0
+    ds = read_curve(out_file)
+    assert ds.attrs["layout"] == "file" and ds.attrs["n_pillars"] == 12
+    assert ds.attrs["layout_file"] == str(path) and len(ds.attrs["layout_file_sha256"]) == 64
+    assert labels.shape == (96, 96)
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--layout", "file"], "--layout-file is required for --layout file"),
+    (["--layout", "file", "--layout-file", "LABELS", "--pillars", "11"],
+     "--pillars 11 is invalid: allowed 12"),
+    (["--layout", "file", "--layout-file", "TOUCH"], r"--layout-file .*t\.npy is invalid "
+                                                     r"\(pillars 0 and 1 at element"),
+    (["--layout", "file", "--layout-file", "LABELS", "--shape", "square"], "--shape square"),
+    (["--layout", "hexagonal", "--pillars", "7", "--grid", "128"], "--pillars 7 .*6 or 9"),
+    (["--layout", "regular", "--pillars", "16", "--grid", "128", "--aspect", "2"],
+     "--aspect 2.0 is invalid: allowed 1 unless --shape is 'ellipse'"),
+    (["--layout", "regular", "--grid", "64"], "--pillars is required for --layout regular"),
+])
+def test_cli_refuses_bad_geometry_and_writes_nothing(tmp_path, capsys, extra, message):
+    from brushcore.cli import main
+
+    labels = build_labels(_ellipse_brush())
+    touch = np.full((32, 32), -1)
+    touch[2:6, 2:6], touch[6:9, 2:6] = 0, 1
+    files = {"LABELS": str(save_label_map(labels, tmp_path / "m.npy")),
+             "TOUCH": str(save_label_map(touch, tmp_path / "t.npy"))}
+    out = tmp_path / "never.nc"
+    argv = ["simulate", "--kbar", "0.1", "--out", str(out), "--quiet"]
+    argv += [files.get(a, a) for a in extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+    assert "Traceback" not in err and "n_pillars" not in err and not out.exists()
