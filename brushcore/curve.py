@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 
 from . import theory
 from .convolution import cached_convolver
-from .lattices import hexagonal_lattice
+from .lattices import hexagonal_fill, hexagonal_lattice
 from .layout import build_labels
 from .operator import BrushOperator
 from .params import BrushParams, SolverOptions
@@ -62,7 +62,7 @@ def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
 
 
 def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float | int | str]:
-    """What the layout realised: pillar count, hexagonal rows x columns, the file's digest.
+    """What the layout realised: pillar count, hexagonal rows x columns and fill, file digest.
 
     ``shape``, ``aspect``, ``orientation`` and ``layout_file`` themselves are
     parameters (see `BrushParams.as_attrs`); ``pillar_radius`` is the
@@ -71,6 +71,7 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
     attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1}
     if params.layout == "hexagonal":
         attrs["lattice_rows"], attrs["lattice_columns"] = hexagonal_lattice(params.n_pillars)
+        attrs["lattice_fill"] = hexagonal_fill(params.n_pillars)
     if params.layout == "file":
         attrs["layout_file_sha256"] = hashlib.sha256(
             Path(params.layout_file).read_bytes()).hexdigest()

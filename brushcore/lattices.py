@@ -38,3 +38,28 @@ def nearest_hexagonal_counts(n_pillars: int) -> tuple[int | None, int]:
     lower = next((m for m in range(n_pillars - 1, 0, -1) if hexagonal_lattice(m)), None)
     upper = next(m for m in range(n_pillars + 1, 2 * n_pillars + 8) if hexagonal_lattice(m))
     return lower, upper
+
+
+def hexagonal_pitch(rows: int, cols: int, side: float) -> float:
+    """Pitch p of an r x c hexagonal lattice in the L x L square [length].
+
+    The largest p for which the lattice with a margin of p/2 beyond its
+    outer centres fits: c + 1/2 pitches wide (every other row shifted by
+    p/2), (r - 1) sqrt(3)/2 + 1 pitches high.
+    """
+    shift = 0.5 if rows > 1 else 0.0
+    return side / max(cols + shift, (rows - 1) * math.sqrt(3.0) / 2.0 + 1.0)
+
+
+def hexagonal_fill(n_pillars: int) -> float:
+    """Fraction of the square covered by the lattice's hexagonal cells, N (sqrt(3)/2) p^2 / L^2.
+
+    1 for a lattice that fills the square; below 1 the pillars stand
+    denser than N / L^2 (locally phi / fill) and the rest of the square is
+    an empty band.  E.g. 0.767 for N = 64 (8 x 8), 0.862 for N = 56 (8 x 7).
+    """
+    lattice = hexagonal_lattice(n_pillars)
+    if lattice is None:
+        raise ValueError(f"{n_pillars} pillars do not fill a hexagonal lattice")
+    p = hexagonal_pitch(*lattice, 1.0)
+    return n_pillars * math.sqrt(3.0) / 2.0 * p * p

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from .params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams, ParameterError
-from .lattices import hexagonal_lattice
+from .lattices import hexagonal_lattice, hexagonal_pitch
 from .layout_file import read_label_map
 from .shapes import PillarShape
 
@@ -114,7 +114,10 @@ def hexagonal_centres(n_pillars: int, side: float) -> np.ndarray:
     centres (the regular lattice's rule: the wall gap is half the pillar
     gap), fits the square; the lattice is centred, so the empty band the
     factorisation leaves is split between opposite sides.  The pitch thus
-    follows from N and L alone; phi sets the pillar size.
+    follows from N and L alone; phi sets the pillar size.  Where r / c is
+    not 2 / sqrt(3) the lattice covers only a part of the square
+    (`lattices.hexagonal_fill`, 0.767 for N = 64), where the pillars stand
+    denser than N / L^2.
     """
     lattice = hexagonal_lattice(n_pillars)
     if lattice is None:  # BrushParams refuses such N with a message
@@ -122,7 +125,7 @@ def hexagonal_centres(n_pillars: int, side: float) -> np.ndarray:
     rows, cols = lattice
     shift = 0.5 if rows > 1 else 0.0
     dy = math.sqrt(3.0) / 2.0
-    pitch = side / max(cols + shift, (rows - 1) * dy + 1.0)
+    pitch = hexagonal_pitch(rows, cols, side)
     i, j = np.divmod(np.arange(n_pillars), cols)
     y = i * dy * pitch
     x = (j + shift * (i % 2)) * pitch

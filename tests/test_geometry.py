@@ -11,7 +11,7 @@ from conftest import punch_params
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate, theory
 from brushcore.curve import run
-from brushcore.lattices import hexagonal_lattice
+from brushcore.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.layout import build_labels, hexagonal_centres, touching_pillars
 from brushcore.layout_file import file_params, read_label_map, save_label_map
 from brushcore.params import MAX_PHI_ERROR
@@ -96,6 +96,9 @@ def test_hexagonal_lattice_counts_and_pitch():
     assert inner.sum() >= 20 and np.allclose(nearest[inner], pitch, rtol=1e-12)
     # centred: the lattice is symmetric under a half turn about the square's centre
     assert np.allclose(np.sort((1000.0 - c).round(9), axis=0), np.sort(c.round(9), axis=0))
+    # 8 x 7: 7.5 pitches wide, 7 sqrt(3)/2 + 1 = 7.06 high -> the cells cover 86 %
+    assert pitch == pytest.approx(1000.0 / 7.5)
+    assert hexagonal_fill(56) == pytest.approx(56 * math.sqrt(3) / 2 / 7.5**2)
     # margin to the walls >= half the pillar gap (as in the regular lattice)
     assert c.min() >= 0.5 * pitch - 1e-9 and c.max() <= 1000.0 - 0.5 * pitch + 1e-9
 
@@ -312,6 +315,8 @@ def test_cli_runs_shapes_and_file_layouts_and_records_them(tmp_path):
     ds = read_curve(out)
     assert (ds.attrs["shape"], ds.attrs["aspect"], ds.attrs["orientation"]) == ("ellipse", 2, 30)
     assert (ds.attrs["lattice_rows"], ds.attrs["lattice_columns"]) == (4, 3)
+    # 4 x 3: 3.5 pitches wide, 3 sqrt(3)/2 + 1 = 3.60 high
+    assert ds.attrs["lattice_fill"] == pytest.approx(12 * math.sqrt(3) / 2 / (1.5 * math.sqrt(3) + 1)**2)
     assert ds.attrs["n_pillars_realised"] == 12 and ds.attrs["layout_file"] == ""
     labels = np.where(ds.detachment_step.values >= 0, 0, -1)
     path = save_label_map(build_labels(_ellipse_brush()), tmp_path / "m.npy")
