@@ -7,7 +7,7 @@ downstream (springs, snapshots, counts) works from it, so any layout
 (or a per-pillar stiffness) plugs in without touching the solver.
 
 Layouts: "regular" (square lattice), "random" (random sequential
-addition), "hexagonal" (triangular lattice, see `hexagonal_lattice`) and
+addition), "hexagonal" (triangular lattice, see `hexagonal_centres`) and
 "file" (a label map or an image, see `layout_file`).  Pillars of one map
 never touch: no two different pillars share an element edge (4-neighbour
 adjacency); a shared corner is allowed.
@@ -19,10 +19,11 @@ import math
 
 import numpy as np
 
-from .params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams, ParameterError
 from .lattices import hexagonal_lattice, hexagonal_pitch
 from .layout_file import read_label_map
+from .params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams, ParameterError
 from .shapes import PillarShape
+
 
 class LayoutError(ValueError):
     """Generated pillars overlap or leave the square; `build_labels` names the parameters."""
@@ -107,8 +108,8 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
 def hexagonal_centres(n_pillars: int, side: float) -> np.ndarray:
     """Centres of a triangular lattice of N pillars in the L x L square, shape (N, 2) [length].
 
-    The N = r x c pillars (`lattices.hexagonal_lattice`) stand in r rows of c, every
-    other row shifted by half a pitch p, rows p sqrt(3)/2 apart, so that
+    The N = r x c pillars (`lattices.hexagonal_lattice`) stand in r rows of
+    c, every other row shifted by half a pitch p, rows p sqrt(3)/2 apart, so that
     each pillar's nearest neighbours are all p away.  The pitch is the
     largest for which the lattice, with a margin of p/2 beyond the outer
     centres (the regular lattice's rule: the wall gap is half the pillar
