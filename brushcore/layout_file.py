@@ -43,6 +43,10 @@ def _refuse(path: Path, allowed: str, reason: str) -> ParameterError:
 
 
 def _read_npy(path: Path) -> np.ndarray:
+    size = path.stat().st_size
+    if size > 8 * MAX_IMAGE_PIXELS + 65536:  # int64 at the largest grid, plus the header
+        raise _refuse(path, f"a label map of at most {MAX_IMAGE_PIXELS} elements",
+                      f"the file has {size} bytes")
     try:
         data = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
