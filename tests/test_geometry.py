@@ -276,18 +276,19 @@ def square_punches():
 
 
 def test_square_punch_pull_off_against_fine_grid_and_equal_disc(square_punches):
-    """A square flat punch lets go at about 0.89 of the Kendall force of the disc of equal area.
+    """A square flat punch lets go at about 0.88 of the Kendall force of the disc of equal area.
 
     No square-punch adhesion formula was found in the reference corpora
     searched (Popov, Pohrt & Li, Friction 5 (2017) 308 simulate square
-    punches with this method but their value was not available), so the
-    reference is a fine-grid run of this solver: side 128 elements (grid
-    206) gave F_ad / F_K(a0) = 0.8885, against 0.9129 (side 32), 0.9006
-    (64) and 0.8917 (96), and the disc of equal area 1.002-1.003 on the
-    same grids.  The value still drifts by ~0.012 per halving of h (the
-    corners, where detachment starts, converge slowly), so the 64-element
-    run must lie within 2 % of the fine one, and below the equal disc by
-    5-15 %: corners concentrate the stress and start the detachment.
+    punches with this method, but no value of theirs was available), so the
+    reference is a fine-grid run of this solver, F_ad / F_K(a0) for sides of
+    32, 48, 64, 96, 128 and 192 elements (grids up to 308):
+    0.9129, 0.8995, 0.9006, 0.8917, 0.8885, 0.8846; the equal-area disc
+    gives 1.002-1.003 on the same grids.  The corners, where detachment
+    starts, converge slowly (about first order in h: 64/128/192 extrapolate
+    to ~0.877), so the 64-element run must lie within 2.5 % of the finest
+    one (measured 1.8 %), and 5-15 % below the equal disc: corners
+    concentrate the stress and start the detachment.
     """
     ratios = {}
     for s, ds in square_punches.items():
@@ -295,7 +296,7 @@ def test_square_punch_pull_off_against_fine_grid_and_equal_disc(square_punches):
         a0 = theory.equivalent_radius(s * s)
         ratios[s] = float(ds.adhesive_force) / theory.kendall_force(a0, 1.0, 1.0)
         assert float(ds.adhesive_force_normalized) == pytest.approx(ratios[s], rel=1e-12)
-    assert abs(ratios[64] / 0.8885 - 1) < 0.02, ratios
+    assert abs(ratios[64] / 0.8846 - 1) < 0.025, ratios
     assert ratios[32] > ratios[64], f"no downward drift towards the fine grid: {ratios}"
     disc = simulate(punch_params(theory.equivalent_radius(64 * 64)))
     disc_ratio = float(disc.adhesive_force_normalized)
