@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import theory
-from .params import BrushParams
+from .params import BrushParams, ParameterError
 
 
 @dataclass(frozen=True)
@@ -58,8 +58,21 @@ def gaussian_heights(std: float, n: int, seed: int) -> np.ndarray:
 
 
 def pillar_inputs(params: BrushParams, labels: np.ndarray) -> PillarInputs:
-    """Heights, stiffnesses, gap map and units of a brush on its label map."""
-    n = params.n_pillars
+    """Heights, stiffnesses, gap map and units of a brush on its label map.
+
+    Raises
+    ------
+    ParameterError
+        When given per-pillar arrays do not match the pillars the layout
+        realised (``params.n_pillars`` is checked already; a label map
+        handed in may differ).
+    """
+    n = int(labels.max()) + 1
+    for name in ("heights", "kbar_values"):
+        given = getattr(params, name)
+        if given is not None and len(given) != n:
+            raise ParameterError(name, f"<{len(given)} values>",
+                                 f"one value per pillar of the layout ({n})")
     area = float(np.count_nonzero(labels >= 0)) * params.h**2
     d_unit = theory.displacement_scale(area, params.e_star, params.dgamma)
     f_unit = theory.force_scale(area, params.e_star, params.dgamma)
