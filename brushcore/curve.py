@@ -427,7 +427,8 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
         "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
         "pillar_order": "label order: regular brushes row-major, pillar i*sqrt(N)+j at "
                         "((i+1/2) L/sqrt(N), (j+1/2) L/sqrt(N)) along (y, x); random brushes "
-                        "in placement order",
+                        "in placement order; other layouts as labelled; pillar_y, pillar_x "
+                        "give every pillar's centroid",
         "events": curve.events,
         "steps": int(d.size),
         "operator_applications": applications,
