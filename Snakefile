@@ -39,6 +39,7 @@ localrules:
     fig7,
     fig8,
     rough_figure,
+    curve_figure,
 
 
 rule all:

@@ -336,6 +336,80 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
     return fig
 
 
+def rough_loop(curve: xr.Dataset) -> Figure:
+    """One approach-retract loop with the contact at the preload and at F_ad (issue 11).
+
+    Left: F / F_K against d / d_K, approach and retraction in two colours
+    (compression is negative), the preload and F_ad marked.  Right: the
+    contact maps the curve file keeps at those two stages (red attached,
+    grey detached pillar elements).
+    """
+    fig = _new_figure(10.5, 3.6)
+    ax, *maps = fig.subplots(1, 3, width_ratios=[1.6, 1, 1])
+    d = curve["displacement_normalized"].values
+    f = curve["force_normalized"].values
+    back = curve["retraction"].values.astype(bool) if "retraction" in curve else np.ones_like(d,
+                                                                                               bool)
+    ax.plot(d[~back], f[~back], color="C0", lw=1, label="approach to the preload")
+    ax.plot(d[back], f[back], color="C3", lw=1, label="retraction")
+    i_max = int(np.nanargmax(np.where(back, f, -np.inf)))
+    ax.plot(d[i_max], f[i_max], "k^", label=rf"$\bar F_{{ad}}$ = {f[i_max]:.3g}")
+    i_pre = int(np.nanargmin(f))
+    ax.plot(d[i_pre], f[i_pre], "kv", label=f"preload {-f[i_pre]:.3g}")
+    ax.axhline(0.0, color="0.6", lw=0.5)
+    ax.set_xlabel(r"$d / d_K$")
+    ax.set_ylabel(r"$F / F_K$ (tensile > 0)")
+    ax.legend(fontsize=7)
+    labels = [str(s) for s in curve["snapshot_label"].values] if "snapshot_label" in curve else []
+    for axm, stage in zip(maps, ("preload", "maximum force")):
+        axm.set_axis_off()
+        if stage not in labels:
+            _no_data(axm, f"no map at {stage}")
+            continue
+        state = curve["contact_snapshot"].isel(snapshot=labels.index(stage)).values
+        axm.imshow(state + 1, cmap=SNAPSHOT_CMAP, vmin=0, vmax=2, origin="lower",
+                   interpolation="nearest")
+        axm.set_title(f"contact at {'the preload' if stage == 'preload' else 'F_ad'}",
+                      fontsize=9)
+    a = curve.attrs
+    fig.suptitle(f"{a.get('layout')} brush, N = {a.get('n_pillars')}, "
+                 rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, roughness "
+                 f"{float(a.get('roughness', 0.0)):g} $d_K$, seed {a.get('seed')}")
+    return fig
+
+
+def load_sharing(curve: xr.Dataset) -> Figure:
+    """Force of every pillar at F_ad against its height (issue 11).
+
+    Forces are in units of the mean pillar force at F_ad (F_ad / N), heights
+    in d_K; colour is the pillar's kbar.  Equal load sharing is the line at 1;
+    a rough stiff brush loads its tallest pillars, a soft one spreads the load.
+    """
+    fig = _new_figure(5.0, 3.8)
+    ax = fig.subplots()
+    if "pillar_force_at_adhesive_force" not in curve:
+        _no_data(ax, "no per-pillar forces in this curve")
+        return fig
+    force = curve["pillar_force_at_adhesive_force"].values
+    mean = float(curve["adhesive_force"]) / force.size
+    height = curve["pillar_height_normalized"].values
+    kbar = curve["pillar_kbar"].values
+    finite = np.isfinite(kbar)
+    art = ax.scatter(height, force / mean, c=np.where(finite, kbar, np.nan), s=12,
+                     cmap="viridis", label="pillars")
+    if finite.any() and np.ptp(kbar[finite]) > 0:
+        fig.colorbar(art, ax=ax, label=r"pillar $\bar k$")
+    ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="equal sharing")
+    ax.axhline(0.0, color="0.7", lw=0.5)
+    ax.set_xlabel(r"pillar height $z_p / d_K$")
+    ax.set_ylabel(r"pillar force at $F_{ad}$ / ($F_{ad}/N$)")
+    ax.legend(fontsize=7)
+    a = curve.attrs
+    ax.set_title(f"N = {a.get('n_pillars')}, " + rf"$\bar k$ = {float(a.get('kbar')):g}, "
+                 f"roughness {float(a.get('roughness', 0.0)):g} $d_K$", fontsize=9)
+    return fig
+
+
 def save(fig: Figure, path: str | Path, dpi: int = 150) -> None:
     """Write a figure (format from the suffix), creating the directory."""
     path = Path(path)

@@ -490,3 +490,18 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert flat.adhesive_force.dims == ("layout", "n_pillars", "kbar", "seed")
     assert float(flat.adhesive_force.squeeze()) == pytest.approx(
         float(build_sweep(files[:1]).adhesive_force.squeeze()), rel=1e-12)
+
+
+def test_loop_and_load_sharing_figures_show_the_curve():
+    """The one-curve figures mark F_ad and the preload of the curve and sum to F_ad."""
+    from brushcore import figures
+
+    ds = simulate(BrushParams("regular", 16, 0.01, 64, roughness=0.5, preload=1.0, seed=1))
+    fig = figures.rough_loop(ds)
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert f"= {float(ds.adhesive_force_normalized):.3g}" in labels[2]
+    assert labels[3] == "preload 1"  # the protocol stopped at exactly the preload
+    sharing = figures.load_sharing(ds)
+    y = sharing.axes[0].collections[0].get_offsets()[:, 1]
+    # pillar forces at F_ad add up to F_ad: the mean of F_p / (F_ad / N) is 1
+    assert np.mean(y) == pytest.approx(1.0, rel=1e-6)

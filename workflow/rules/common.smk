@@ -1,6 +1,7 @@
 """Helpers shared by the rules: config checks, the job list and resource estimates."""
 
 import difflib
+import math
 
 import jsonschema
 import yaml
@@ -178,10 +179,38 @@ def rough_brush(config):
     return "random", int(config["random"][0])
 
 
+CURVE_FIGURES = ("rough_loop", "load_sharing")
+
+
+def rough_example_curve(config):
+    """The curve file the one-curve rough figures show, or None for a flat sweep.
+
+    The brush of `rough_brush`, seed 0, the largest roughness and preload
+    asked for, and the finite kbar closest to 0.01 on a log scale (soft
+    enough that pillars share load, stiff enough that they interact).
+    """
+    brush = rough_brush(config)
+    rough = [c for c in sweep_cases(config)
+             if c[6] and (c[0], c[1]) == brush and c[3] == 0 and float(c[2]) < float("inf")]
+    if not rough:
+        return None
+
+    def rank(case):
+        tag = parse_rough_tag(case[6])
+        return (-tag["roughness"], -tag["preload"], tag["kbar_spread"],
+                abs(math.log10(float(case[2])) + 2.0))
+
+    layout, n, kbar, seed, grid, phi, tag = min(rough, key=rank)
+    return ("results/curves/" + CURVE_NAME.format(
+        layout=layout, n_pillars=n, kbar=kbar, seed=seed, grid=grid, phi=repr(float(phi)),
+        rough=tag) + ".nc")
+
+
 def rough_figure_files(config):
     """The rough-brush figures, for configs that ask for rough cases only."""
     flat = all(float(v) == 0.0 for key in ("roughness", "preload", "kbar_spread")
                for v in config[key])
     if flat:
         return []
-    return [f"results/figures/{name}.{ext}" for name in ROUGH_FIGURES for ext in ("png", "pdf")]
+    names = ROUGH_FIGURES + (CURVE_FIGURES if rough_example_curve(config) else ())
+    return [f"results/figures/{name}.{ext}" for name in names for ext in ("png", "pdf")]

@@ -124,3 +124,29 @@ rule rough_figure:
         flat=False,
     script:
         "../scripts/figure.py"
+
+
+rule curve_figure:
+    """Rough brushes (issue 11): one approach-retract loop and its load sharing."""
+    input:
+        lambda wildcards: rough_example_curve(config),
+    output:
+        png=report(
+            "results/figures/{curve_figure}.png",
+            caption="../report/rough.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/{curve_figure}.pdf",
+    log:
+        "logs/figures/{curve_figure}.log",
+    benchmark:
+        "results/benchmarks/figures/{curve_figure}.tsv"
+    wildcard_constraints:
+        curve_figure="rough_loop|load_sharing",
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        figure=lambda wildcards: wildcards.curve_figure,
+    script:
+        "../scripts/curve_figure.py"
