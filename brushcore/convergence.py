@@ -20,25 +20,30 @@ Method
 * Four or more grids: least squares of (1) by variable projection: for a
   fixed p, f0 and C are a linear least-squares problem; p minimises the
   residual over a bounded interval.
-* Error estimate: the larger of
-  (a) Roache's grid convergence index of the finest grid,
-      GCI = Fs |f1 - f2| / (r21^p - 1), Fs = 1.25 (three or more grids;
-      Roache 1998, Celik et al. 2008) -- the band around f1 that f0 lies in,
-      widened by the safety factor; used here as the uncertainty of f0,
-      which is conservative because |f1 - f0| = GCI / Fs; and
-  (b) with four or more grids, the spread max |f0(subset) - f0| of the
-      three-grid extrapolations over consecutive triples of grids.
-  The half range of the raw values, (max f - min f)/2, is returned as well
-  (``spread``): the uncertainty Stern et al. (2001) use for oscillatory
-  convergence, where no extrapolation exists.
+* Error estimate (``error``, the uncertainty of f0):
+  - three grids: Roache's grid convergence index of the finest grid,
+    GCI = Fs |f1 - f2| / (r21^p - 1) with Fs = 1.25 (order observed from
+    three grids; Roache 1998, Celik et al. 2008).  It is the band around f1
+    that holds f0, widened by Fs; since |f1 - f0| = GCI / Fs it is used here
+    as the uncertainty of f0 as well.
+  - four or more grids: Eca & Hoekstra (2014), who fit scattered data by
+    least squares: U = Fs |fit(h1) - f0| + sigma + |f1 - fit(h1)|, sigma the
+    standard deviation of the fit, Fs = 1.25 for monotone data and 3 when the
+    values oscillate (the fit is then kept, flagged ``non_monotone``, as
+    long as its order and residual pass).
+  The GCI is returned for every fit (``gci``), and the half range of the raw
+  values, (max f - min f)/2, always (``spread``): the uncertainty Stern et
+  al. (2001) use for oscillatory convergence, where no extrapolation exists.
 * Flags, never a silent number:
   ``too_few_grids`` (fewer than ``min_grids`` finite values),
   ``non_monotone`` (successive differences change sign: oscillatory
-  convergence, for which (1) is meaningless),
-  ``poor_fit`` (order outside ``order_range``, no root, divergence, or an
-  rms residual above ``max_relative_residual`` of the range of f).
-  Where a flag makes (1) meaningless, the order, f0 and the error are NaN;
-  the raw values stay with the caller (and in `extrapolate_sweep`'s output).
+  convergence; with three grids (1) has no solution and f0 is NaN),
+  ``poor_fit`` (order outside ``order_range``, no positive order (the
+  differences grow under refinement), or an rms residual above
+  ``max_relative_residual`` of the range of f).
+  Where a flag makes (1) meaningless, f0 and the error are NaN (the order
+  too when none was observed); the raw values stay with the caller (and in
+  `extrapolate_sweep`'s output).
 
 All functions are pure.  h is any length proportional to the element size;
 brushcore uses h/L = 1/n (n elements per side of the square L x L), so the
@@ -52,6 +57,9 @@ Celik, Ghia, Roache, Freitas, Coleman & Raad, J. Fluids Eng. 130 (2008)
 078001 ("Procedure for estimation and reporting of uncertainty due to
 discretization in CFD applications").
 Stern, Wilson, Coleman & Paterson, J. Fluids Eng. 123 (2001) 793-802.
+Eca & Hoekstra, J. Comput. Phys. 262 (2014) 104-130 ("A procedure for the
+estimation of the numerical uncertainty of CFD calculations based on grid
+refinement studies").
 """
 
 from __future__ import annotations
@@ -86,6 +94,8 @@ class ConvergenceOptions:
         near p = 1/2 ... 1 for forces; 0.3 ... 4 leaves room on both sides.
     safety_factor : Roache's Fs of the grid convergence index (1.25 when the
         order is observed from three or more grids).
+    scattered_safety_factor : Fs for four or more grids whose values are not
+        monotone (3, Eca & Hoekstra 2014).
     max_relative_residual : largest rms residual of the least-squares fit
         (four or more grids), relative to max f - min f, before the fit is
         flagged poor.
@@ -98,6 +108,7 @@ class ConvergenceOptions:
     min_grids: int = 3
     order_range: tuple[float, float] = (0.3, 4.0)
     safety_factor: float = 1.25
+    scattered_safety_factor: float = 3.0
     max_relative_residual: float = 0.1
     order_bounds: tuple[float, float] = (0.02, 12.0)
     flat_rtol: float = 1e-12
@@ -288,29 +299,35 @@ def extrapolate(
     if np.all(np.abs(np.diff(f)) <= flat):
         # Converged to rounding: nothing to extrapolate, and no order to observe.
         return result(value=finest, error=0.0, gci=0.0, resid=0.0)
-    if not is_monotone(f, atol=flat):
+    monotone = is_monotone(f, atol=flat)
+    if not monotone and n == 3:
+        # Three points that oscillate admit no f0 + C h^p with p > 0.
         return result(non_monotone=True)
 
     f0, coef, p, resid = _extrapolate_sorted(h, f, opts)
+    if not np.isfinite(p) or p <= 0:
+        # Differences grow under refinement: no limit exists.
+        return result(resid=resid, non_monotone=not monotone, poor_fit=True)
     lo, hi = opts.order_range
     scale = float(f.max() - f.min())
-    poor = (not np.isfinite(p)) or not (lo < p <= hi) or resid > opts.max_relative_residual * scale
-    if not np.isfinite(p) or p <= 0:
-        return result(resid=resid, poor_fit=True)  # divergent: no limit exists
+    poor = not (lo < p <= hi) or resid > opts.max_relative_residual * scale
+    # Roache's GCI of the finest grid, from the two finest values.
     gci = opts.safety_factor * abs(f[0] - f[1]) / ((h[1] / h[0]) ** p - 1.0)
-    error = gci
-    if n >= 4:
-        # Spread of the three-grid extrapolations over consecutive triples.
-        subs = [_extrapolate_sorted(h[i:i + 3], f[i:i + 3], opts)[0] for i in range(n - 2)]
-        subs = np.array(subs)
-        if np.all(np.isfinite(subs)):
-            error = max(error, float(np.max(np.abs(subs - f0))))
-        else:
-            poor = True  # a triple oscillates or diverges: the law does not hold throughout
+    if n == 3:
+        error = gci
+    else:
+        # Eca & Hoekstra (2014): U = Fs |fit(h1) - f0| + sigma + |f1 - fit(h1)|,
+        # sigma the standard deviation of the fit; Fs = 3 for scattered data.
+        fit1 = f0 + coef * h[0] ** p
+        sigma = resid * math.sqrt(n / (n - 3))
+        fs = opts.safety_factor if monotone else opts.scattered_safety_factor
+        error = fs * abs(fit1 - f0) + sigma + abs(f[0] - fit1)
     if poor:
         # Report the order that was observed, but no limit built on it.
-        return result(order=p, coef=coef, gci=gci, resid=resid, poor_fit=True)
-    return result(value=f0, error=error, order=p, coef=coef, gci=gci, resid=resid)
+        return result(order=p, coef=coef, gci=gci, resid=resid, non_monotone=not monotone,
+                      poor_fit=True)
+    return result(value=f0, error=error, order=p, coef=coef, gci=gci, resid=resid,
+                  non_monotone=not monotone)
 
 
 # ---------------------------------------------------------------------------
@@ -441,12 +458,15 @@ def extrapolate_sweep(
     ds.attrs = {
         "title": "brushcore mesh-refinement study: results extrapolated to h -> 0",
         "Conventions": "CF-1.10",
-        "comment": ("f(h) = f0 + C h^p with the observed order p; error = max(GCI of the "
-                    "finest grid, spread of three-grid sub-fits); flagged cases carry NaN"),
+        "comment": ("f(h) = f0 + C h^p with the observed order p; error = Roache's GCI "
+                    "(3 grids) or Eca & Hoekstra's least-squares uncertainty (>= 4 grids); "
+                    "f0 is NaN where a flag makes the fit meaningless"),
         "references": ("Roache (1998); Celik et al., J. Fluids Eng. 130 (2008) 078001; "
+                       "Eca & Hoekstra, J. Comput. Phys. 262 (2014) 104; "
                        "Stern et al., J. Fluids Eng. 123 (2001) 793"),
         "order_range": f"({opts.order_range[0]}, {opts.order_range[1]}]",
         "safety_factor": opts.safety_factor,
+        "scattered_safety_factor": opts.scattered_safety_factor,
         "max_relative_residual": opts.max_relative_residual,
         "min_grids": opts.min_grids,
         "under_resolved_radius_elements": UNDER_RESOLVED_RADIUS,
@@ -531,6 +551,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
         Path(p).parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(csv_path, index=False)
     header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
-              "error = max(Roache GCI of the finest grid, spread of 3-grid sub-fits). "
+              "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
+              "uncertainty (>= 4 grids). "
               f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements.\n\n")
     Path(md_path).write_text(header + to_markdown(table))

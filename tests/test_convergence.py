@@ -112,6 +112,18 @@ def test_order_outside_plausible_range_is_poor_fit():
     assert loose.ok and loose.value == pytest.approx(F0, rel=1e-9)
 
 
+def test_scattered_many_grids_kept_with_wider_error():
+    # A clear trend with a small oscillation on top (the staircase of a
+    # pillar's disc on the grid does this): fitted, flagged, Fs = 3.
+    h = 1.0 / np.array([128.0, 160.0, 192.0, 256.0, 320.0, 384.0, 512.0])
+    wiggle = 4e-4 * np.array([1, -1, 1, -1, 1, -1, 1])
+    e = extrapolate(h, law(h, 1.0) + wiggle)
+    assert e.non_monotone and not e.poor_fit
+    assert 0.5 < e.order < 2.5
+    assert abs(e.value - F0) <= e.error
+    assert e.error > e.gci, "Fs = 3 and the scatter widen the band beyond Roache's GCI"
+
+
 def test_large_residual_is_poor_fit():
     # Monotone, but not a power law: a kink a single h^p cannot follow.
     h = 1.0 / np.array([64.0, 128.0, 256.0, 512.0, 1024.0])
