@@ -339,6 +339,7 @@ _OUTPUTS = {
     "extrapolated": ("{q} extrapolated to h -> 0", False),
     "error": ("estimated uncertainty of the extrapolated {q}", False),
     "order": ("observed order p of {q} = f0 + C h^p", False),
+    "coefficient": ("coefficient C of {q} = f0 + C h^p, h = 1/n", False),
     "finest": ("{q} on the finest grid run", False),
     "spread": ("half range of {q} over the grids", False),
     "gci": ("grid convergence index of the finest {q} (Roache, Fs = 1.25)", False),
@@ -351,8 +352,8 @@ _OUTPUTS = {
 
 def _apply(values: np.ndarray, h: np.ndarray, opts: ConvergenceOptions) -> tuple[float, ...]:
     e = extrapolate(h, values, opts)
-    return (e.value, e.error, e.order, e.finest, e.spread, e.gci, float(e.n_grids),
-            float(e.non_monotone), float(e.poor_fit), float(e.too_few_grids))
+    return (e.value, e.error, e.order, e.coefficient, e.finest, e.spread, e.gci,
+            float(e.n_grids), float(e.non_monotone), float(e.poor_fit), float(e.too_few_grids))
 
 
 def _finest_index(values: np.ndarray) -> int:
@@ -396,7 +397,7 @@ def extrapolate_sweep(
     -------
     xarray.Dataset
         On the case dimensions: ``{q}_extrapolated``, ``{q}_error``,
-        ``{q}_order``, ``{q}_finest``, ``{q}_spread``, ``{q}_gci``,
+        ``{q}_order``, ``{q}_coefficient``, ``{q}_finest``, ``{q}_spread``, ``{q}_gci``,
         ``{q}_n_grids`` and the int8 flags ``{q}_non_monotone``,
         ``{q}_poor_fit``, ``{q}_too_few_grids``; the raw values ``{q}`` on
         (cases..., grid); ``finest_grid`` and ``pillar_radius_elements_finest``
@@ -432,10 +433,10 @@ def extrapolate_sweep(
                 da = da.astype(np.int8)
                 attrs.update(units="1", flag_values=np.array([0, 1], dtype=np.int8),
                              flag_meanings="no yes")
-            elif suffix == "order" or suffix == "n_grids":
+            elif suffix in ("order", "n_grids"):
                 attrs["units"] = "1"
             else:
-                attrs["units"] = units
+                attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
             out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
         out[q] = raw.copy()
     # Finest grid run per case (any quantity finite), and its resolution.
