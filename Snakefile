@@ -12,13 +12,14 @@ min_version("9.0")
 configfile: "config/config.yaml"
 
 
-validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
-
-
 include: "workflow/rules/common.smk"
 
 
-check_regular_squares(config)
+check_config(config, workflow.source_path("workflow/schemas/config.schema.yaml"))
+
+
+validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
+check_cases(config)
 
 
 report: "workflow/report/workflow.rst"

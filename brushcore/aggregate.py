@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 
 from brushcore import provenance
-from brushcore.io import read_curve
+from brushcore.io import publish, read_curve
 
 LAYOUTS = ("regular", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
@@ -345,9 +345,7 @@ def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
     tmp = path.with_name(path.name + ".tmp")
     try:
         sweep.to_netcdf(tmp, engine="netcdf4", encoding=encoding(sweep))
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())  # on disk before it replaces the old sweep
-        tmp.replace(path)
+        publish(tmp, path)  # on disk, with the umask's mode, before it replaces the old sweep
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -1,32 +1,85 @@
-"""Command line: ``brushcore simulate ...`` writes one curve file."""
+"""Command line: ``brushcore simulate ...`` writes one curve file.
+
+Conventions: no abbreviated flags, unknown flags named (with the closest
+known one), defaults shown in ``--help``, errors worded with the flags the
+user typed, every check done before the first solve, Ctrl-C ends with one
+line and exit status 130.
+"""
 
 from __future__ import annotations
 
 import argparse
+import difflib
+import re
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 from .cg import ConvergenceError
+from .joblog import EXIT_INTERRUPTED, INTERRUPTED
 from .params import LAYOUTS, BrushParams, ParameterError, SolverOptions
+from .provenance import version
 from .pulloff import SolverError
+
+#: API parameter -> the flag that sets it, for error messages.
+FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "--phi",
+         "seed": "--seed", "min_gap": "--min-gap", "e_star": "--e-star",
+         "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
+         "lookahead": "--lookahead", "cascade": "--cascade", "threads": "--threads",
+         "out": "--out", "allow_coarse": "--allow-coarse"}
+_NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
 
 def _kbar(text: str) -> float:
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"kbar={text!r} is invalid: allowed a number in (0, inf]; 'inf' means rigid") from None
-    return value
+            f"{text!r} is not a number; allowed a number in (0, inf], 'inf' means rigid"
+        ) from None
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that names unknown flags before complaining about missing ones."""
+
+    def parse_known_args(self, args=None, namespace=None):  # noqa: D102 - argparse API
+        args = list(sys.argv[1:] if args is None else args)
+        if self._subparsers is None:  # a sub-command's parser judges its own flags
+            known = set(self._option_string_actions)
+            for token in args:
+                if token == "--":
+                    break
+                flag = token.split("=", 1)[0]
+                if flag.startswith("-") and not _NUMBER.match(flag) and flag not in known:
+                    close = difflib.get_close_matches(flag, sorted(known), n=1)
+                    hint = f" (did you mean {close[0]}?)" if close else ""
+                    self.error(f"unknown argument {flag}{hint}")
+        return super().parse_known_args(args, namespace)
+
+
+class _DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows defaults, except for required flags and store_true switches."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.required or action.default in (None, False):
+            return action.help
+        return super()._get_help_string(action)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation and tests)."""
-    parser = argparse.ArgumentParser(prog="brushcore", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    sim = sub.add_parser("simulate", help="pull one brush off and write its curve (netCDF)")
-    sim.add_argument("--layout", choices=LAYOUTS, required=True)
+    parser = _Parser(prog="brushcore", description=__doc__.splitlines()[0],
+                     allow_abbrev=False)
+    parser.add_argument("--version", action="version", version=f"brushcore {version()}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sim = sub.add_parser("simulate", help="pull one brush off and write its curve (netCDF)",
+                         description="Pull one brush off and write its curve (netCDF). "
+                                     "Units: E*, dgamma and h in one consistent system "
+                                     "(the file states SI).",
+                         allow_abbrev=False,
+                         formatter_class=_DefaultsShown)
+    sim.add_argument("--layout", choices=LAYOUTS, required=True, help="pillar layout")
     sim.add_argument("--pillars", type=int, required=True, help="number of pillars N")
     sim.add_argument("--kbar", type=_kbar, required=True,
                      help="spring stiffness k/(E* L); 'inf' for rigid pillars")
@@ -35,15 +88,18 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--seed", type=int, default=0, help="seed of the random layout")
     sim.add_argument("--min-gap", type=float, default=1.0,
                      help="minimum gap between random pillars [elements]")
-    sim.add_argument("--e-star", type=float, default=1.0, help="effective modulus E*")
-    sim.add_argument("--dgamma", type=float, default=1.0, help="work of adhesion")
-    sim.add_argument("--h", type=float, default=1.0, help="element size")
+    sim.add_argument("--e-star", type=float, default=1.0, help="effective modulus E* [Pa]")
+    sim.add_argument("--dgamma", type=float, default=1.0, help="work of adhesion [J/m^2]")
+    sim.add_argument("--h", type=float, default=1.0, help="element size [m]")
+    sim.add_argument("--allow-coarse", action="store_true",
+                     help="run even if the pillars are under 2 elements in radius or phi "
+                          "is realised more than 5 %% off")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
-    sim.add_argument("--lookahead", type=float, default=0.0,
-                     help="approximate: detach within this relative window (default exact)")
+    sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
+                     help="approximate: detach within this relative window (0 = exact)")
     sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
                      help="local: per-pillar cascades where they provably do not change "
-                          "the result (default); global: re-solve after every round (reference)")
+                          "the result; global: re-solve after every round (reference)")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
     sim.add_argument("--out", type=Path, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -51,44 +107,81 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class _Progress:
-    """Prints detached fraction and events to stderr at most every 2 s."""
+    """Progress on stderr: a live line on a terminal, plain lines in a log.
 
-    def __init__(self) -> None:
+    On a terminal the line is rewritten in place every 2 s; when stderr is a
+    file (a batch job's log) a full line is printed every 30 s, so that the
+    log never holds carriage returns.
+    """
+
+    def __init__(self, stream=None) -> None:
+        self.stream = sys.stderr if stream is None else stream
+        self.live = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.every = 2.0 if self.live else 30.0
         self.t0 = self.last = time.monotonic()
+        self.shown = False
 
     def __call__(self, events: int, attached: int, total: int) -> None:
         now = time.monotonic()
-        if now - self.last >= 2.0:
-            self.last = now
-            print(f"\r  {100 * (1 - attached / total):5.1f}% detached, {events} events, "
-                  f"{now - self.t0:6.1f} s", end="", file=sys.stderr, flush=True)
+        if now - self.last < self.every:
+            return
+        self.last = now
+        text = (f"  {100 * (1 - attached / total):5.1f}% detached, {events} events, "
+                f"{now - self.t0:6.1f} s")
+        if self.live:
+            print("\r" + text, end="", file=self.stream, flush=True)
+            self.shown = True
+        else:
+            print(text, file=self.stream, flush=True)
+
+    def end_line(self) -> None:
+        """Finish a live line so that the next message starts on its own."""
+        if self.shown:
+            print("", file=self.stream, flush=True)
+            self.shown = False
+
+
+def _error(message: str, progress: _Progress | None = None) -> None:
+    if progress is not None:
+        progress.end_line()
+    print(f"brushcore: error: {message}", file=sys.stderr)
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .io import write_curve
     from .curve import simulate
+    from .io import check_output_path, write_curve
+    from .layout import build_labels
     from .threads import pin_threads
 
+    progress = None if args.quiet else _Progress()
     try:
         params = BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
                              grid=args.grid, phi=args.phi, seed=args.seed,
                              min_gap=args.min_gap, e_star=args.e_star, dgamma=args.dgamma,
-                             h=args.h)
+                             h=args.h, allow_coarse=args.allow_coarse)
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade)
         if args.threads < 1:
-            raise ParameterError(f"threads={args.threads} is invalid: allowed an integer >= 1")
+            raise ParameterError("threads", args.threads, "an integer >= 1")
+        check_output_path(args.out)
+        labels = build_labels(params)  # layout and discretisation checked before any solve
+        area = int((labels >= 0).sum())
+        print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements,"
+              f" phi realised {area / labels.size:.4g} (requested {params.phi:g})",
+              file=sys.stderr)
         pin_threads(args.threads)
-        # The layout is built (and checked) before any solve starts.
-        ds = simulate(params, options, progress=None if args.quiet else _Progress())
+        ds = simulate(params, options, progress=progress, labels=labels)
+        write_curve(ds, args.out)
     except ParameterError as exc:
-        print(f"brushcore: error: {exc}", file=sys.stderr)
+        _error(exc.in_terms_of(FLAGS, sep=" "), progress)
         return 2
     except (ConvergenceError, SolverError) as exc:
-        print(f"\nbrushcore: solver failed: {exc}", file=sys.stderr)
+        _error(f"solver failed: {exc}", progress)
         return 1
-    write_curve(ds, args.out)
-    if not args.quiet:
-        print("", file=sys.stderr)
+    except KeyboardInterrupt:
+        _error(INTERRUPTED, progress)
+        return EXIT_INTERRUPTED
+    if progress is not None:
+        progress.end_line()
     print(f"F_ad/F_K = {float(ds.adhesive_force_normalized):.4f}  "
           f"W/W_K = {float(ds.work_of_separation_normalized):.4f}  "
           f"events = {ds.attrs['events']}  operator applications = "
@@ -97,11 +190,15 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``brushcore`` command."""
-    args = build_parser().parse_args(argv)
-    if args.command == "simulate":
-        return _simulate(args)
+    try:
+        args = build_parser().parse_args(argv)
+        if args.command == "simulate":
+            return _simulate(args)
+    except KeyboardInterrupt:  # during start-up (imports, parsing)
+        _error(INTERRUPTED)
+        return EXIT_INTERRUPTED
     return 2  # pragma: no cover - argparse enforces the sub-command
 
 

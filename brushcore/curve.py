@@ -20,6 +20,16 @@ from .cg import ConvergenceError
 from .pulloff import Progress, PullOffCurve, SolverError, pull_off
 from .threads import fft_threads
 
+#: How to read dimensional values: the inputs define the unit system.
+UNITS_CONVENTION = ("SI: e_star in Pa, dgamma in J m-2, h in m, so lengths in m, forces in N, "
+                    "energies in J; with the defaults e_star = dgamma = h = 1 the values are "
+                    "in units of h, E* h^2 and dgamma h^2")
+#: Definitions of the symbols used in long names.
+SYMBOLS = ("A: real contact area (pillar elements x h^2); a0 = sqrt(A / pi): radius of one "
+           "compact punch of area A; F_K = sqrt(8 pi E* dgamma a0^3): Kendall's pull-off "
+           "force of that punch; d_K = sqrt(2 pi dgamma a0 / E*); W_K = 2 pi a0^2 dgamma; "
+           "kbar = k / (E* L), L = grid h; phi = A / L^2")
+
 SNAPSHOT_LABELS = ("start", "before maximum", "maximum force", "after maximum",
                    "last contact")
 
@@ -84,14 +94,17 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
 
 
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
-             progress: Progress | None = None) -> xr.Dataset:
+             progress: Progress | None = None, labels: np.ndarray | None = None,
+             ) -> xr.Dataset:
     """Pull-off curve, adhesive force and work of separation as a Dataset.
+
+    ``labels`` (optional) is the label map to use, see `run`.
 
     Signs: d > 0 pulls the brush away, F > 0 is tensile.  Normalised values
     follow the paper (eqs. 20-24) with A the discretised real contact area.
     """
     t0 = time.perf_counter()
-    detach, curve, applications = run(params, options, progress)
+    detach, curve, applications = run(params, options, progress, labels)
     wall = time.perf_counter() - t0
     h, es, dg = params.h, params.e_star, params.dgamma
     area_total = float(np.count_nonzero(detach >= 0)) * h * h
@@ -107,35 +120,35 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     states = np.where(pillar[None], (detach[None] > snaps[:, None, None]).astype(np.int8),
                       np.int8(-1)).astype(np.int8)
     coord = (np.arange(params.grid) + 0.5) * h
-    length = {"units": "1 (length in units of h=E*=dgamma=1 unless attrs say otherwise)"}
 
     def var(dims, data, name, units, **extra):
         return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
 
     data = {
-        "displacement": var("step", curve.displacement, "pull-off displacement d", "length"),
-        "force": var("step", curve.force, "tensile normal force F", "force"),
-        "contact_area": var("step", area, "real contact area", "length^2"),
+        "displacement": var("step", curve.displacement, "pull-off displacement d", "m"),
+        "force": var("step", curve.force, "tensile normal force F", "N"),
+        "contact_area": var("step", area, "real contact area", "m2"),
         "attached_pillars": var("step", curve.attached_pillars.astype(np.int32),
                                 "pillars with attached elements", "1"),
         "displacement_normalized": var("step", curve.displacement / ds_,
-                                       "d / sqrt(2 pi dgamma a0 / E*)", "1"),
+                                       "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
         "force_normalized": var("step", curve.force / fs,
-                                "F / sqrt(8 pi E* dgamma a0^3)", "1"),
+                                "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)", "1"),
         "detachment_step": var(("y", "x"), detach, "first step at which the element is "
                                "detached", "1", comment="-1 outside pillars"),
         "contact_snapshot": var(("snapshot", "y", "x"), states, "contact state", "1",
                                 flag_values=np.array([-1, 0, 1], dtype=np.int8),
                                 flag_meanings="no_pillar detached attached"),
         "snapshot_step": var("snapshot", snaps, "step of the snapshot", "1"),
-        "snapshot_label": var("snapshot", np.array(SNAPSHOT_LABELS), "stage", "1"),
-        "adhesive_force": var((), f_ad, "adhesive force (maximum tensile force)", "force"),
-        "adhesive_force_normalized": var((), f_ad / fs, "F_ad / sqrt(8 pi E* dgamma a0^3)",
-                                         "1"),
+        "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
+                                      {"long_name": "stage of the pull-off"}),
+        "adhesive_force": var((), f_ad, "adhesive force (maximum tensile force)", "N"),
+        "adhesive_force_normalized": var((), f_ad / fs, "F_ad / F_K", "1"),
         "displacement_at_adhesive_force": var((), float(curve.displacement[i_max]),
-                                              "d at the adhesive force", "length"),
-        "work_of_separation": var((), work, "work of separation, integral of F dd", "energy"),
-        "work_of_separation_normalized": var((), work / ws, "W / (2 pi a0^2 dgamma)", "1"),
+                                              "d at the adhesive force", "m"),
+        "work_of_separation": var((), work, "work of separation, integral of F dd", "J"),
+        "work_of_separation_normalized": var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
+                                             "1"),
     }
     attrs = {
         **params.as_attrs(),
@@ -143,6 +156,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "phi_actual": area_total / params.side**2,
         "real_contact_area": area_total,
         "pillar_radius": params.pillar_radius,
+        "pillar_radius_elements": params.pillar_radius_elements,
         "side_length": params.side,
         "critical_stress": theory.critical_stress(es, dg, h),
         "events": curve.events,
@@ -160,10 +174,14 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "history": f"{dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} "
                    f"brushcore {version()} simulate",
         "sign_convention": "d > 0 pulls away from the half space; F > 0 is tensile",
+        "units_convention": UNITS_CONVENTION,
+        "symbols": SYMBOLS,
     }
     return xr.Dataset(data, coords={
-        "step": np.arange(curve.displacement.size, dtype=np.int32),
-        "y": var("y", coord, "element centre y", "length"),
-        "x": var("x", coord, "element centre x", "length"),
-        "snapshot": np.arange(snaps.size, dtype=np.int32),
+        "step": var("step", np.arange(curve.displacement.size, dtype=np.int32),
+                    "step of the pull-off (one per solve)", "1"),
+        "y": var("y", coord, "element centre y", "m"),
+        "x": var("x", coord, "element centre x", "m"),
+        "snapshot": var("snapshot", np.arange(snaps.size, dtype=np.int32),
+                        "contact snapshot index", "1"),
     }, attrs=attrs)

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from .params import ParameterError
+
 #: Variables and attributes a curve file must have to be aggregated.
 REQUIRED_VARS = ("displacement", "force", "contact_area", "attached_pillars",
                  "adhesive_force", "adhesive_force_normalized", "work_of_separation",
@@ -25,7 +27,7 @@ class CurveFileError(ValueError):
 
 
 def _encoding(ds: xr.Dataset) -> dict:
-    enc = {}
+    enc: dict[str, dict] = {name: {"_FillValue": None} for name in ds.coords}  # CF: none
     for name, v in ds.data_vars.items():
         if v.ndim >= 2:  # maps and snapshots compress ~50x
             enc[name] = {"zlib": True, "complevel": 4}
@@ -54,6 +56,66 @@ def content_digest(ds: xr.Dataset) -> str:
     return h.hexdigest()
 
 
+def _umask() -> int:
+    """The process umask, read without changing it where the OS allows."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0o022)  # elsewhere: set and restore (not thread-safe, done once a file)
+    os.umask(mask)
+    return mask
+
+
+def check_output_path(path: str | os.PathLike) -> Path:
+    """Check, before any work, that a file can be written at ``path``.
+
+    The path must not be a folder, and its nearest existing ancestor must be
+    a folder in which a file can actually be created (a test file is
+    created and removed there; nothing else is left behind, missing
+    folders are not created yet).
+
+    Raises
+    ------
+    ParameterError
+        Named ``out``, saying what is wrong with the path.
+    """
+    path = Path(path)
+
+    def refuse(reason: str) -> ParameterError:
+        return ParameterError("out", str(path), "a file path in a writable folder "
+                              "(missing folders are created)", reason)
+
+    if path.is_dir():
+        raise refuse("it is a folder")
+    ancestor = path.parent
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise refuse(f"{ancestor} is a file, not a folder")
+    try:
+        with tempfile.TemporaryFile(dir=ancestor):
+            pass
+    except OSError as exc:
+        raise refuse(f"cannot create a file in {ancestor}: {exc.strerror}") from None
+    return path
+
+
+def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """Give a finished temporary file the umask's mode, flush it and rename it to ``path``.
+
+    Temporary files are created owner-only (0600); the published file gets
+    0666 & ~umask like any file a tool writes.
+    """
+    os.chmod(tmp, 0o666 & ~_umask())
+    with open(tmp, "rb") as fh:
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
 def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     """Write a curve Dataset to netCDF4 atomically.
 
@@ -69,9 +131,7 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     os.close(fd)
     try:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(ds))
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .params import BrushParams, ParameterError
+from .params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams, ParameterError
 
 
 def regular_centres(n_pillars: int, side: float) -> np.ndarray:
@@ -55,8 +55,8 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
     rng = np.random.default_rng(seed)
     lo, hi = radius, side - radius
     if hi < lo:
-        raise ParameterError(f"n_pillars={n_pillars} is invalid: allowed a pillar radius "
-                             f"{radius:.3g} <= L/2 = {side / 2:.3g}")
+        raise ParameterError("n_pillars", n_pillars, "fewer or smaller pillars",
+                             f"pillar radius {radius:.3g} > L/2 = {side / 2:.3g}")
     min_dist2 = (2.0 * radius + gap) ** 2
     # A cell grid of size >= the exclusion distance: only 3 x 3 neighbours matter.
     cell = math.sqrt(min_dist2)
@@ -85,9 +85,9 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
                 break
         else:
             raise ParameterError(
-                f"n_pillars={n_pillars} is invalid for layout 'random': only {p} discs of "
-                f"radius {radius:.3g} with gap {gap:.3g} fitted after {max_attempts} trials "
-                f"for the next; allowed fewer pillars, a smaller phi or a smaller min_gap")
+                "n_pillars", n_pillars, "fewer pillars, a smaller phi or a smaller min_gap",
+                f"random layout: only {p} discs of radius {radius:.3g} with gap {gap:.3g} "
+                f"fitted, {max_attempts} trials failed for the next")
     return centres
 
 
@@ -128,11 +128,35 @@ def build_labels(params: BrushParams) -> np.ndarray:
         centres = random_centres(params.n_pillars, params.side, params.pillar_radius,
                                  params.min_gap * params.h, params.seed)
     labels = label_map(centres, params.pillar_radius, params.grid, params.h)
+    check_discretisation(params, labels)
+    return labels
+
+
+def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
+    """Refuse a label map that misrepresents the requested brush.
+
+    Every pillar must cover an element; unless ``params.allow_coarse``, the
+    realised filling factor must lie within MAX_PHI_ERROR of the requested
+    one (the pillar radius rule is checked by `BrushParams` itself).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``grid``, with the smallest grid that would do where it can
+        be computed, and the realised values.
+    """
     counts = np.bincount(labels[labels >= 0], minlength=params.n_pillars)
+    r = params.pillar_radius_elements
     if np.any(counts == 0):
         raise ParameterError(
-            f"grid={params.grid} is invalid: {int(np.sum(counts == 0))} pillars of radius "
-            f"{params.pillar_radius_elements:.3g} elements cover no element centre; allowed a "
-            f"grid with pillar radius >= 1 element, i.e. grid >= "
-            f"{math.ceil(params.grid / params.pillar_radius_elements)}")
-    return labels
+            "grid", params.grid, f"grid >= {math.ceil(FLOOR_RADIUS_ELEMENTS * params.grid / r)}",
+            f"{int(np.sum(counts == 0))} pillars of radius {r:.3g} elements cover no "
+            "element centre")
+    phi_actual = float(counts.sum()) / labels.size
+    error = phi_actual / params.phi - 1.0
+    if abs(error) > MAX_PHI_ERROR and not params.allow_coarse:
+        raise ParameterError(
+            "grid", params.grid, "a finer grid (or allow_coarse to run it anyway)",
+            f"phi is realised as {phi_actual:.4g} instead of {params.phi:g} "
+            f"({100 * error:+.1f} %, more than {100 * MAX_PHI_ERROR:g} %) with a pillar "
+            f"radius of {r:.3g} elements")

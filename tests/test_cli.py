@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import re
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -34,17 +38,23 @@ def test_rigid_kbar_inf(tmp_path):
 
 
 BAD = [
-    (["--kbar", "-1"], "kbar=-1.0"),
-    (["--kbar", "nan"], "kbar=nan"),
-    (["--kbar", "abc"], "kbar='abc'"),
-    (["--kbar", "0"], "kbar=0.0"),
-    (["--pillars", "3"], "n_pillars=3 .*perfect square"),
-    (["--pillars", "0"], "n_pillars=0 .*N >= 1"),
-    (["--phi", "0.6"], r"phi=0.6 .*\(0, 0.5\]"),
-    (["--phi", "0"], r"phi=0.0 .*\(0, 0.5\]"),
-    (["--grid", "8", "--pillars", "64"], "grid=8 .*pillar"),
+    (["--kbar", "-1"], r"--kbar -1.0 is invalid"),
+    (["--kbar", "nan"], "--kbar nan is invalid"),
+    (["--kbar", "abc"], "--kbar: 'abc' is not a number"),
+    (["--kbar", "0"], "--kbar 0.0 is invalid"),
+    (["--pillars", "3"], "--pillars 3 .*perfect square"),
+    (["--pillars", "0"], "--pillars 0 .*N >= 1"),
+    (["--phi", "0.6"], r"--phi 0.6 .*\(0, 0.5\]"),
+    (["--phi", "0"], r"--phi 0.0 .*\(0, 0.5\]"),
+    (["--grid", "8", "--pillars", "64"], "--grid 8 .*pillar radius"),
+    (["--grid", "41", "--pillars", "256"], "--grid 41 .*--grid >= 164 .*--allow-coarse"),
+    (["--grid", "128", "--pillars", "256"], "--grid 128 .*--grid >= 164"),
     (["--layout", "hex"], "invalid choice: 'hex'"),
-    (["--layout", "random", "--pillars", "60", "--phi", "0.5"], "n_pillars=60 .*fewer"),
+    (["--layout", "random", "--pillars", "60", "--phi", "0.5"], "--pillars 60 .*fewer"),
+    (["--threads", "0"], "--threads 0 .*>= 1"),
+    (["--n-pillars", "16"], "unknown argument --n-pillars .*did you mean --pillars"),
+    (["--k", "0.1"], "unknown argument --k "),
+    (["--ou", "x.nc"], "unknown argument --ou "),
 ]
 
 
@@ -59,9 +69,8 @@ def test_bad_input_is_rejected_before_computing(tmp_path, extra, message):
         cmd += [key, value]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert res.returncode == 2, res.stderr
-    import re
-
     assert re.search(message, res.stderr), res.stderr
+    assert "Traceback" not in res.stderr and "n_pillars" not in res.stderr
     assert not out.exists() and not list(tmp_path.iterdir())
 
 
@@ -78,3 +87,93 @@ def test_truncated_or_foreign_file_is_refused_by_name(tmp_path):
     write_curve(ds, foreign)
     with pytest.raises(CurveFileError, match="foreign.nc.*force"):
         read_curve(foreign)
+
+
+def _cli(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "brushcore.cli", *args], capture_output=True,
+                          text=True, timeout=120, **kw)
+
+
+SMALL = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01", "--grid", "48"]
+
+
+@pytest.mark.parametrize("out,reason", [
+    ("a.nc/fig5a.nc", "a.nc is a file, not a folder"),
+    (".", "it is a folder"),
+    ("/proc/x.nc", "cannot create a file in /proc"),
+])
+def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
+    (tmp_path / "a.nc").write_text("not a folder")
+    t0 = time.perf_counter()
+    res = _cli(*SMALL, "--grid", "256", "--pillars", "256", "--kbar", "0.455", "--out", out,
+               cwd=tmp_path)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert res.stderr.startswith("brushcore: error: --out ") and reason in res.stderr, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert time.perf_counter() - t0 < 20  # the 256-pillar pull-off (~5 s) never started
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc"]
+
+
+def test_files_respect_the_umask(tmp_path):
+    out = tmp_path / "sub" / "c.nc"
+    old = os.umask(0o022)
+    try:
+        assert main([*SMALL, "--out", str(out), "--quiet"]) == 0
+    finally:
+        os.umask(old)
+    assert out.stat().st_mode & 0o777 == 0o644
+
+
+def test_version_and_defaults_in_help():
+    res = _cli("--version")
+    assert res.returncode == 0 and re.fullmatch(r"brushcore \S+\n", res.stdout), res
+    text = _cli("simulate", "--help").stdout
+    assert "(default: 0.12)" in text and "(default: local)" in text
+
+
+def test_every_run_reports_its_discretisation(tmp_path):
+    res = _cli(*SMALL, "--out", str(tmp_path / "c.nc"), "--quiet")
+    assert res.returncode == 0, res.stderr
+    assert re.search(r"pillar radius 4\.69 elements, phi realised 0\.1\d+ \(requested 0\.12\)",
+                     res.stderr), res.stderr
+    assert abs(read_curve(tmp_path / "c.nc").attrs["pillar_radius_elements"] - 4.69) < 0.01
+
+
+def test_allow_coarse_runs_what_is_refused_by_default(tmp_path):
+    args = ["simulate", "--layout", "regular", "--pillars", "256", "--kbar", "0.455",
+            "--grid", "64", "--out", str(tmp_path / "c.nc"), "--quiet"]
+    assert _cli(*args).returncode == 2
+    res = _cli(*args, "--allow-coarse")
+    assert res.returncode == 0, res.stderr
+    assert "pillar radius 0.782 elements, phi realised 0.25" in res.stderr
+    assert read_curve(tmp_path / "c.nc").attrs["allow_coarse"] == 1
+
+
+def test_progress_in_a_log_has_no_carriage_returns(tmp_path):
+    """stderr to a file (a batch log) gets whole lines, never a rewritten one."""
+    from brushcore.cli import _Progress
+
+    log = open(tmp_path / "log", "w+")
+    progress = _Progress(log)
+    progress.last -= 60  # as if the last line was a minute ago
+    progress(3, 50, 100)
+    progress.end_line()
+    log.seek(0)
+    text = log.read()
+    assert "\r" not in text and re.fullmatch(r" +50\.0% detached, 3 events, +\S+ s\n", text)
+
+
+def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
+    out = tmp_path / "c.nc"
+    proc = subprocess.Popen([sys.executable, "-m", "brushcore.cli", "simulate", "--layout",
+                             "regular", "--pillars", "256", "--kbar", "0.455", "--grid", "512",
+                             "--out", str(out)], stderr=subprocess.PIPE, text=True)
+    first = proc.stderr.readline()  # printed after every check, before the ~10 s pull-off
+    assert first.startswith("grid 512: pillar radius"), first
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == 130, rest
+    assert rest.strip().splitlines()[-1] == "brushcore: error: interrupted; nothing written"
+    assert "Traceback" not in rest
+    assert not list(tmp_path.iterdir())

@@ -447,14 +447,15 @@ def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
     """A job whose layout cannot be built: Snakemake fails, names it, writes no curve for it."""
     work = copy_repo(tmp_path / "repo")
     config = work / "config/unfit.yaml"
-    config.write_text("grid: 64\nphi: 0.5\nkbar: [1.0]\nregular: [4]\nrandom: [1620]\n"
+    # 40 discs of radius 4 elements pass every plan-time check but cannot be packed
+    config.write_text("grid: 64\nphi: 0.5\nkbar: [1.0]\nregular: [4]\nrandom: [40]\n"
                       "seeds: [0]\nfig5: {n_pillars: 4, kbar: [1.0]}\nthreads: 1\n")
     proc = snakemake(work, "--cores", "2", "--configfile", "config/unfit.yaml")
     text = output(proc)
     assert proc.returncode != 0, f"the sweep succeeded with an unfit layout:\n{text[-4000:]}"
-    assert "Error in rule simulate" in text and "N1620_kbar1.0_seed0" in text, text[-4000:]
-    log = (work / "logs/simulate/random/N1620_kbar1.0_seed0.log").read_text()
-    assert "n_pillars=1620" in log and "ParameterError" in log, log
+    assert "Error in rule simulate" in text and "N40_kbar1.0_seed0" in text, text[-4000:]
+    log = (work / "logs/simulate/random/N40_kbar1.0_seed0.log").read_text()
+    assert "n_pillars=40" in log and "ParameterError" in log, log
     assert not (work / "results/curves/random").exists() or not list(
         (work / "results/curves/random").iterdir()), "the failed job left files"
     assert not (work / "results/sweep.nc").exists(), "sweep.nc written despite a failed job"

@@ -1,23 +1,70 @@
-"""Helpers shared by the rules: the job list and resource estimates."""
+"""Helpers shared by the rules: config checks, the job list and resource estimates."""
 
-import math
+import difflib
+
+import jsonschema
+import yaml
+
+from brushcore.params import BrushParams, ParameterError
+from brushcore.layout import build_labels
 
 
-def check_regular_squares(config):
-    """Stop before any job when a regular N is not a perfect square.
+def check_config(config, schema_path):
+    """Validate the config against its schema with one short message naming the key.
 
-    JSON Schema cannot express "perfect square", so this completes the schema.
+    Snakemake's `validate` prints the whole schema around the error; this
+    reports the first error only, as "config key 'x': ...", with the closest
+    known key for a typo.  Defaults are filled in afterwards by `validate`.
     """
-    for key, values in (
-        ("regular", config["regular"]),
-        ("fig5.n_pillars", [config["fig5"]["n_pillars"]]),
-    ):
-        bad = [n for n in values if math.isqrt(n) ** 2 != n]
-        if bad:
-            raise ValueError(
-                f"config key '{key}': N = {bad} not a perfect square; a regular "
-                "layout needs sqrt(N) x sqrt(N) pillars (e.g. 64, 256, 576, 2304)"
+    with open(schema_path) as fh:
+        schema = yaml.safe_load(fh)
+    error = jsonschema.exceptions.best_match(
+        jsonschema.Draft202012Validator(schema).iter_errors(config)
+    )
+    if error is None:
+        return
+    where = ".".join(str(p) for p in error.absolute_path)
+    if error.validator == "additionalProperties":
+        known = sorted(error.schema.get("properties", {}))
+        extra = sorted(set(error.instance) - set(known))
+        close = difflib.get_close_matches(extra[0], known, n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {known}"
+        prefix = f"{where}." if where else ""
+        raise ConfigError(f"config key '{prefix}{extra[0]}' is unknown{hint}")
+    raise ConfigError(f"config key '{where}': {error.message}")
+
+
+class ConfigError(ValueError):
+    """The config asks for something that cannot run; the message names the key."""
+
+
+def check_cases(config):
+    """Run every check that needs no solve, for every case, before any job starts.
+
+    Builds the parameters of each case (ranges, the grid rule: pillar radius
+    >= 2 elements) and the label map of each regular brush (realised phi within
+    5 %), so that a config that cannot run stops `snakemake -n` already.
+    Random layouts are packed in their jobs (seconds each); a packing failure
+    fails that job.  The geometry does not depend on kbar: checked once.
+    """
+    seen = set()
+    for layout, n, kbar, seed, grid, phi in sweep_cases(config):
+        if (layout, n, seed, grid, phi) in seen:
+            continue
+        seen.add((layout, n, seed, grid, phi))
+        try:
+            params = BrushParams(
+                layout, n, float(kbar), grid, phi=phi, seed=seed,
+                allow_coarse=config["allow_coarse"],
             )
+            if layout == "regular":
+                build_labels(params)
+        except ParameterError as exc:
+            keys = {"n_pillars": layout, "allow_coarse": "allow_coarse: true"}
+            raise ConfigError(
+                f"config: {exc.in_terms_of(keys, sep=' = ')} "
+                f"(case {layout} N = {n}, grid = {grid}, phi = {phi})"
+            ) from None
 
 
 def kbar_tag(kbar):
@@ -26,11 +73,12 @@ def kbar_tag(kbar):
 
 
 def sweep_cases(config):
-    """Every (layout, n_pillars, kbar, seed) the config asks for, once.
+    """Every (layout, n_pillars, kbar, seed, grid, phi) the config asks for, once.
 
     Regular layouts ignore the seed, so they run with seed 0 only; the Fig. 5
     brush adds its own kbar values to the regular sweep.
     """
+    grid, phi = config["grid"], config["phi"]
     cases = set()
     for n in config["regular"]:
         for kbar in config["kbar"]:
@@ -42,14 +90,24 @@ def sweep_cases(config):
         for kbar in config["kbar"]:
             for seed in config["seeds"]:
                 cases.add(("random", n, kbar_tag(kbar), seed))
-    return sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3]))
+    ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3]))
+    return [(*case, grid, phi) for case in ordered]
+
+
+#: One curve file per case; every parameter that changes the curve is in its name,
+#: so that a sweep on another grid or filling factor never overwrites it.
+CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}"
 
 
 def curve_files(config):
     """The curve file of every case of the sweep."""
     return [
-        f"results/curves/{layout}/N{n}_kbar{kbar}_seed{seed}.nc"
-        for layout, n, kbar, seed in sweep_cases(config)
+        "results/curves/"
+        + CURVE_NAME.format(
+            layout=layout, n_pillars=n, kbar=kbar, seed=seed, grid=grid, phi=repr(float(phi))
+        )
+        + ".nc"
+        for layout, n, kbar, seed, grid, phi in sweep_cases(config)
     ]
 
 
@@ -59,7 +117,7 @@ def simulate_mem_mb(wildcards, attempt):
     Measured peak RSS at grid 512: 0.18-0.31 GB, 0.56 GB for 48 x 48 pillars
     (pillar-interaction matrices); FFT buffers and blocks scale with n^2.
     """
-    grid = config["grid"]
+    grid = int(wildcards.grid)
     return int(400 + 800 * (grid / 512) ** 2) * attempt
 
 
@@ -69,5 +127,5 @@ def simulate_runtime(wildcards, attempt):
     Measured at grid 512 on one core: 2-150 s per curve; the cost grows
     about as n^3 (solves ~ n, each ~ n^2 log n).
     """
-    grid = config["grid"]
+    grid = int(wildcards.grid)
     return int(5 + 15 * (grid / 512) ** 3) * attempt

@@ -1,23 +1,24 @@
 rule simulate:
-    """One pull-off simulation: one (layout, N, kbar, seed) -> one curve file."""
+    """One pull-off simulation: one (layout, N, kbar, seed, grid, phi) -> one curve file."""
     output:
-        "results/curves/{layout}/N{n_pillars}_kbar{kbar}_seed{seed}.nc",
+        f"results/curves/{CURVE_NAME}.nc",
     log:
-        "logs/simulate/{layout}/N{n_pillars}_kbar{kbar}_seed{seed}.log",
+        f"logs/simulate/{CURVE_NAME}.log",
     benchmark:
-        "results/benchmarks/simulate/{layout}/N{n_pillars}_kbar{kbar}_seed{seed}.tsv"
+        f"results/benchmarks/simulate/{CURVE_NAME}.tsv"
     wildcard_constraints:
         layout="regular|random",
         n_pillars=r"[0-9]+",
-        kbar=r"[0-9][0-9.e+-]*",
+        kbar=r"[0-9][0-9.e+-]*|inf",
         seed=r"[0-9]+",
+        grid=r"[0-9]+",
+        phi=r"[0-9][0-9.e+-]*",
     threads: config["threads"]
     resources:
         mem_mb=simulate_mem_mb,
         runtime=simulate_runtime,
     params:
-        grid=config["grid"],
-        phi=config["phi"],
         solver=config["solver"],
+        allow_coarse=config["allow_coarse"],
     script:
         "../scripts/simulate.py"

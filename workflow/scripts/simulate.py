@@ -7,13 +7,14 @@ import os
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = str(snakemake.threads)  # noqa: F821
 
-from brushcore import BrushParams, SolverOptions, simulate  # noqa: E402
-from brushcore.io import remove_stale_temporaries, write_curve  # noqa: E402
-from brushcore.joblog import logged  # noqa: E402
-from brushcore.threads import pin_threads  # noqa: E402
+from brushcore.joblog import logged  # noqa: E402 - light; the rest is imported under it
 
 
 def main(smk) -> None:
+    from brushcore import BrushParams, SolverOptions, simulate
+    from brushcore.io import remove_stale_temporaries, write_curve
+    from brushcore.threads import pin_threads
+
     remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)
     w = smk.wildcards
@@ -21,9 +22,10 @@ def main(smk) -> None:
         layout=w.layout,
         n_pillars=int(w.n_pillars),
         kbar=float(w.kbar),
-        grid=int(smk.params.grid),
-        phi=float(smk.params.phi),
+        grid=int(w.grid),
+        phi=float(w.phi),
         seed=int(w.seed),
+        allow_coarse=bool(smk.params.allow_coarse),
     )
     print(f"{params} on {smk.threads} thread(s)", flush=True)
     curve = simulate(params, SolverOptions(**smk.params.solver))

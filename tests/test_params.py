@@ -1,0 +1,80 @@
+"""Parameters: NumPy scalars accepted and normalised, one discretisation rule."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from brushcore import BrushParams, ParameterError, SolverOptions
+from brushcore.layout import build_labels
+
+
+def test_numpy_scalars_are_accepted_and_normalised():
+    p = BrushParams("regular", np.int64(16), np.float32(0.1), np.int64(64),
+                    phi=np.float32(0.12), seed=np.uint8(3))
+    assert p == BrushParams("regular", 16, float(np.float32(0.1)), 64,
+                            phi=float(np.float32(0.12)), seed=3)
+    for name in ("n_pillars", "grid", "seed"):
+        assert type(getattr(p, name)) is int, name
+    for name in ("kbar", "phi", "e_star"):
+        assert type(getattr(p, name)) is float, name
+    for grid in np.array([64, 128]):  # what users write
+        assert BrushParams("regular", 16, 0.1, grid).grid == int(grid)
+    assert SolverOptions(rtol=np.float64(1e-5), max_iter=np.int32(10)).max_iter == 10
+
+
+@pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.0), ("grid", "64"),
+                                         ("kbar", np.bool_(True))])
+def test_non_numbers_are_still_refused(field, value):
+    args = {"layout": "regular", "n_pillars": 16, "kbar": 0.1, "grid": 64, field: value}
+    with pytest.raises(ParameterError, match=field):
+        BrushParams(**args)
+
+
+def test_error_speaks_the_callers_vocabulary():
+    with pytest.raises(ParameterError) as err:
+        BrushParams("regular", 15, 0.1, 64)
+    assert str(err.value).startswith("n_pillars=15 is invalid")
+    assert err.value.in_terms_of({"n_pillars": "--pillars"}, sep=" ").startswith(
+        "--pillars 15 is invalid")
+
+
+# (N, grid, runs by default): the paper's finest brush runs, meaningless grids do not.
+RULE = [(2304, 512, True), (256, 512, True), (256, 256, True), (16, 64, True),
+        (256, 64, False),   # radius 0.78 elements, phi realised 0.25 for 0.12
+        (256, 128, False),  # radius 1.56, phi realised 0.0625
+        (2304, 256, False)]  # radius 1.04
+
+
+@pytest.mark.parametrize("n_pillars,grid,runs", RULE)
+def test_one_discretisation_rule(n_pillars, grid, runs):
+    def check(allow_coarse: bool) -> BrushParams:
+        p = BrushParams("regular", n_pillars, 1.0, grid, allow_coarse=allow_coarse)
+        labels = build_labels(p)
+        phi = np.count_nonzero(labels >= 0) / labels.size
+        assert (p.pillar_radius_elements >= 2 and abs(phi / 0.12 - 1) <= 0.05) == runs
+        return p
+
+    if runs:
+        check(False)
+    else:
+        with pytest.raises(ParameterError, match="grid") as err:
+            check(False)
+        # the suggested grid really passes the radius rule
+        hint = str(err.value)
+        if "grid >= " in hint:
+            suggested = int(hint.split("grid >= ")[1].split()[0])
+            assert BrushParams("regular", n_pillars, 1.0, suggested).pillar_radius_elements >= 2
+        check(True)  # explicitly asked for: runs
+
+
+def test_floor_even_when_coarse_is_allowed():
+    """Below sqrt(2)/2 elements a pillar may cover no element centre; the hint is consistent."""
+    with pytest.raises(ParameterError, match=r"grid >= \d+") as err:
+        BrushParams("regular", 256, 1.0, 41, allow_coarse=True)
+    suggested = int(str(err.value).split("grid >= ")[1].split()[0])
+    assert suggested == math.ceil(41 * math.sqrt(0.5) / (41 * math.sqrt(0.12 / (math.pi * 256))))
+    for grid in range(suggested, suggested + 12):  # every pillar covers an element
+        build_labels(BrushParams("regular", 256, 1.0, grid, allow_coarse=True))
