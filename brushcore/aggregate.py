@@ -1,10 +1,13 @@
 """Collect one-curve files into the analysis-ready sweep dataset (``sweep.nc``).
 
-One curve file holds one pull-off simulation (one layout, N, kbar, seed).
-`build_sweep` reads them all with `brushcore.io.read_curve` and lays the
-scalars out on the full (layout, n_pillars, kbar, seed) grid, NaN where a
-combination was not run, with the force-displacement curves NaN-padded along
-``step``.  Contact snapshots are large, so only a chosen subset of cases keeps
+One curve file holds one pull-off simulation (one layout, N, kbar, seed,
+grid).  `build_sweep` reads them all with `brushcore.io.read_curve` and lays
+the scalars out on the full (layout, n_pillars, kbar, seed, grid) product,
+NaN where a combination was not run, with the force-displacement curves
+NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
+when a sweep has one grid, so that mesh-refinement studies
+(`brushcore.convergence`) and single-grid sweeps share one layout;
+`finest_grid` reduces it to one value per case for the figures and tables.  Contact snapshots are large, so only a chosen subset of cases keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
 ``xarray.open_dataset``; `encoding` gives the compression to write it with.
 """
@@ -27,6 +30,9 @@ from brushcore.io import publish, read_curve
 
 LAYOUTS = ("regular", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
+#: The resolution dimension (elements per side n of the L x L square).
+GRID_DIM = "grid"
+SWEEP_DIMS = (*CASE_DIMS, GRID_DIM)
 
 #: Scalar variables copied from each curve file.
 SCALAR_VARIABLES = (
@@ -44,6 +50,7 @@ ATTRIBUTE_SCALARS = {
     "wall_time_s": ("s", "wall time of the simulation"),
     "phi_actual": ("1", "filling factor A / L^2 realised on the grid"),
     "real_contact_area": ("1", "real contact area A (units of h^2)"),
+    "pillar_radius_elements": ("1", "pillar radius a_p / h in elements"),
 }
 #: Per-step curves, NaN-padded to the longest curve of the sweep.
 CURVE_VARIABLES = (
@@ -70,18 +77,21 @@ class CaseKey:
     n_pillars : number of pillars N.
     kbar : normalised spring stiffness k / (E* L) [-].
     seed : random-layout seed (0 for regular layouts).
+    grid : elements per side n of the L x L square.
     """
 
     layout: str
     n_pillars: int
     kbar: float
     seed: int
+    grid: int
 
 
 def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
-    return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]))
+    return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
+                   int(a["grid"]))
 
 
 def file_sha256(path: str | Path) -> str:
@@ -140,12 +150,13 @@ def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
         "n_pillars": np.array(sorted({k.n_pillars for k in keys}), dtype=np.int64),
         "kbar": np.array(sorted({k.kbar for k in keys}), dtype=np.float64),
         "seed": np.array(sorted({k.seed for k in keys}), dtype=np.int64),
+        "grid": np.array(sorted({k.grid for k in keys}), dtype=np.int64),
     }
 
 
-def _index(coords: dict[str, np.ndarray], key: CaseKey) -> tuple[int, int, int, int]:
-    return tuple(  # type: ignore[return-value]
-        int(np.flatnonzero(coords[dim] == getattr(key, dim))[0]) for dim in CASE_DIMS
+def _index(coords: dict[str, np.ndarray], key: CaseKey) -> tuple[int, ...]:
+    return tuple(
+        int(np.flatnonzero(coords[dim] == getattr(key, dim))[0]) for dim in SWEEP_DIMS
     )
 
 
@@ -183,8 +194,9 @@ def build_sweep(
     Returns
     -------
     xarray.Dataset
-        Scalars on (layout, n_pillars, kbar, seed); curves on the same dims
-        plus ``step``; snapshots on (case, snapshot, y, x); provenance attrs.
+        Scalars on (layout, n_pillars, kbar, seed, grid); curves on the same
+        dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
+        provenance attrs.
 
     Raises
     ------
@@ -192,10 +204,9 @@ def build_sweep(
         Naming the offending file when one cannot be read or cases clash.
     """
     curves = load_curves(paths)
-    grid = _common_attr(curves, "grid")
     phi = _common_attr(curves, "phi")
     coords = _case_coords(curves)
-    shape = tuple(len(coords[d]) for d in CASE_DIMS)
+    shape = tuple(len(coords[d]) for d in SWEEP_DIMS)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
     first = next(iter(curves.values()))[1]
 
@@ -208,33 +219,46 @@ def build_sweep(
         for name in SCALAR_VARIABLES:
             scalars[name][at] = float(curve[name])
         for name in ATTRIBUTE_SCALARS:
-            scalars[name][at] = float(curve.attrs.get(name, np.nan))
+            scalars[name][at] = _attribute(curve, name)
         scalars["n_steps"][at] = curve.sizes["step"]
         for name in CURVE_VARIABLES:
             values = np.asarray(curve[name].values, dtype=np.float64)
             lines[name][at][: values.size] = values
 
     for name in SCALAR_VARIABLES:
-        data[name] = xr.DataArray(scalars[name], dims=CASE_DIMS, attrs=dict(first[name].attrs))
+        data[name] = xr.DataArray(scalars[name], dims=SWEEP_DIMS, attrs=dict(first[name].attrs))
     for name, (units, long_name) in ATTRIBUTE_SCALARS.items():
         data[name] = xr.DataArray(
-            scalars[name], dims=CASE_DIMS, attrs={"units": units, "long_name": long_name}
+            scalars[name], dims=SWEEP_DIMS, attrs={"units": units, "long_name": long_name}
         )
     data["n_steps"] = xr.DataArray(
-        scalars["n_steps"], dims=CASE_DIMS,
+        scalars["n_steps"], dims=SWEEP_DIMS,
         attrs={"units": "1", "long_name": "valid entries along step (rest is NaN padding)"},
     )
     for name in CURVE_VARIABLES:
         data[name] = xr.DataArray(
-            lines[name], dims=(*CASE_DIMS, "step"), attrs=dict(first[name].attrs)
+            lines[name], dims=(*SWEEP_DIMS, "step"), attrs=dict(first[name].attrs)
         )
     data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb))
 
     sweep = xr.Dataset(data, coords=_coordinate_arrays(coords))
     # The stacked snapshot cases are labels, not data: make them coordinates.
     sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
-    sweep.attrs = _provenance(curves, grid=grid, phi=phi)
+    sweep.attrs = _provenance(curves, phi=phi)
     return sweep
+
+
+def _attribute(curve: xr.Dataset, name: str) -> float:
+    """A numeric curve attribute, NaN when absent.
+
+    Curve files written before ``pillar_radius_elements`` was recorded give
+    it from ``pillar_radius`` / ``h``.
+    """
+    if name == "pillar_radius_elements" and name not in curve.attrs:
+        a = curve.attrs
+        return float(a["pillar_radius"]) / float(a["h"]) if "pillar_radius" in a and "h" in a \
+            else math.nan
+    return float(curve.attrs.get(name, np.nan))
 
 
 def _coordinate_arrays(coords: dict[str, np.ndarray]) -> dict[str, xr.DataArray]:
@@ -243,8 +267,9 @@ def _coordinate_arrays(coords: dict[str, np.ndarray]) -> dict[str, xr.DataArray]
         "n_pillars": {"units": "1", "long_name": "number of pillars N"},
         "kbar": {"units": "1", "long_name": "normalised spring stiffness k / (E* L)"},
         "seed": {"units": "1", "long_name": "random-layout seed (0 for regular)"},
+        "grid": {"units": "1", "long_name": "elements per side n of the L x L square"},
     }
-    out = {d: xr.DataArray(coords[d], dims=d, attrs=attrs[d]) for d in CASE_DIMS}
+    out = {d: xr.DataArray(coords[d], dims=d, attrs=attrs[d]) for d in SWEEP_DIMS}
     out["layout"] = out["layout"].astype(str)
     return out
 
@@ -262,6 +287,9 @@ def _snapshots(
     keys = sorted(k for k in with_snaps if wanted(k))
     if not keys:
         return {}
+    # Maps of different grids cannot share (y, x): keep the finest grid's.
+    finest = max(k.grid for k in keys)
+    keys = [k for k in keys if k.grid == finest]
     n_snap = max(with_snaps[k].sizes["snapshot"] for k in keys)
     ny, nx = with_snaps[keys[0]].sizes["y"], with_snaps[keys[0]].sizes["x"]
     snap = np.full((len(keys), n_snap, ny, nx), -1, dtype=np.int8)
@@ -288,6 +316,7 @@ def _snapshots(
         "case_n_pillars": xr.DataArray(np.array([k.n_pillars for k in keys]), dims="case"),
         "case_kbar": xr.DataArray(np.array([k.kbar for k in keys]), dims="case"),
         "case_seed": xr.DataArray(np.array([k.seed for k in keys]), dims="case"),
+        "case_grid": xr.DataArray(np.array([k.grid for k in keys]), dims="case"),
     }
     if "detachment_step" in first:
         out["detachment_step"] = xr.DataArray(
@@ -297,7 +326,7 @@ def _snapshots(
 
 
 def _provenance(
-    curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, grid: object, phi: object
+    curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, phi: object
 ) -> dict[str, object]:
     files = sorted(str(path) for path, _ in curves.values())
     hashes = [file_sha256(f) for f in files]
@@ -315,7 +344,7 @@ def _provenance(
         "git_commit": provenance.git_commit(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
-        "grid": int(grid) if grid is not None else -1,
+        "grids": np.array(sorted({k.grid for k in curves}), dtype=np.int64),
         "phi": float(phi) if phi is not None else math.nan,
         "source_files": "\n".join(files),
         "source_sha256": "\n".join(hashes),
@@ -373,3 +402,40 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         return None
     names = [n for n in ("contact_snapshot", "snapshot_step", "snapshot_label") if n in sweep]
     return sweep[names].isel(case=int(idx[0]))
+
+
+def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr.Dataset:
+    """Each case at the finest grid it was run on, without the ``grid`` dimension.
+
+    Figures and the summary show one value per case; on a refinement sweep
+    that is the best-resolved one.  A sweep without ``grid`` (older files) is
+    returned unchanged.
+
+    Parameters
+    ----------
+    sweep : dataset of `build_sweep`.
+    ran : variable whose finite values mark the grids a case ran on.
+
+    Returns
+    -------
+    xarray.Dataset
+        Every variable with a ``grid`` dimension reduced to its value at the
+        finest grid run (NaN where the case never ran), plus ``grid_used``
+        (elements per side of that grid, NaN where none).
+    """
+    if GRID_DIM not in sweep.dims:
+        return sweep
+    sweep = sweep.sortby(GRID_DIM)
+    rank = xr.DataArray(np.arange(sweep.sizes[GRID_DIM]), dims=GRID_DIM)
+    done = np.isfinite(sweep[ran])
+    finest = rank == rank.where(done).max(GRID_DIM)  # one True per case that ran
+    out = sweep.copy()
+    for name, var in sweep.data_vars.items():
+        if GRID_DIM in var.dims:
+            # Exactly one unmasked value survives, so the sum is that value.
+            out[name] = var.where(finest).sum(GRID_DIM, min_count=1).assign_attrs(var.attrs)
+    out["grid_used"] = (
+        sweep[GRID_DIM].astype(np.float64).where(finest).sum(GRID_DIM, min_count=1)
+        .assign_attrs(units="1", long_name="elements per side n of the finest grid run")
+    )
+    return out.drop_vars(GRID_DIM)

@@ -475,6 +475,22 @@ def extrapolate_sweep(
     return ds
 
 
+def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
+    """Write `extrapolate_sweep`'s dataset to netCDF4 atomically (CF: no fill on coordinates)."""
+    from brushcore.io import publish
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        conv.to_netcdf(tmp, engine="netcdf4",
+                       encoding={name: {"_FillValue": None} for name in conv.coords})
+        publish(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 # ---------------------------------------------------------------------------
 # Tables
 # ---------------------------------------------------------------------------

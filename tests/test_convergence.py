@@ -229,3 +229,101 @@ def test_sweep_uses_recorded_radius_and_needs_grid():
     assert float(conv["pillar_radius_elements_finest"].max()) == 7.0
     with pytest.raises(ValueError, match="no 'grid' dimension"):
         extrapolate_sweep(sweep.isel(grid=0))
+
+
+# ---------------------------------------------------------------------------
+# Grid as a sweep dimension: real (tiny) curve files through build_sweep
+# ---------------------------------------------------------------------------
+
+GRIDS = (32, 48, 64)
+
+
+@pytest.fixture(scope="module")
+def refinement_curves(tmp_path_factory: pytest.TempPathFactory) -> list:
+    """2 x 2 regular brushes, rigid and soft, on 32, 48, 64; soft misses 48 (not run)."""
+    from brushcore import BrushParams, simulate
+    from brushcore.io import write_curve
+
+    folder = tmp_path_factory.mktemp("refinement")
+    paths = []
+    for kbar in (math.inf, 1e-3):
+        for grid in GRIDS:
+            if kbar == 1e-3 and grid == 48:
+                continue  # a missing combination
+            curve = simulate(BrushParams("regular", 4, kbar, grid))
+            paths.append(write_curve(curve, folder / f"k{kbar}_g{grid}.nc"))
+    return paths
+
+
+def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, tmp_path):
+    from brushcore.aggregate import GRID_DIM, build_sweep, finest_grid, write_sweep
+
+    sweep = build_sweep(refinement_curves)
+    assert sweep["adhesive_force_normalized"].dims == (
+        "layout", "n_pillars", "kbar", "seed", GRID_DIM)
+    assert sweep["force"].dims[-2:] == (GRID_DIM, "step")
+    assert sweep[GRID_DIM].values.tolist() == list(GRIDS)
+    assert sweep.attrs["grids"].tolist() == list(GRIDS)
+    soft = sweep.sel(layout="regular", n_pillars=4, kbar=1e-3, seed=0)
+    rigid = sweep.sel(layout="regular", n_pillars=4, kbar=np.inf, seed=0)
+    assert np.isnan(float(soft["adhesive_force_normalized"].sel(grid=48)))
+    assert np.isnan(soft["force"].sel(grid=48).values).all()
+    assert np.isfinite(rigid["adhesive_force_normalized"].values).all()
+    radius = rigid["pillar_radius_elements"].values
+    assert radius == pytest.approx(np.array(GRIDS) * math.sqrt(0.12 / (4 * math.pi)))
+    # Snapshot maps of different grids cannot share (y, x): only the finest is kept.
+    if "contact_snapshot" in sweep:
+        assert set(sweep["case_grid"].values.tolist()) == {64}
+        assert sweep.sizes["x"] == 64
+
+    # One value per case for the figures and the summary: the finest grid run.
+    one = finest_grid(sweep)
+    assert GRID_DIM not in one.dims
+    assert float(one["grid_used"].sel(kbar=1e-3, layout="regular", n_pillars=4, seed=0)) == 64
+    assert float(one["adhesive_force_normalized"].sel(
+        kbar=1e-3, layout="regular", n_pillars=4, seed=0)) == \
+        float(soft["adhesive_force_normalized"].sel(grid=64))
+
+    path = tmp_path / "sweep.nc"
+    write_sweep(sweep, path)
+    with xr.open_dataset(path) as back:
+        conv = extrapolate_sweep(back)
+    q = "adhesive_force_normalized"
+    assert int(conv[f"{q}_n_grids"].sel(kbar=1e-3).squeeze()) == 2
+    assert int(conv[f"{q}_too_few_grids"].sel(kbar=1e-3).squeeze()) == 1
+    assert int(conv[f"{q}_n_grids"].sel(kbar=np.inf).squeeze()) == 3
+    assert float(conv["pillar_radius_elements_finest"].sel(kbar=1e-3).squeeze()) == \
+        pytest.approx(radius[-1])
+
+
+def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
+    from brushcore import figures
+    from brushcore.aggregate import build_sweep
+    from brushcore.summary import headline_rows, value_at
+
+    sweep = build_sweep(refinement_curves)
+    assert value_at(sweep, "adhesive_force_normalized", "regular", 4, math.inf) == float(
+        sweep["adhesive_force_normalized"].sel(grid=64, kbar=np.inf).squeeze())
+    rows = headline_rows(sweep, fig5_n_pillars=4, fig5_kbar=math.inf)
+    radius_rows = [r for r in rows if r.quantity.startswith("pillar radius")]
+    assert radius_rows and radius_rows[0].value == f"{64 * math.sqrt(0.12 / (4 * math.pi)):.3g}"
+    assert "UNDER-RESOLVED" not in radius_rows[0].note and "grid 64" in radius_rows[0].note
+    for draw in (figures.fig6, figures.fig7, figures.fig8):
+        draw(sweep)
+    figures.fig5(sweep, n_pillars=4, kbar=(1e-3,))
+    figures.save(figures.convergence(extrapolate_sweep(sweep)), tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 0
+
+
+def test_summary_marks_under_resolved():
+    from brushcore.summary import _resolution_row
+
+    dims = ("layout", "n_pillars", "kbar", "seed")
+    coords = {"layout": ["regular"], "n_pillars": [2304], "kbar": [1.0], "seed": [0]}
+    sweep = xr.Dataset({
+        "adhesive_force_normalized": (dims, np.full((1, 1, 1, 1), 1.9)),
+        "pillar_radius_elements": (dims, np.full((1, 1, 1, 1), 2.08)),
+        "grid_used": (dims, np.full((1, 1, 1, 1), 512.0)),
+    }, coords=coords)
+    row = _resolution_row(sweep, "regular", 2304)
+    assert row.value == "2.08" and "UNDER-RESOLVED" in row.note and "grid 512" in row.note

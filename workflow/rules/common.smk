@@ -47,6 +47,10 @@ def check_cases(config):
     Random layouts are packed in their jobs (seconds each); a packing failure
     fails that job.  The geometry does not depend on kbar: checked once.
     """
+    named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
+    twice = sorted({n for n in named if named.count(n) > 1})
+    if twice:
+        raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
     seen = set()
     for layout, n, kbar, seed, grid, phi in sweep_cases(config):
         if (layout, n, seed, grid, phi) in seen:
@@ -78,7 +82,7 @@ def sweep_cases(config):
     Regular layouts ignore the seed, so they run with seed 0 only; the Fig. 5
     brush adds its own kbar values to the regular sweep.
     """
-    grid, phi = config["grid"], config["phi"]
+    phi = config["phi"]
     cases = set()
     for n in config["regular"]:
         for kbar in config["kbar"]:
@@ -91,7 +95,30 @@ def sweep_cases(config):
             for seed in config["seeds"]:
                 cases.add(("random", n, kbar_tag(kbar), seed))
     ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3]))
-    return [(*case, grid, phi) for case in ordered]
+    return [(*case, grid, phi) for case in ordered for grid in case_grids(config, case[1])]
+
+
+def grid_list(value):
+    """A config grid (an integer or a list of integers) as a sorted list."""
+    return sorted({int(value)} if isinstance(value, int) else {int(g) for g in value})
+
+
+def case_grids(config, n_pillars):
+    """The grids a brush of `n_pillars` runs on: `grid_by_n` if it names N, else `grid`."""
+    for entry in config.get("grid_by_n", []):
+        if int(entry["n_pillars"]) == int(n_pillars):
+            return grid_list(entry["grid"])
+    return grid_list(config["grid"])
+
+
+def wants_convergence(config):
+    """True when some brush runs on three or more grids: the refinement study is made."""
+    return any(len(case_grids(config, n)) >= 3 for n in sweep_brushes(config))
+
+
+def sweep_brushes(config):
+    """Every pillar number N of the sweep (both layouts and the Fig. 5 brush)."""
+    return {*config["regular"], *config["random"], config["fig5"]["n_pillars"]}
 
 
 #: One curve file per case; every parameter that changes the curve is in its name,
