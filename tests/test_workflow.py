@@ -188,6 +188,17 @@ def test_three_grids_plan_the_convergence_rule(repo_copy: Path, tmp_path: Path) 
         assert f"_grid{grid}_phi0.12.nc" in text
 
 
+def test_convergence_config_plans_the_study(repo_copy: Path) -> None:
+    config = yaml.safe_load((repo_copy / "config/convergence.yaml").read_text())
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/convergence.yaml")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    # 3 brushes x 3 kbar x 3 grids, and the 48 x 48 brush on its own 3 grids
+    assert planned_simulations(text) == len(config["regular"]) * len(config["kbar"]) * 3, text
+    assert re.search(r"^convergence\s+1\s*$", text, flags=re.MULTILINE), text
+    assert "_grid2048_" in text and "N64_kbar1e-06_seed0_grid2048" not in text
+
+
 def test_lint(repo_copy: Path) -> None:
     """No lint but the conda/container one: software is pip-installed (README)."""
     proc = snakemake(repo_copy, "--lint")
