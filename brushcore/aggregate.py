@@ -7,7 +7,8 @@ NaN where a combination was not run, with the force-displacement curves
 NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
 when a sweep has one grid, so that mesh-refinement studies
 (`brushcore.convergence`) and single-grid sweeps share one layout;
-`finest_grid` reduces it to one value per case for the figures and tables.  Contact snapshots are large, so only a chosen subset of cases keeps
+`finest_grid` reduces it to one value per case for the figures and tables.
+Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
 ``xarray.open_dataset``; `encoding` gives the compression to write it with.
 """

@@ -362,20 +362,6 @@ def _finest_index(values: np.ndarray) -> int:
     return int(idx[-1]) if idx.size else -1
 
 
-def radius_elements(n: np.ndarray | float, n_pillars: np.ndarray | float,
-                    phi: np.ndarray | float) -> np.ndarray:
-    """Nominal pillar radius in elements, a_p / h = n sqrt(phi / (pi N)).
-
-    Parameters
-    ----------
-    n : elements per side of the square L x L.
-    n_pillars : number of pillars N.
-    phi : filling factor A / L^2 [-].
-    """
-    return np.asarray(n, dtype=float) * np.sqrt(np.asarray(phi, dtype=float)
-                                                / (np.pi * np.asarray(n_pillars, dtype=float)))
-
-
 def extrapolate_sweep(
     sweep: xr.Dataset,
     quantities: Sequence[str] = QUANTITIES,
@@ -389,7 +375,7 @@ def extrapolate_sweep(
         per side n) beside the case dimensions (layout, n_pillars, kbar, seed,
         and any other); NaN where a combination was not run.  If it holds
         ``pillar_radius_elements`` (same dims) that is used, else the nominal
-        radius from `radius_elements` with the ``phi`` coordinate or attribute.
+        radius n sqrt(phi / (pi N)) with the ``phi`` coordinate or attribute.
     quantities : variables to extrapolate.
     options : `ConvergenceOptions`; defaults when None.
 
@@ -439,7 +425,7 @@ def extrapolate_sweep(
                 attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
             out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
         out[q] = raw.copy()
-    # Finest grid run per case (any quantity finite), and its resolution.
+    # Finest grid run per case (finite first quantity), and its resolution.
     anyq = sweep[quantities[0]]
     finest_i = xr.apply_ufunc(_finest_index, anyq, input_core_dims=[[GRID_DIM]],
                               vectorize=True, output_dtypes=[np.int64])
@@ -520,7 +506,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             raw = one[q].values
             if not np.any(np.isfinite(raw)):
                 continue
-            row = {d: _plain(one[d].values) for d in case_dims}
+            row = {d: one[d].values.item() for d in case_dims}
             row["quantity"] = _SHORT.get(q, q)
             for g, v in zip(grids, raw):
                 row[f"n={g}"] = float(v)
@@ -534,11 +520,6 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             row["flags"] = ",".join(flags)
             rows.append(row)
     return pd.DataFrame(rows)
-
-
-def _plain(value: object) -> object:
-    v = np.asarray(value).item()
-    return v
 
 
 def _fmt(value: object) -> str:
