@@ -130,7 +130,9 @@ class Row:
 
 
 def _fmt(value: float, digits: int = 3) -> str:
-    return NOT_AVAILABLE if value is None or not math.isfinite(value) else f"{value:.{digits}g}"
+    if value is None or math.isnan(value):
+        return NOT_AVAILABLE
+    return f"{value:.{digits}g}"  # inf stays "inf": kbar = inf is a rigid run, not a gap
 
 
 def _brushes(sweep: xr.Dataset) -> list[tuple[str, int]]:
