@@ -41,8 +41,10 @@ Method
   ``poor_fit`` (order outside ``order_range``, no positive order (the
   differences grow under refinement), or an rms residual above
   ``max_relative_residual`` of the range of f).
-  Where a flag makes (1) meaningless, f0 and the error are NaN (the order
-  too when none was observed); the raw values stay with the caller (and in
+  Where a flag makes (1) meaningless, f0 and the error are NaN; the order
+  that was observed is kept (negative when the differences grow under
+  refinement), NaN when none was (oscillation, or no root with uneven
+  ratios); the raw values stay with the caller (and in
   `extrapolate_sweep`'s output).
 
 All functions are pure.  h is any length proportional to the element size;
@@ -306,8 +308,9 @@ def extrapolate(
 
     f0, coef, p, resid = _extrapolate_sorted(h, f, opts)
     if not np.isfinite(p) or p <= 0:
-        # Differences grow under refinement: no limit exists.
-        return result(resid=resid, non_monotone=not monotone, poor_fit=True)
+        # Differences grow under refinement: no limit exists.  A negative
+        # observed order (constant ratio) is still reported: it says how fast.
+        return result(order=p, resid=resid, non_monotone=not monotone, poor_fit=True)
     lo, hi = opts.order_range
     scale = float(f.max() - f.min())
     poor = not (lo < p <= hi) or resid > opts.max_relative_residual * scale
