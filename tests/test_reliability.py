@@ -454,7 +454,8 @@ def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
     text = output(proc)
     assert proc.returncode != 0, f"the sweep succeeded with an unfit layout:\n{text[-4000:]}"
     assert "Error in rule simulate" in text and "N40_kbar1.0_seed0" in text, text[-4000:]
-    log = (work / "logs/simulate/random/N40_kbar1.0_seed0.log").read_text()
+    # the log is named like the curve file, grid and phi included (issue 16)
+    log = (work / "logs/simulate/random/N40_kbar1.0_seed0_grid64_phi0.5.log").read_text()
     assert "n_pillars=40" in log and "ParameterError" in log, log
     assert not (work / "results/curves/random").exists() or not list(
         (work / "results/curves/random").iterdir()), "the failed job left files"
