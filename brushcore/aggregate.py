@@ -50,9 +50,13 @@ ATTRIBUTE_SCALARS = {
     "cg_iterations": ("1", "conjugate-gradient iterations"),
     "wall_time_s": ("s", "wall time of the simulation"),
     "phi_actual": ("1", "filling factor A / L^2 realised on the grid"),
-    "real_contact_area": ("1", "real contact area A (units of h^2)"),
-    "pillar_radius_elements": ("1", "pillar radius a_p / h in elements"),
+    "real_contact_area": ("m2", "real contact area A"),
+    "pillar_radius_elements": ("1", "pillar radius a_p / h (elements a radius spans)"),
 }
+#: Curve-file attributes every curve of a sweep must share (the physics) ...
+SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols")
+#: ... and those that may differ (numerics): kept as attributes, distinct values joined by "; ".
+SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "allow_coarse")
 #: Per-step curves, NaN-padded to the longest curve of the sweep.
 CURVE_VARIABLES = (
     "displacement",
@@ -246,6 +250,16 @@ def build_sweep(
     # The stacked snapshot cases are labels, not data: make them coordinates.
     sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
     sweep.attrs = _provenance(curves, phi=phi)
+    for name in SHARED_ATTRIBUTES:
+        value = _common_attr(curves, name)
+        if value is not None:
+            sweep.attrs[name] = value
+    for name in SOLVER_ATTRIBUTES:
+        values = {str(c.attrs[name]): c.attrs[name] for _, c in curves.values()
+                  if name in c.attrs}
+        if values:
+            sweep.attrs[name] = (next(iter(values.values())) if len(values) == 1
+                                 else "; ".join(sorted(values)))
     return sweep
 
 
@@ -312,12 +326,19 @@ def _snapshots(
             snap, dims=(*dims, "y", "x"), attrs=dict(first["contact_snapshot"].attrs)
         ),
         "snapshot_step": xr.DataArray(step, dims=dims, attrs=dict(first["snapshot_step"].attrs)),
-        "snapshot_label": xr.DataArray(label.astype(str), dims=dims),
-        "case_layout": xr.DataArray(np.array([k.layout for k in keys]), dims="case"),
-        "case_n_pillars": xr.DataArray(np.array([k.n_pillars for k in keys]), dims="case"),
-        "case_kbar": xr.DataArray(np.array([k.kbar for k in keys]), dims="case"),
-        "case_seed": xr.DataArray(np.array([k.seed for k in keys]), dims="case"),
-        "case_grid": xr.DataArray(np.array([k.grid for k in keys]), dims="case"),
+        "snapshot_label": xr.DataArray(label.astype(str), dims=dims,
+                                       attrs={"long_name": "stage of the pull-off"}),
+        "case_layout": xr.DataArray(np.array([k.layout for k in keys]), dims="case",
+                                    attrs={"long_name": "layout of the snapshot case"}),
+        "case_n_pillars": xr.DataArray(np.array([k.n_pillars for k in keys]), dims="case",
+                                       attrs={"long_name": "N of the snapshot case",
+                                              "units": "1"}),
+        "case_kbar": xr.DataArray(np.array([k.kbar for k in keys]), dims="case",
+                                  attrs={"long_name": "kbar of the snapshot case", "units": "1"}),
+        "case_seed": xr.DataArray(np.array([k.seed for k in keys]), dims="case",
+                                  attrs={"long_name": "seed of the snapshot case", "units": "1"}),
+        "case_grid": xr.DataArray(np.array([k.grid for k in keys]), dims="case",
+                                  attrs={"long_name": "grid n of the snapshot case", "units": "1"}),
     }
     if "detachment_step" in first:
         out["detachment_step"] = xr.DataArray(
@@ -345,7 +366,7 @@ def _provenance(
         "git_commit": provenance.git_commit(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
-        "grids": np.array(sorted({k.grid for k in curves}), dtype=np.int64),
+        "grid": np.array(sorted({k.grid for k in curves}), dtype=np.int64),  # every grid run
         "phi": float(phi) if phi is not None else math.nan,
         "source_files": "\n".join(files),
         "source_sha256": "\n".join(hashes),
@@ -358,7 +379,7 @@ def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, objec
 
     One chunk per curve keeps NaN padding and unrun cases nearly free on disk.
     """
-    enc: dict[str, dict[str, object]] = {}
+    enc: dict[str, dict[str, object]] = {name: {"_FillValue": None} for name in sweep.coords}
     for name, var in sweep.data_vars.items():
         whole = {"step", "y", "x"} & set(var.dims)
         if var.dtype.kind not in "fi" or not whole:

@@ -1,8 +1,9 @@
-"""Shared helpers for the physics tests."""
+"""Shared helpers for the physics tests, and the opt-in for tests that change the system."""
 
 from __future__ import annotations
 
 import math
+import os
 
 import pytest
 
@@ -19,3 +20,18 @@ def punch_params(radius: float, kbar: float = math.inf, **kw) -> BrushParams:
 @pytest.fixture
 def punch():
     return punch_params
+
+
+#: The Slurm test installs Debian packages (slurm-wlm, munge) and starts daemons:
+#: it runs only when asked for (CI asks, see .ci/run).
+SLURM_OPT_IN = "BRUSHCORE_SLURM_TESTS"
+
+
+def pytest_collection_modifyitems(config, items):
+    if os.environ.get(SLURM_OPT_IN) == "1":
+        return
+    skip = pytest.mark.skip(reason=f"opt-in: set {SLURM_OPT_IN}=1 to install slurm-wlm and "
+                                   "munge with apt and run the sweep through a one-node Slurm")
+    for item in items:
+        if "slurm" in item.keywords:
+            item.add_marker(skip)

@@ -265,7 +265,7 @@ def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, 
         "layout", "n_pillars", "kbar", "seed", GRID_DIM)
     assert sweep["force"].dims[-2:] == (GRID_DIM, "step")
     assert sweep[GRID_DIM].values.tolist() == list(GRIDS)
-    assert sweep.attrs["grids"].tolist() == list(GRIDS)
+    assert np.atleast_1d(sweep.attrs["grid"]).tolist() == list(GRIDS)
     soft = sweep.sel(layout="regular", n_pillars=4, kbar=1e-3, seed=0)
     rigid = sweep.sel(layout="regular", n_pillars=4, kbar=np.inf, seed=0)
     assert np.isnan(float(soft["adhesive_force_normalized"].sel(grid=48)))

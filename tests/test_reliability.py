@@ -454,7 +454,6 @@ def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
     text = output(proc)
     assert proc.returncode != 0, f"the sweep succeeded with an unfit layout:\n{text[-4000:]}"
     assert "Error in rule simulate" in text and "N40_kbar1.0_seed0" in text, text[-4000:]
-    # the log is named like the curve file, grid and phi included (issue 16)
     log = (work / "logs/simulate/random/N40_kbar1.0_seed0_grid64_phi0.5.log").read_text()
     assert "n_pillars=40" in log and "ParameterError" in log, log
     assert not (work / "results/curves/random").exists() or not list(
@@ -475,3 +474,18 @@ def test_failed_sweep_write_keeps_the_old_sweep(cli_curves: list[Path], tmp_path
     assert target.read_bytes() == before, "a failed write changed the existing sweep"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sweep.nc"], (
         f"a failed sweep write left files: {sorted(p.name for p in tmp_path.iterdir())}")
+
+
+def test_interrupted_job_logs_one_line_and_exits_130(tmp_path: Path, capfd) -> None:
+    """Ctrl-C inside a workflow script: no traceback, one line, status 130."""
+    from brushcore.joblog import EXIT_INTERRUPTED, logged
+
+    log = tmp_path / "job.log"
+    with pytest.raises(SystemExit) as stop:
+        with logged(log):
+            print("working")
+            raise KeyboardInterrupt
+    assert stop.value.code == EXIT_INTERRUPTED == 130
+    assert log.read_text() == "working\ninterrupted; nothing written\n"
+    err = capfd.readouterr().err
+    assert err.strip() == f"{log}: interrupted; nothing written" and "Traceback" not in err

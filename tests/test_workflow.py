@@ -209,23 +209,55 @@ def test_lint(repo_copy: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("bad", "key"),
+    ("bad", "message"),
     [
-        ({"kbar": [-1.0e-3, 1.0]}, "kbar"),
-        ({"colour": "red"}, "colour"),
-        ({"regular": [4, 10]}, "regular"),
+        ({"kbar": [-1.0e-3, 1.0]}, "config key 'kbar.0': -0.001 is less than or equal to"),
+        ({"colour": "red"}, "config key 'colour' is unknown"),
+        ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),
+        ({"solver": {"rtoll": 1e-5}}, "config key 'solver.rtoll' is unknown; did you mean"),
+        ({"regular": [4, 10]}, "config: regular = 10 is invalid: allowed a perfect square"),
+        # checks that need the layout run at plan time too
+        ({"grid": 32, "regular": [256]}, "config: grid = 32 is invalid .*allowed grid >= \\d+ "
+                                         r"\(or allow_coarse: true"),
+        ({"grid": 128, "regular": [256]}, "config: grid = 128 is invalid"),
+        ({"regular": [16], "random": [], "phi": 0.05},
+         "phi is realised as 0.04688 instead of 0.05"),
     ],
 )
-def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: dict, key: str
-                                         ) -> None:
+def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: dict,
+                                         message: str) -> None:
+    """One short message naming the key, from `snakemake -n` already."""
     config = tmp_path / "bad.yaml"
     config.write_text(yaml.safe_dump(bad))
     proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
                      str(config))
     text = output(proc)
     assert proc.returncode != 0, text
-    assert key in text, f"error does not name {key!r}:\n{text}"
+    assert re.search(message, text), f"error does not say {message!r}:\n{text}"
+    assert len(text.strip().splitlines()) <= 6, text  # no schema dump, no long traceback
     assert "Job stats" not in text and "rule simulate" not in text, text
+
+
+def test_allow_coarse_key_runs_what_is_refused(repo_copy: Path, tmp_path: Path) -> None:
+    config = tmp_path / "coarse.yaml"
+    config.write_text(yaml.safe_dump({"grid": 128, "regular": [256], "allow_coarse": True}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config))
+    assert proc.returncode == 0, output(proc)
+
+
+def test_curve_names_carry_grid_and_phi(repo_copy: Path, tmp_path: Path) -> None:
+    """Another grid or phi plans new files instead of overwriting the earlier curves."""
+    names = {}
+    for grid, phi in ((64, 0.12), (96, 0.12), (64, 0.2)):
+        config = tmp_path / f"g{grid}_{phi}.yaml"
+        config.write_text(yaml.safe_dump({"grid": grid, "phi": phi}))
+        proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                         str(config), "--forceall")
+        assert proc.returncode == 0, output(proc)
+        names[grid, phi] = set(re.findall(r"results/curves/\S+\.nc", output(proc)))
+        assert all(f"_grid{grid}_phi{phi}.nc" in n for n in names[grid, phi])
+    assert not names[64, 0.12] & names[96, 0.12] and not names[64, 0.12] & names[64, 0.2]
 
 
 def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> None:

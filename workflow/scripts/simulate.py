@@ -33,7 +33,9 @@ def main(smk) -> None:
     print(
         f"F_ad = {float(curve['adhesive_force_normalized']):.6g}, "
         f"W = {float(curve['work_of_separation_normalized']):.6g} (normalised), "
-        f"{curve.attrs.get('events')} events, {curve.attrs.get('wall_time_s', float('nan')):.3g} s"
+        f"{curve.attrs.get('events')} events, {curve.attrs.get('wall_time_s', float('nan')):.3g} s; "
+        f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements, "
+        f"phi realised {curve.attrs['phi_actual']:.4g}"
     )
 
 

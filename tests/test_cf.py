@@ -1,0 +1,70 @@
+"""Curve files and sweep.nc pass the IOOS compliance checker's CF-1.10 suite with no error."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from brushcore import BrushParams, simulate
+from brushcore.aggregate import build_sweep, write_sweep
+from brushcore.io import write_curve
+
+pytest.importorskip("compliance_checker")
+
+
+def cf_errors(path: Path, tmp_path: Path) -> list[str]:
+    """Messages of every failed CF-1.10 check of the checker's highest priority."""
+    from compliance_checker.runner import CheckSuite, ComplianceChecker
+
+    CheckSuite.load_all_available_checkers()
+    report = tmp_path / f"{path.stem}.json"
+    ComplianceChecker.run_checker(str(path), ["cf:1.10"], verbose=0, criteria="normal",
+                                  output_filename=str(report), output_format="json")
+    results = json.loads(report.read_text())["cf:1.10"]
+    errors = []
+    for item in results.get("high_priorities", []):
+        if item["value"][0] < item["value"][1]:
+            errors += [f"{item['name']}: {m}" for m in item["msgs"]]
+    return errors
+
+
+@pytest.fixture(scope="module")
+def curve_files(tmp_path_factory) -> list[Path]:
+    root = tmp_path_factory.mktemp("cf")
+    files = []
+    for layout, n, kbar in (("regular", 4, 0.01), ("regular", 16, float("inf")),
+                            ("random", 4, 1.0)):
+        path = root / f"{layout}_{n}_{kbar}.nc"
+        write_curve(simulate(BrushParams(layout, n, kbar, 64)), path)
+        files.append(path)
+    return files
+
+
+def test_curve_file_is_cf_clean(curve_files, tmp_path):
+    assert cf_errors(curve_files[0], tmp_path) == []
+
+
+def test_sweep_is_cf_clean(curve_files, tmp_path):
+    sweep_nc = tmp_path / "sweep.nc"
+    sweep = build_sweep(curve_files, keep_snapshots=[("regular", 4)])
+    assert "case_kbar" in sweep.coords  # the snapshot cases are in the file checked
+    write_sweep(sweep, sweep_nc)
+    assert cf_errors(sweep_nc, tmp_path) == []
+
+
+def test_sweep_keeps_every_parameter(curve_files):
+    sweep = build_sweep(curve_files)
+    for name in ("e_star", "dgamma", "h", "min_gap", "rtol", "cascade", "tie_rtol",
+                 "units_convention", "symbols", "grid", "phi"):
+        assert name in sweep.attrs, name
+    assert "a0 = sqrt(A / pi)" in sweep.attrs["symbols"]
+
+
+def test_convergence_is_cf_clean(curve_files, tmp_path):
+    from brushcore.convergence import extrapolate_sweep, write_dataset
+
+    path = tmp_path / "convergence.nc"
+    write_dataset(extrapolate_sweep(build_sweep(curve_files)), path)
+    assert cf_errors(path, tmp_path) == []
