@@ -18,16 +18,18 @@ from pathlib import Path
 
 from .cg import ConvergenceError
 from .joblog import EXIT_INTERRUPTED, INTERRUPTED
-from .params import LAYOUTS, BrushParams, ParameterError, SolverOptions
+from .params import LAYOUTS, MAX_ASPECT, BrushParams, ParameterError, SolverOptions
 from .provenance import version
 from .pulloff import SolverError
+from .shapes import SHAPES
 
 #: API parameter -> the flag that sets it, for error messages.
 FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "--phi",
          "seed": "--seed", "min_gap": "--min-gap", "e_star": "--e-star",
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
          "lookahead": "--lookahead", "cascade": "--cascade", "threads": "--threads",
-         "out": "--out", "allow_coarse": "--allow-coarse"}
+         "out": "--out", "allow_coarse": "--allow-coarse", "shape": "--shape",
+         "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
 
@@ -58,6 +60,14 @@ class _Parser(argparse.ArgumentParser):
         return super().parse_known_args(args, namespace)
 
 
+class _Given(argparse.Action):
+    """Stores the value and remembers that the flag was typed (not its default)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):  # noqa: D102
+        setattr(namespace, self.dest, values)
+        namespace.given = getattr(namespace, "given", set()) | {self.dest}
+
+
 class _DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
     """Shows defaults, except for required flags and store_true switches."""
 
@@ -80,11 +90,16 @@ def build_parser() -> argparse.ArgumentParser:
                          allow_abbrev=False,
                          formatter_class=_DefaultsShown)
     sim.add_argument("--layout", choices=LAYOUTS, required=True, help="pillar layout")
-    sim.add_argument("--pillars", type=int, required=True, help="number of pillars N")
+    sim.add_argument("--pillars", type=int, action=_Given,
+                     help="number of pillars N (required, except for --layout file: the "
+                          "file's)")
     sim.add_argument("--kbar", type=_kbar, required=True,
                      help="spring stiffness k/(E* L); 'inf' for rigid pillars")
-    sim.add_argument("--grid", type=int, required=True, help="elements per side n")
-    sim.add_argument("--phi", type=float, default=0.12, help="filling factor (0, 0.5]")
+    sim.add_argument("--grid", type=int, action=_Given,
+                     help="elements per side n (required, except for --layout file: the "
+                          "file's)")
+    sim.add_argument("--phi", type=float, default=0.12, action=_Given,
+                     help="filling factor (0, 0.5] (--layout file: the file's)")
     sim.add_argument("--seed", type=int, default=0, help="seed of the random layout")
     sim.add_argument("--min-gap", type=float, default=1.0,
                      help="minimum gap between random pillars [elements]")
@@ -94,6 +109,16 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--allow-coarse", action="store_true",
                      help="run even if the pillars are under 2 elements in radius or phi "
                           "is realised more than 5 %% off")
+    sim.add_argument("--shape", choices=SHAPES, default="disc",
+                     help="pillar cross-section (area phi L^2 / N for every shape)")
+    sim.add_argument("--aspect", type=float, default=1.0,
+                     help=f"major / minor axis of --shape ellipse, [1, {MAX_ASPECT:g}]")
+    sim.add_argument("--orientation", type=float, default=0.0,
+                     help="angle of the ellipse's major axis or a square's side from the "
+                          "x axis [degrees]")
+    sim.add_argument("--layout-file", type=Path,
+                     help="label map (.npy: -1 no pillar, 0..N-1 pillar) or image (.png: "
+                          "dark pillars on white) for --layout file")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
                      help="approximate: detach within this relative window (0 = exact)")
@@ -147,6 +172,33 @@ def _error(message: str, progress: _Progress | None = None) -> None:
     print(f"brushcore: error: {message}", file=sys.stderr)
 
 
+def _brush_params(args: argparse.Namespace) -> BrushParams:
+    """BrushParams from the flags; for --layout file N, grid and phi come from the file."""
+    given = getattr(args, "given", set())
+    common = dict(seed=args.seed, min_gap=args.min_gap, e_star=args.e_star,
+                  dgamma=args.dgamma, h=args.h, allow_coarse=args.allow_coarse,
+                  shape=args.shape, aspect=args.aspect, orientation=args.orientation)
+    if args.layout == "file":
+        from .layout_file import file_params
+
+        if args.layout_file is None:
+            raise _Missing("--layout-file is required for --layout file")
+        fixed = {"n_pillars": args.pillars, "grid": args.grid, "phi": args.phi}
+        fixed = {k: v for k, v in fixed.items() if {"n_pillars": "pillars"}.get(k, k) in given}
+        return file_params(args.layout_file, args.kbar, **common, **fixed)
+    for flag, value in (("--pillars", args.pillars), ("--grid", args.grid)):
+        if value is None:
+            raise _Missing(f"{flag} is required for --layout {args.layout}")
+    return BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
+                       grid=args.grid, phi=args.phi,
+                       layout_file="" if args.layout_file is None else str(args.layout_file),
+                       **common)
+
+
+class _Missing(Exception):
+    """A flag that the chosen layout needs was not given."""
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from .curve import simulate
     from .io import check_output_path, write_curve
@@ -155,10 +207,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
     progress = None if args.quiet else _Progress()
     try:
-        params = BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
-                             grid=args.grid, phi=args.phi, seed=args.seed,
-                             min_gap=args.min_gap, e_star=args.e_star, dgamma=args.dgamma,
-                             h=args.h, allow_coarse=args.allow_coarse)
+        params = _brush_params(args)
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade)
         if args.threads < 1:
             raise ParameterError("threads", args.threads, "an integer >= 1")
@@ -166,13 +215,16 @@ def _simulate(args: argparse.Namespace) -> int:
         labels = build_labels(params)  # layout and discretisation checked before any solve
         area = int((labels >= 0).sum())
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements,"
-              f" phi realised {area / labels.size:.4g} (requested {params.phi:g})",
-              file=sys.stderr)
+              f" phi realised {area / labels.size:.4g} (requested {params.phi:g}), "
+              f"{int(labels.max()) + 1} pillars", file=sys.stderr)
         pin_threads(args.threads)
         ds = simulate(params, options, progress=progress, labels=labels)
         write_curve(ds, args.out)
     except ParameterError as exc:
         _error(exc.in_terms_of(FLAGS, sep=" "), progress)
+        return 2
+    except _Missing as exc:
+        _error(str(exc), progress)
         return 2
     except (ConvergenceError, SolverError) as exc:
         _error(f"solver failed: {exc}", progress)

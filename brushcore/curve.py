@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import datetime as dt
+import hashlib
 import time
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 import xarray as xr
@@ -12,6 +14,7 @@ from threadpoolctl import threadpool_limits
 
 from . import theory
 from .convolution import cached_convolver
+from .lattices import hexagonal_fill, hexagonal_lattice
 from .layout import build_labels
 from .operator import BrushOperator
 from .params import BrushParams, SolverOptions
@@ -56,6 +59,23 @@ def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
 
     return np.array([0, halfway(0, i_max), i_max, halfway(i_max, i_last), i_last],
                     dtype=np.int32)
+
+
+def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float | int | str]:
+    """What the layout realised: pillar count, hexagonal rows x columns and fill, file digest.
+
+    ``shape``, ``aspect``, ``orientation`` and ``layout_file`` themselves are
+    parameters (see `BrushParams.as_attrs`); ``pillar_radius`` is the
+    equal-area radius for every shape.
+    """
+    attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1}
+    if params.layout == "hexagonal":
+        attrs["lattice_rows"], attrs["lattice_columns"] = hexagonal_lattice(params.n_pillars)
+        attrs["lattice_fill"] = hexagonal_fill(params.n_pillars)
+    if params.layout == "file":
+        attrs["layout_file_sha256"] = hashlib.sha256(
+            Path(params.layout_file).read_bytes()).hexdigest()
+    return attrs
 
 
 def run(params: BrushParams, options: SolverOptions = SolverOptions(),
@@ -104,6 +124,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     follow the paper (eqs. 20-24) with A the discretised real contact area.
     """
     t0 = time.perf_counter()
+    labels = build_labels(params) if labels is None else labels
     detach, curve, applications = run(params, options, progress, labels)
     wall = time.perf_counter() - t0
     h, es, dg = params.h, params.e_star, params.dgamma
@@ -174,6 +195,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "history": f"{dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} "
                    f"brushcore {version()} simulate",
         "sign_convention": "d > 0 pulls away from the half space; F > 0 is tensile",
+        **geometry_attrs(params, labels),
         "units_convention": UNITS_CONVENTION,
         "symbols": SYMBOLS,
     }

@@ -1,9 +1,16 @@
 """Pillar layouts as label maps on the n x n grid.
 
-An element belongs to pillar p when its centre lies inside p's disc.  The
-label map holds the pillar index per element and -1 elsewhere; everything
+An element belongs to pillar p when its centre lies inside p's
+cross-section (a disc, square or ellipse, see `shapes`).  The label map
+holds the pillar index per element and -1 elsewhere; everything
 downstream (springs, snapshots, counts) works from it, so any layout
 (or a per-pillar stiffness) plugs in without touching the solver.
+
+Layouts: "regular" (square lattice), "random" (random sequential
+addition), "hexagonal" (triangular lattice, see `hexagonal_centres`) and
+"file" (a label map or an image, see `layout_file`).  Pillars of one map
+never touch: no two different pillars share an element edge (4-neighbour
+adjacency); a shared corner is allowed.
 """
 
 from __future__ import annotations
@@ -12,7 +19,14 @@ import math
 
 import numpy as np
 
+from .lattices import hexagonal_lattice, hexagonal_pitch
+from .layout_file import read_label_map
 from .params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams, ParameterError
+from .shapes import PillarShape
+
+
+class LayoutError(ValueError):
+    """Generated pillars overlap or leave the square; `build_labels` names the parameters."""
 
 
 def regular_centres(n_pillars: int, side: float) -> np.ndarray:
@@ -91,6 +105,36 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
     return centres
 
 
+def hexagonal_centres(n_pillars: int, side: float) -> np.ndarray:
+    """Centres of a triangular lattice of N pillars in the L x L square, shape (N, 2) [length].
+
+    The N = r x c pillars (`lattices.hexagonal_lattice`) stand in r rows of
+    c, every other row shifted by half a pitch p, rows p sqrt(3)/2 apart, so that
+    each pillar's nearest neighbours are all p away.  The pitch is the
+    largest for which the lattice, with a margin of p/2 beyond the outer
+    centres (the regular lattice's rule: the wall gap is half the pillar
+    gap), fits the square; the lattice is centred, so the empty band the
+    factorisation leaves is split between opposite sides.  The pitch thus
+    follows from N and L alone; phi sets the pillar size.  Where r / c is
+    not 2 / sqrt(3) the lattice covers only a part of the square
+    (`lattices.hexagonal_fill`, 0.767 for N = 64), where the pillars stand
+    denser than N / L^2.
+    """
+    lattice = hexagonal_lattice(n_pillars)
+    if lattice is None:  # BrushParams refuses such N with a message
+        raise ValueError(f"{n_pillars} pillars do not fill a hexagonal lattice")
+    rows, cols = lattice
+    shift = 0.5 if rows > 1 else 0.0
+    dy = math.sqrt(3.0) / 2.0
+    pitch = hexagonal_pitch(rows, cols, side)
+    i, j = np.divmod(np.arange(n_pillars), cols)
+    y = i * dy * pitch
+    x = (j + shift * (i % 2)) * pitch
+    y += 0.5 * (side - y.max() - y.min())
+    x += 0.5 * (side - (cols - 1 + shift) * pitch)
+    return np.column_stack([y, x])
+
+
 def label_map(centres: np.ndarray, radius: float, n: int, h: float) -> np.ndarray:
     """Pillar index of each element (-1 outside all pillars), shape (n, n).
 
@@ -113,23 +157,146 @@ def label_map(centres: np.ndarray, radius: float, n: int, h: float) -> np.ndarra
     return labels
 
 
-def build_labels(params: BrushParams) -> np.ndarray:
-    """The label map of a parameter set, checked so that every pillar has elements.
+def shape_label_map(centres: np.ndarray, shape: PillarShape, area: float, n: int,
+                    h: float) -> np.ndarray:
+    """Label map of equal pillars of any shape, shape (n, n) (-1 outside all pillars).
+
+    Parameters
+    ----------
+    centres : pillar centres (y, x), shape (N, 2) [length]
+    shape : the cross-section of every pillar
+    area : cross-section A_p of one pillar [length^2]
+    n, h : elements per side and element size [length]
+
+    Raises
+    ------
+    LayoutError
+        If two pillars claim the same element, or a pillar reaches beyond
+        the L x L square (naming the pillars).
+    """
+    labels = np.full((n, n), -1, dtype=np.int32)
+    ey, ex = (e / h for e in shape.half_extents(area))
+    side = n * h
+    for p, (cy, cx) in enumerate(centres / h):
+        if cy - ey < 0 or cx - ex < 0 or cy + ey > n or cx + ex > n:
+            raise LayoutError(f"pillar {p} at ({cy * h:.4g}, {cx * h:.4g}) reaches beyond "
+                              f"the {side:.4g} x {side:.4g} square")
+        i0, i1 = max(0, int(math.floor(cy - ey)) - 1), min(n, int(math.ceil(cy + ey)) + 1)
+        j0, j1 = max(0, int(math.floor(cx - ex)) - 1), min(n, int(math.ceil(cx + ex)) + 1)
+        yy = (np.arange(i0, i1)[:, None] + 0.5 - cy) * h
+        xx = (np.arange(j0, j1)[None, :] + 0.5 - cx) * h
+        inside = shape.contains(yy, xx, area)
+        block = labels[i0:i1, j0:j1]
+        if np.any(block[inside] >= 0):
+            q = int(block[inside & (block >= 0)][0])
+            raise LayoutError(f"pillars {q} and {p} overlap on the grid")
+        block[inside] = p
+    return labels
+
+
+def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int, int, int]]:
+    """Pairs of different pillars sharing an element edge (4-neighbour adjacency).
+
+    Returns
+    -------
+    Up to ``limit`` tuples (p, q, row, column): pillars p < q touch at the
+    element (row, column) of p and its neighbour below or to the right.
+    """
+    found: list[tuple[int, int, int, int]] = []
+    for axis in (0, 1):
+        a = labels[:-1, :] if axis == 0 else labels[:, :-1]
+        b = labels[1:, :] if axis == 0 else labels[:, 1:]
+        rows, cols = np.nonzero((a >= 0) & (b >= 0) & (a != b))
+        for r, c in zip(rows[:limit], cols[:limit]):
+            p, q = sorted((int(a[r, c]), int(b[r, c])))
+            found.append((p, q, int(r), int(c)))
+    return sorted(found)[:limit]
+
+
+def check_not_touching(labels: np.ndarray, name: str, value: object) -> None:
+    """Refuse a label map whose pillars touch, naming pillars and elements.
 
     Raises
     ------
     ParameterError
-        If a pillar covers no element centre (grid too coarse) or a random
-        layout cannot be packed.
+        For parameter ``name`` (the layout's input) if any two pillars
+        share an element edge.
+    """
+    pairs = touching_pillars(labels)
+    if pairs:
+        where = "; ".join(f"pillars {p} and {q} at element (row {r}, column {c})"
+                          for p, q, r, c in pairs)
+        raise ParameterError(name, value, "a layout whose pillars are at least one element "
+                             "apart (no shared element edge)", f"{where}")
+
+
+def pillar_shape(params: BrushParams) -> PillarShape:
+    """The cross-section of the pillars of a generated layout."""
+    return PillarShape(params.shape, params.aspect, params.orientation)
+
+
+def generated_centres(params: BrushParams) -> np.ndarray:
+    """Pillar centres (y, x) of a regular, random or hexagonal layout, shape (N, 2) [length].
+
+    The random layout keeps the circumscribed discs of the pillars apart by
+    the gap (exact for discs, conservative for squares and ellipses, which
+    keep the orientation of ``params``).
     """
     if params.layout == "regular":
-        centres = regular_centres(params.n_pillars, params.side)
+        return regular_centres(params.n_pillars, params.side)
+    if params.layout == "hexagonal":
+        return hexagonal_centres(params.n_pillars, params.side)
+    radius = (params.pillar_radius if params.shape == "disc"
+              else pillar_shape(params).circumradius(params.pillar_area))
+    return random_centres(params.n_pillars, params.side, radius,
+                          params.min_gap * params.h, params.seed)
+
+
+def build_labels(params: BrushParams) -> np.ndarray:
+    """The label map of a parameter set, checked so that every pillar has elements.
+
+    Regular and random layouts of discs are built exactly as before
+    shapes existed (same label maps, bit for bit).  Other shapes, the
+    hexagonal lattice and file layouts are also checked for touching
+    pillars (a shared element edge).
+
+    Raises
+    ------
+    ParameterError
+        If a pillar covers no element centre (grid too coarse), a random
+        layout cannot be packed, pillars overlap, touch or leave the
+        square, or a layout file does not fit (see `layout_file`).
+    """
+    if params.layout == "file":
+        labels = read_label_map(params.layout_file, params.grid)
+        _check_file_matches(params, labels)
+        check_discretisation(params, labels)
+        return labels
+    centres = generated_centres(params)
+    if params.shape == "disc" and params.layout in ("regular", "random"):
+        labels = label_map(centres, params.pillar_radius, params.grid, params.h)
     else:
-        centres = random_centres(params.n_pillars, params.side, params.pillar_radius,
-                                 params.min_gap * params.h, params.seed)
-    labels = label_map(centres, params.pillar_radius, params.grid, params.h)
+        try:
+            labels = shape_label_map(centres, pillar_shape(params), params.pillar_area,
+                                     params.grid, params.h)
+        except LayoutError as exc:
+            raise ParameterError("phi", params.phi, "a smaller phi, fewer pillars, a more "
+                                 "compact shape or a finer grid", str(exc)) from None
+        check_not_touching(labels, "phi", params.phi)
     check_discretisation(params, labels)
     return labels
+
+
+def _check_file_matches(params: BrushParams, labels: np.ndarray) -> None:
+    """The file's pillar count and filling factor must be the parameters' own."""
+    n_file = int(labels.max()) + 1
+    if n_file != params.n_pillars:
+        raise ParameterError("n_pillars", params.n_pillars,
+                             f"{n_file}, the count of {params.layout_file}")
+    phi_file = float(np.count_nonzero(labels >= 0)) / labels.size
+    if abs(phi_file / params.phi - 1.0) > 1e-9:
+        raise ParameterError("phi", params.phi,
+                             f"{phi_file!r}, the filling factor of {params.layout_file}")
 
 
 def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:

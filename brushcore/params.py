@@ -15,9 +15,14 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, nearest_hexagonal_counts
+from .shapes import SHAPES
 from .theory import stiffness_from_kbar
 
-LAYOUTS = ("regular", "random")
+LAYOUTS = ("regular", "random", "hexagonal", "file")
+#: Largest ellipse aspect ratio: beyond it the minor axis of a pillar that
+#: passes the radius rule (on its equal-area radius) spans under an element.
+MAX_ASPECT = 10.0
 
 
 class ParameterError(ValueError):
@@ -105,9 +110,13 @@ class BrushParams:
 
     Parameters
     ----------
-    layout : "regular" (sqrt(N) x sqrt(N) lattice) or "random" (random
-        sequential addition of equal discs).
-    n_pillars : number of pillars N >= 1 (a perfect square for "regular").
+    layout : "regular" (sqrt(N) x sqrt(N) lattice), "random" (random
+        sequential addition of equal pillars), "hexagonal" (triangular
+        lattice of rows x columns = N, see `layout.hexagonal_centres`) or
+        "file" (the label map or image in ``layout_file``).
+    n_pillars : number of pillars N >= 1 (a perfect square for "regular",
+        rows x columns near the hexagonal aspect for "hexagonal", the
+        file's count for "file").
     kbar : normalised spring stiffness k / (E* L) in (0, inf]; inf = rigid.
     grid : elements per side n of the square L x L holding the pillars.
     phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
@@ -120,6 +129,16 @@ class BrushParams:
         pillar radius under MIN_RADIUS_ELEMENTS elements, or a realised
         filling factor more than MAX_PHI_ERROR off the requested one);
         such runs are refused by default.
+    shape : pillar cross-section of generated layouts, "disc" (default),
+        "square" or "ellipse"; each pillar has the area phi L^2 / N, so
+        ``pillar_radius`` is the equal-area radius for every shape.
+    aspect : semi-major / semi-minor axis of an ellipse in [1, MAX_ASPECT]
+        (1 for other shapes).
+    orientation : angle from the x axis to the major axis of an ellipse or
+        a side of a square [degrees] (0 for discs).
+    layout_file : path of the ``.npy`` label map or ``.png`` image of a
+        "file" layout ("" otherwise).  Its n_pillars, grid and phi must be
+        the file's; `layout_file.file_params` fills them in.
 
     Integer and real parameters accept NumPy scalars and are stored as
     Python ``int`` / ``float``.  Dimensional parameters are in one
@@ -139,10 +158,15 @@ class BrushParams:
     dgamma: float = 1.0
     h: float = 1.0
     allow_coarse: bool = False
+    shape: str = "disc"
+    aspect: float = 1.0
+    orientation: float = 0.0
+    layout_file: str = ""
 
     def __post_init__(self) -> None:
         _normalise(self, ("n_pillars", "grid", "seed"),
-                   ("kbar", "phi", "min_gap", "e_star", "dgamma", "h"))
+                   ("kbar", "phi", "min_gap", "e_star", "dgamma", "h", "aspect",
+                    "orientation"))
         _require(self.layout in LAYOUTS, "layout", self.layout, f"one of {LAYOUTS}")
         _require(_is_integer(self.n_pillars) and self.n_pillars >= 1,
                  "n_pillars", self.n_pillars, "an integer N >= 1")
@@ -150,6 +174,14 @@ class BrushParams:
             side = math.isqrt(self.n_pillars)
             _require(side * side == self.n_pillars, "n_pillars", self.n_pillars,
                      "a perfect square (1, 4, 9, 16, ...) for regular brushes")
+        if self.layout == "hexagonal" and hexagonal_lattice(self.n_pillars) is None:
+            lower, upper = nearest_hexagonal_counts(self.n_pillars)
+            _require(False, "n_pillars", self.n_pillars,
+                     "a count that fills a hexagonal lattice, e.g. "
+                     + (f"{lower} or {upper}" if lower else f"{upper}"),
+                     f"a hexagonal lattice needs rows x columns = N with rows/columns within "
+                     f"a factor {HEX_ASPECT_TOLERANCE:g} of 2/sqrt(3)")
+        self._check_shape()
         _require(_is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar > 0,
                  "kbar", self.kbar, "a number in (0, inf]; inf means rigid pillars")
         _require(_is_integer(self.grid) and 4 <= self.grid <= 8192, "grid", self.grid,
@@ -176,6 +208,30 @@ class BrushParams:
                  + ("that cover an element centre" if self.allow_coarse else
                     "needed for a meaningful detachment criterion"))
 
+    def _check_shape(self) -> None:
+        """Validate shape, aspect, orientation and layout_file (after the layout)."""
+        if not isinstance(self.layout_file, str) and hasattr(self.layout_file, "__fspath__"):
+            object.__setattr__(self, "layout_file", str(self.layout_file))
+        _require(isinstance(self.layout_file, str), "layout_file", self.layout_file,
+                 "a path (str or os.PathLike)")
+        if self.layout == "file":
+            _require(self.layout_file != "", "layout_file", self.layout_file,
+                     "the path of a .npy label map or .png image for the file layout")
+        else:
+            _require(self.layout_file == "", "layout_file", self.layout_file,
+                     "no layout file unless layout is 'file'")
+        _require(self.shape in SHAPES, "shape", self.shape, f"one of {SHAPES}")
+        _require(self.layout != "file" or self.shape == "disc", "shape", self.shape,
+                 "the default 'disc' for the file layout (its shapes come from the file)")
+        _require(_is_real(self.aspect) and 1.0 <= self.aspect <= MAX_ASPECT, "aspect",
+                 self.aspect, f"a number in [1, {MAX_ASPECT:g}]")
+        _require(self.shape == "ellipse" or self.aspect == 1.0, "aspect", self.aspect,
+                 "1 unless shape is 'ellipse'")
+        _require(_is_real(self.orientation) and math.isfinite(self.orientation),
+                 "orientation", self.orientation, "a finite angle in degrees")
+        _require(self.shape in ("square", "ellipse") or self.orientation == 0.0,
+                 "orientation", self.orientation, "0 unless shape is 'square' or 'ellipse'")
+
     @property
     def side(self) -> float:
         """Side L = n h of the square holding the pillars [length]."""
@@ -183,13 +239,18 @@ class BrushParams:
 
     @property
     def pillar_radius(self) -> float:
-        """Pillar radius a_p = L sqrt(phi / (pi N)) [length]."""
+        """Pillar radius a_p = L sqrt(phi / (pi N)) [length] (equal-area radius)."""
         return self.side * math.sqrt(self.phi / (math.pi * self.n_pillars))
 
     @property
     def pillar_radius_elements(self) -> float:
         """Pillar radius in elements."""
         return self.pillar_radius / self.h
+
+    @property
+    def pillar_area(self) -> float:
+        """Cross-section of one pillar A_p = phi L^2 / N [length^2]."""
+        return self.phi * self.side**2 / self.n_pillars
 
     @property
     def stiffness(self) -> float:

@@ -1,0 +1,203 @@
+"""Layouts read from a file: an integer label map (.npy) or an image (.png).
+
+Files come from other people's tools, so they are read as data, never as
+code, and refused with the file named when they do not fit:
+
+- ``.npy``: an n x n integer array, -1 = no pillar, 0 ... N-1 = pillar
+  index; read with ``np.load(allow_pickle=False)``.  Every index 0 ... N-1
+  must cover at least one element; any other negative value is refused.
+  A pillar may be any set of elements (it moves as one body on its
+  spring).
+- ``.png``: an n x n image, at most MAX_IMAGE_PIXELS pixels (checked from
+  the header before decoding), read with matplotlib's reader.  A pixel is
+  pillar when it is darker than 50 % grey and not transparent (alpha >=
+  0.5): black pillars on white, as a thresholded micrograph or a drawn
+  mask.  Pillars are the 8-connected components of pillar pixels
+  (`scipy.ndimage.label`), numbered in raster order of the grid.  The
+  image is read as it is shown: its top row is the grid's last row (the
+  snapshots are drawn with y up), so a file layout looks like its image.
+
+In both, pillars must not touch: two different pillars sharing an element
+edge (4-neighbour adjacency) are refused, naming the pillars and the
+element.  A shared corner is allowed in a label map (its labels say which
+pillar is which); in an image a corner joins two blobs into one pillar, as
+8-connected labelling does, so an image never has touching pillars.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .params import BrushParams, ParameterError
+
+#: Largest image accepted (the largest grid, 8192^2), checked before decoding.
+MAX_IMAGE_PIXELS = 8192 * 8192
+SUFFIXES = (".npy", ".png")
+_NAME = "layout_file"
+
+
+def _refuse(path: Path, allowed: str, reason: str) -> ParameterError:
+    return ParameterError(_NAME, str(path), allowed, reason)
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    size = path.stat().st_size
+    if size > 8 * MAX_IMAGE_PIXELS + 65536:  # int64 at the largest grid, plus the header
+        raise _refuse(path, f"a label map of at most {MAX_IMAGE_PIXELS} elements",
+                      f"the file has {size} bytes")
+    try:
+        data = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise _refuse(path, "a .npy file of an n x n integer array",
+                      f"not readable as a plain .npy array: {exc}") from None
+    if not isinstance(data, np.ndarray) or data.dtype.kind not in "iu":
+        kind = getattr(data, "dtype", type(data).__name__)
+        raise _refuse(path, "an integer label map (-1 = no pillar, 0 ... N-1 = pillar)",
+                      f"holds {kind} values")
+    if data.ndim != 2:
+        raise _refuse(path, "a two-dimensional n x n label map",
+                      f"has shape {data.shape}")
+    bad = np.argwhere(data < -1)
+    if bad.size:
+        r, c = (int(v) for v in bad[0])
+        raise _refuse(path, "labels -1 (no pillar) or 0 ... N-1",
+                      f"element (row {r}, column {c}) holds {int(data[r, c])}"
+                      + (f" and {len(bad) - 1} more elements hold values < -1"
+                         if len(bad) > 1 else ""))
+    if data.size and int(data.max()) >= 2**31 - 1:
+        raise _refuse(path, "labels 0 ... N-1 with N < 2^31 - 1", "a label is too large")
+    return data.astype(np.int32)
+
+
+def _read_png(path: Path) -> np.ndarray:
+    from matplotlib import image as mpimg  # noqa: PLC0415 - only for images
+    from PIL import Image  # matplotlib's own image dependency
+    from scipy import ndimage
+
+    try:
+        with Image.open(path) as im:  # header only: size before decoding
+            width, height = im.size
+    except Image.DecompressionBombError:
+        raise _refuse(path, f"an image of at most {MAX_IMAGE_PIXELS} pixels",
+                      "larger than Pillow's decompression-bomb limit") from None
+    except OSError as exc:
+        raise _refuse(path, "a PNG image", f"not readable as an image: {exc}") from None
+    if width * height > MAX_IMAGE_PIXELS:
+        raise _refuse(path, f"an image of at most {MAX_IMAGE_PIXELS} pixels",
+                      f"is {width} x {height} pixels")
+    pixels = np.asarray(mpimg.imread(path), dtype=float)
+    if pixels.ndim == 3:
+        alpha = pixels[..., 3] if pixels.shape[2] == 4 else np.ones(pixels.shape[:2])
+        grey = pixels[..., :3].mean(axis=2) if pixels.shape[2] >= 3 else pixels[..., 0]
+    else:
+        alpha, grey = np.ones_like(pixels), pixels
+    if grey.max() > 1.0:  # integer-valued image from Pillow: 8 or 16 bit
+        grey = grey / (65535.0 if grey.max() > 255 else 255.0)
+    pillar = (grey < 0.5) & (alpha >= 0.5)
+    # Top image row = largest y; 8-connected: a corner contact is one pillar.
+    blobs, _ = ndimage.label(pillar[::-1], structure=np.ones((3, 3), dtype=int))
+    return (blobs - 1).astype(np.int32)
+
+
+def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
+    """The checked label map of a layout file, shape (n, n), int32, -1 outside pillars.
+
+    Parameters
+    ----------
+    path : a ``.npy`` label map or a ``.png`` image (see the module notes)
+    grid : required n (elements per side); None accepts any square map
+
+    Raises
+    ------
+    ParameterError
+        For ``layout_file``, naming the file and what does not fit: a
+        missing or unreadable file, other suffixes, non-integer data,
+        labels that are not -1 or 0 ... N-1 (the missing indices named), a
+        shape other than grid x grid, no pillar at all, pillars that touch
+        (pillar indices and element named).
+    """
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        raise _refuse(path, f"a file ending in {' or '.join(SUFFIXES)}",
+                      f"unknown kind {path.suffix or '(no suffix)'!r}")
+    if not path.is_file():
+        raise _refuse(path, "an existing, readable file", "no such file")
+    labels = _read_npy(path) if path.suffix.lower() == ".npy" else _read_png(path)
+    unit = "elements" if path.suffix.lower() == ".npy" else "pixels"
+    if labels.ndim != 2 or labels.shape[0] != labels.shape[1]:
+        raise _refuse(path, "a square n x n map", f"is {labels.shape[0]} x "
+                      f"{labels.shape[1]} {unit} (rows x columns)")
+    if grid is not None and labels.shape[0] != grid:
+        raise _refuse(path, f"a {grid} x {grid} map (the grid)",
+                      f"is {labels.shape[0]} x {labels.shape[1]} {unit}")
+    present = np.unique(labels[labels >= 0])
+    if present.size == 0:
+        raise _refuse(path, "a map with at least one pillar", "no pillar element")
+    n_pillars = int(present[-1]) + 1
+    if present.size != n_pillars:
+        missing = np.setdiff1d(np.arange(n_pillars), present)
+        shown = ", ".join(str(int(m)) for m in missing[:10])
+        raise _refuse(path, f"pillar labels 0 ... N-1 each on at least one element",
+                      f"labels up to {n_pillars - 1}, but no element has label {shown}"
+                      + (f" and {missing.size - 10} more" if missing.size > 10 else ""))
+    from .layout import check_not_touching  # noqa: PLC0415 - layout imports this module
+    check_not_touching(labels, _NAME, str(path))
+    return labels
+
+
+def save_label_map(labels: np.ndarray, path: str | Path) -> Path:
+    """Write a label map as ``.npy`` (int32), readable by `read_label_map`.
+
+    Returns
+    -------
+    The path written (``.npy`` appended when missing, as numpy does).
+    """
+    path = Path(path)
+    if path.suffix != ".npy":
+        path = path.with_name(path.name + ".npy")
+    np.save(path, np.ascontiguousarray(labels, dtype=np.int32), allow_pickle=False)
+    return path
+
+
+def describe(labels: np.ndarray, h: float = 1.0) -> dict[str, float | int]:
+    """Pillar count, realised filling factor and mean equal-area radius of a label map.
+
+    Returns
+    -------
+    dict with n_pillars, grid, phi (pillar area / L^2) and
+    equivalent_radius (sqrt(mean pillar area / pi)) [length].
+    """
+    n_pillars = int(labels.max()) + 1
+    area = int(np.count_nonzero(labels >= 0))
+    return {"n_pillars": n_pillars, "grid": int(labels.shape[0]),
+            "phi": area / labels.size,
+            "equivalent_radius": float(np.sqrt(area / n_pillars / np.pi)) * h}
+
+
+def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
+    """Parameters of a file layout: N, grid and phi taken from the file.
+
+    Parameters
+    ----------
+    path : the ``.npy`` label map or ``.png`` image
+    kbar : normalised spring stiffness k / (E* L)
+    **kwargs : any other `BrushParams` field (e_star, dgamma, h, ...);
+        n_pillars, grid or phi, if given, must equal the file's
+
+    Raises
+    ------
+    ParameterError
+        If the file is refused (see `read_label_map`) or a given n_pillars,
+        grid or phi differs from the file's.
+    """
+    labels = read_label_map(path, kwargs.get("grid"))
+    found = describe(labels)
+    for name in ("n_pillars", "grid"):
+        if name in kwargs and kwargs[name] != found[name]:
+            raise ParameterError(name, kwargs[name], f"{found[name]}, the value of {path}")
+    if "phi" in kwargs and abs(kwargs["phi"] / found["phi"] - 1.0) > 1e-9:
+        raise ParameterError("phi", kwargs["phi"], f"{found['phi']!r}, the value of {path}")
+    kwargs.update(n_pillars=found["n_pillars"], grid=found["grid"], phi=found["phi"])
+    return BrushParams(layout="file", kbar=kbar, layout_file=str(path), **kwargs)

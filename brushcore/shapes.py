@@ -1,0 +1,90 @@
+"""Pillar cross-sections: disc, square and ellipse of a given area.
+
+A shape is fixed by its kind, an aspect ratio (ellipse) and an
+orientation; its size follows from the pillar area A_p = phi L^2 / N, so
+the filling factor keeps its meaning (real pillar area / L^2) for every
+shape.  The label map asks a shape which element centres it contains.
+
+Conventions
+-----------
+- aspect: semi-major / semi-minor axis of an ellipse, >= 1 (1 for disc and
+  square).
+- orientation [degrees]: angle from the x axis (grid columns) to the
+  ellipse's major axis or to a side of the square, counter-clockwise in
+  the snapshots (which are drawn with y up).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+SHAPES = ("disc", "square", "ellipse")
+
+
+@dataclass(frozen=True)
+class PillarShape:
+    """The cross-section of every pillar of a generated layout.
+
+    Parameters
+    ----------
+    kind : "disc", "square" or "ellipse".
+    aspect : semi-major / semi-minor axis of an ellipse, >= 1.
+    orientation : angle of the major axis (ellipse) or of a side (square)
+        from the x axis [degrees].
+    """
+
+    kind: str = "disc"
+    aspect: float = 1.0
+    orientation: float = 0.0
+
+    def half_axes(self, area: float) -> tuple[float, float]:
+        """Semi-axes (a, b) [length]: radius, half side, or the ellipse's semi-axes.
+
+        Parameters
+        ----------
+        area : pillar cross-section A_p [length^2]
+        """
+        if self.kind == "disc":
+            r = math.sqrt(area / math.pi)
+            return r, r
+        if self.kind == "square":
+            s = 0.5 * math.sqrt(area)
+            return s, s
+        a = math.sqrt(area * self.aspect / math.pi)  # pi a b = A_p with a = aspect b
+        return a, a / self.aspect
+
+    def circumradius(self, area: float) -> float:
+        """Radius of the smallest centred disc holding the pillar [length]."""
+        a, b = self.half_axes(area)
+        return math.hypot(a, b) if self.kind == "square" else a
+
+    def half_extents(self, area: float) -> tuple[float, float]:
+        """Half width of the pillar's bounding box along y and x [length]."""
+        a, b = self.half_axes(area)
+        c, s = abs(math.cos(math.radians(self.orientation))), abs(
+            math.sin(math.radians(self.orientation)))
+        if self.kind == "square":
+            return a * (s + c), a * (c + s)
+        # ellipse (and disc): support function of the rotated ellipse
+        return math.sqrt((a * s) ** 2 + (b * c) ** 2), math.sqrt((a * c) ** 2 + (b * s) ** 2)
+
+    def contains(self, dy: np.ndarray, dx: np.ndarray, area: float) -> np.ndarray:
+        """Whether points at offsets (dy, dx) from the centre lie inside [bool].
+
+        Parameters
+        ----------
+        dy, dx : offsets along y and x, broadcastable [length]
+        area : pillar cross-section A_p [length^2]
+        """
+        a, b = self.half_axes(area)
+        if self.kind == "disc":
+            return dy**2 + dx**2 <= a * a
+        t = math.radians(self.orientation)
+        u = dx * math.cos(t) + dy * math.sin(t)  # along the major axis / a side
+        v = -dx * math.sin(t) + dy * math.cos(t)
+        if self.kind == "square":
+            return (np.abs(u) <= a) & (np.abs(v) <= b)
+        return (u / a) ** 2 + (v / b) ** 2 <= 1.0
