@@ -2,6 +2,7 @@
 
 snakemake --cores 2                                 # the paper's sweep
 snakemake --cores 2 --configfile config/test.yaml   # a tiny sweep
+snakemake --cores 2 --configfile config/convergence.yaml   # mesh refinement
 """
 
 from snakemake.utils import min_version, validate
@@ -28,6 +29,7 @@ report: "workflow/report/workflow.rst"
 include: "workflow/rules/simulate.smk"
 include: "workflow/rules/aggregate.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/convergence.smk"
 
 
 localrules:
@@ -40,6 +42,7 @@ localrules:
     fig8,
     rough_figure,
     curve_figure,
+    convergence,
 
 
 rule all:
@@ -50,3 +53,15 @@ rule all:
         "results/summary.md",
         expand("results/figures/fig{n}.{ext}", n=[5, 6, 7, 8], ext=["png", "pdf"]),
         rough_figure_files(config),
+        # the refinement study only where some brush runs on three or more grids
+        (
+            [
+                "results/convergence.nc",
+                "results/convergence.csv",
+                "results/convergence.md",
+                "results/figures/convergence.png",
+                "results/figures/convergence.pdf",
+            ]
+            if wants_convergence(config)
+            else []
+        ),

@@ -1,10 +1,14 @@
 """Collect one-curve files into the analysis-ready sweep dataset (``sweep.nc``).
 
-One curve file holds one pull-off simulation (one layout, N, kbar, seed).
-`build_sweep` reads them all with `brushcore.io.read_curve` and lays the
-scalars out on the full (layout, n_pillars, kbar, seed) grid, NaN where a
-combination was not run, with the force-displacement curves NaN-padded along
-``step``.  Contact snapshots are large, so only a chosen subset of cases keeps
+One curve file holds one pull-off simulation (one layout, N, kbar, seed,
+grid).  `build_sweep` reads them all with `brushcore.io.read_curve` and lays
+the scalars out on the full (layout, n_pillars, kbar, seed, grid) product,
+NaN where a combination was not run, with the force-displacement curves
+NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
+when a sweep has one grid, so that mesh-refinement studies
+(`brushcore.convergence`) and single-grid sweeps share one layout;
+`finest_grid` reduces it to one value per case for the figures and tables.
+Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
 ``xarray.open_dataset``; `encoding` gives the compression to write it with.
 """
@@ -32,6 +36,9 @@ CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
 ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
 #: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are.
 ROUGH_SCALARS = ("dissipated_energy_normalized", "pillars_in_contact_at_preload")
+#: The resolution dimension (elements per side n of the L x L square).
+GRID_DIM = "grid"
+SWEEP_DIMS = (*CASE_DIMS, GRID_DIM)
 
 #: Scalar variables copied from each curve file.
 SCALAR_VARIABLES = (
@@ -80,12 +87,14 @@ class CaseKey:
     n_pillars : number of pillars N.
     kbar : normalised spring stiffness k / (E* L) [-].
     seed : random-layout seed (0 for regular layouts).
+    grid : elements per side n of the L x L square.
     """
 
     layout: str
     n_pillars: int
     kbar: float
     seed: int
+    grid: int
     roughness: float = 0.0
     preload: float = 0.0
     kbar_spread: float = 0.0
@@ -100,7 +109,7 @@ def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
     return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
-                   *(float(a.get(name, 0.0)) for name in ROUGH_DIMS))
+                   int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS))
 
 
 def file_sha256(path: str | Path) -> str:
@@ -151,8 +160,8 @@ def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> o
 
 
 def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:
-    """Today's four case dimensions, plus ROUGH_DIMS when any case is not flat."""
-    return CASE_DIMS if all(k.is_flat for k in keys) else CASE_DIMS + ROUGH_DIMS
+    """The case dimensions and grid, plus ROUGH_DIMS when any case is not flat."""
+    return SWEEP_DIMS if all(k.is_flat for k in keys) else SWEEP_DIMS + ROUGH_DIMS
 
 
 def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
@@ -164,6 +173,7 @@ def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
         "n_pillars": np.array(sorted({k.n_pillars for k in keys}), dtype=np.int64),
         "kbar": np.array(sorted({k.kbar for k in keys}), dtype=np.float64),
         "seed": np.array(sorted({k.seed for k in keys}), dtype=np.int64),
+        "grid": np.array(sorted({k.grid for k in keys}), dtype=np.int64),
     }
     for dim in ROUGH_DIMS:
         coords[dim] = np.array(sorted({getattr(k, dim) for k in keys}), dtype=np.float64)
@@ -171,7 +181,7 @@ def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
 
 
 def _index(coords: dict[str, np.ndarray], key: CaseKey,
-           dims: Sequence[str] = CASE_DIMS) -> tuple[int, ...]:
+           dims: Sequence[str] = SWEEP_DIMS) -> tuple[int, ...]:
     return tuple(int(np.flatnonzero(coords[dim] == getattr(key, dim))[0]) for dim in dims)
 
 
@@ -209,8 +219,9 @@ def build_sweep(
     Returns
     -------
     xarray.Dataset
-        Scalars on (layout, n_pillars, kbar, seed); curves on the same dims
-        plus ``step``; snapshots on (case, snapshot, y, x); provenance attrs.
+        Scalars on (layout, n_pillars, kbar, seed, grid); curves on the same
+        dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
+        provenance attrs.
 
     Raises
     ------
@@ -218,14 +229,13 @@ def build_sweep(
         Naming the offending file when one cannot be read or cases clash.
     """
     curves = load_curves(paths)
-    grid = _common_attr(curves, "grid")
     phi = _common_attr(curves, "phi")
     coords = _case_coords(curves)
     dims = case_dims(curves)
     shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
     first = next(iter(curves.values()))[1]
-    rough_scalars = ROUGH_SCALARS if dims != CASE_DIMS else ()
+    rough_scalars = ROUGH_SCALARS if dims != SWEEP_DIMS else ()
 
     data: dict[str, xr.DataArray] = {}
     scalars = {name: np.full(shape, np.nan)
@@ -238,7 +248,7 @@ def build_sweep(
             if name in curve:
                 scalars[name][at] = float(curve[name])
         for name in ATTRIBUTE_SCALARS:
-            scalars[name][at] = float(curve.attrs.get(name, np.nan))
+            scalars[name][at] = _attribute(curve, name)
         scalars["n_steps"][at] = curve.sizes["step"]
         for name in CURVE_VARIABLES:
             values = np.asarray(curve[name].values, dtype=np.float64)
@@ -266,7 +276,7 @@ def build_sweep(
     sweep = xr.Dataset(data, coords=_coordinate_arrays(coords, dims))
     # The stacked snapshot cases are labels, not data: make them coordinates.
     sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
-    sweep.attrs = _provenance(curves, grid=grid, phi=phi)
+    sweep.attrs = _provenance(curves, phi=phi)
     for name in SHARED_ATTRIBUTES:
         value = _common_attr(curves, name)
         if value is not None:
@@ -280,13 +290,27 @@ def build_sweep(
     return sweep
 
 
+def _attribute(curve: xr.Dataset, name: str) -> float:
+    """A numeric curve attribute, NaN when absent.
+
+    Curve files written before ``pillar_radius_elements`` was recorded give
+    it from ``pillar_radius`` / ``h``.
+    """
+    if name == "pillar_radius_elements" and name not in curve.attrs:
+        a = curve.attrs
+        return float(a["pillar_radius"]) / float(a["h"]) if "pillar_radius" in a and "h" in a \
+            else math.nan
+    return float(curve.attrs.get(name, np.nan))
+
+
 def _coordinate_arrays(coords: dict[str, np.ndarray],
-                       dims: Sequence[str] = CASE_DIMS) -> dict[str, xr.DataArray]:
+                       dims: Sequence[str] = SWEEP_DIMS) -> dict[str, xr.DataArray]:
     attrs = {
         "layout": {"long_name": "pillar layout"},
         "n_pillars": {"units": "1", "long_name": "number of pillars N"},
         "kbar": {"units": "1", "long_name": "normalised spring stiffness k / (E* L)"},
         "seed": {"units": "1", "long_name": "random-layout seed (0 for flat regular brushes)"},
+        "grid": {"units": "1", "long_name": "elements per side n of the L x L square"},
         "roughness": {"units": "1", "long_name": "std of pillar heights / d_K"},
         "preload": {"units": "1", "long_name": "preload / F_K"},
         "kbar_spread": {"units": "1", "long_name": "coefficient of variation of kbar"},
@@ -300,7 +324,7 @@ def _snapshots(
     curves: dict[CaseKey, tuple[Path, xr.Dataset]],
     keep: Iterable[tuple[str, int]],
     all_below_mb: float,
-    dims: Sequence[str] = CASE_DIMS,
+    dims: Sequence[str] = SWEEP_DIMS,
 ) -> dict[str, xr.DataArray]:
     with_snaps = {k: c for k, (_, c) in curves.items() if "contact_snapshot" in c}
     if not with_snaps:
@@ -310,6 +334,9 @@ def _snapshots(
     keys = sorted(k for k in with_snaps if wanted(k))
     if not keys:
         return {}
+    # Maps of different grids cannot share (y, x): keep the finest grid's.
+    finest = max(k.grid for k in keys)
+    keys = [k for k in keys if k.grid == finest]
     n_snap = max(with_snaps[k].sizes["snapshot"] for k in keys)
     ny, nx = with_snaps[keys[0]].sizes["y"], with_snaps[keys[0]].sizes["x"]
     snap = np.full((len(keys), n_snap, ny, nx), -1, dtype=np.int8)
@@ -342,8 +369,10 @@ def _snapshots(
                                   attrs={"long_name": "kbar of the snapshot case", "units": "1"}),
         "case_seed": xr.DataArray(np.array([k.seed for k in keys]), dims="case",
                                   attrs={"long_name": "seed of the snapshot case", "units": "1"}),
+        "case_grid": xr.DataArray(np.array([k.grid for k in keys]), dims="case",
+                                  attrs={"long_name": "grid n of the snapshot case", "units": "1"}),
     }
-    for dim in dims[len(CASE_DIMS):]:
+    for dim in dims[len(SWEEP_DIMS):]:
         out[f"case_{dim}"] = xr.DataArray(np.array([getattr(k, dim) for k in keys]), dims="case",
                                           attrs={"long_name": f"{dim} of the snapshot case",
                                                  "units": "1"})
@@ -355,7 +384,7 @@ def _snapshots(
 
 
 def _provenance(
-    curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, grid: object, phi: object
+    curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, phi: object
 ) -> dict[str, object]:
     files = sorted(str(path) for path, _ in curves.values())
     hashes = [file_sha256(f) for f in files]
@@ -373,7 +402,7 @@ def _provenance(
         "git_commit": provenance.git_commit(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
-        "grid": int(grid) if grid is not None else -1,
+        "grid": np.array(sorted({k.grid for k in curves}), dtype=np.int64),  # every grid run
         "phi": float(phi) if phi is not None else math.nan,
         "source_files": "\n".join(files),
         "source_sha256": "\n".join(hashes),
@@ -449,3 +478,40 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         return None
     names = [n for n in ("contact_snapshot", "snapshot_step", "snapshot_label") if n in sweep]
     return sweep[names].isel(case=int(idx[0]))
+
+
+def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr.Dataset:
+    """Each case at the finest grid it was run on, without the ``grid`` dimension.
+
+    Figures and the summary show one value per case; on a refinement sweep
+    that is the best-resolved one.  A sweep without ``grid`` (older files) is
+    returned unchanged.
+
+    Parameters
+    ----------
+    sweep : dataset of `build_sweep`.
+    ran : variable whose finite values mark the grids a case ran on.
+
+    Returns
+    -------
+    xarray.Dataset
+        Every variable with a ``grid`` dimension reduced to its value at the
+        finest grid run (NaN where the case never ran), plus ``grid_used``
+        (elements per side of that grid, NaN where none).
+    """
+    if GRID_DIM not in sweep.dims:
+        return sweep
+    sweep = sweep.sortby(GRID_DIM)
+    rank = xr.DataArray(np.arange(sweep.sizes[GRID_DIM]), dims=GRID_DIM)
+    done = np.isfinite(sweep[ran])
+    finest = rank == rank.where(done).max(GRID_DIM)  # one True per case that ran
+    out = sweep.copy()
+    for name, var in sweep.data_vars.items():
+        if GRID_DIM in var.dims:
+            # Exactly one unmasked value survives, so the sum is that value.
+            out[name] = var.where(finest).sum(GRID_DIM, min_count=1).assign_attrs(var.attrs)
+    out["grid_used"] = (
+        sweep[GRID_DIM].astype(np.float64).where(finest).sum(GRID_DIM, min_count=1)
+        .assign_attrs(units="1", long_name="elements per side n of the finest grid run")
+    )
+    return out.drop_vars(GRID_DIM)

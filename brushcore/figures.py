@@ -1,5 +1,7 @@
 """The paper's Figures 5-8 drawn from a sweep dataset (matplotlib, no pyplot).
 
+`convergence` draws a mesh-refinement study (`brushcore.convergence`).
+
 Each ``figN`` function takes the dataset of `brushcore.aggregate.build_sweep`
 and returns a `matplotlib.figure.Figure`; `save` writes it.  Figures are
 built on the object API with the Agg canvas, so no global pyplot state or GUI
@@ -18,10 +20,12 @@ import xarray as xr
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore import theory
-from brushcore.aggregate import snapshots
+from brushcore.aggregate import finest_grid, snapshots
+from brushcore.convergence import QUANTITIES, UNDER_RESOLVED_RADIUS
 from brushcore.summary import fit_soft_prefactor, seed_mean, soft_plateau
 
 F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
@@ -86,6 +90,7 @@ def fig5(
     Numbered dots on each curve mark the steps of the snapshots to its right
     (red: attached element, grey: detached, white: no pillar).
     """
+    sweep = finest_grid(sweep)  # one curve per case: the best-resolved one
     cases = [k for k in kbar if _curve(sweep, layout, n_pillars, k, seed) is not None]
     n_snap = int(sweep.sizes.get("snapshot", 0))
     rows = max(len(cases), 1)
@@ -153,6 +158,7 @@ def fig6(sweep: xr.Dataset) -> Figure:
     The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
     punch F_ad = 1 is dotted.  With several seeds the bars span min to max.
     """
+    sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
@@ -183,6 +189,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     fitted prefactor c of F = c N^(1/4) (and 1/c, the paper's 1.2-1.3) is
     printed on the plot.
     """
+    sweep = finest_grid(sweep)
     fig = _new_figure(4.6, 3.8)
     ax = fig.add_subplot()
     ax.set_title("Soft plateau of the adhesive force")
@@ -230,6 +237,7 @@ def fig8(sweep: xr.Dataset) -> Figure:
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
     (`brushcore.theory.soft_work`); W = 1 is the rigid compact punch.
     """
+    sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
@@ -407,6 +415,99 @@ def load_sharing(curve: xr.Dataset) -> Figure:
     a = curve.attrs
     ax.set_title(f"N = {a.get('n_pillars')}, " + rf"$\bar k$ = {float(a.get('kbar')):g}, "
                  f"roughness {float(a.get('roughness', 0.0)):g} $d_K$", fontsize=9)
+    return fig
+
+
+#: Labels of the quantities the convergence figure draws.
+CONVERGENCE_LABELS = {
+    "adhesive_force_normalized": FAD_LABEL,
+    "work_of_separation_normalized": r"$\bar W$",
+}
+
+
+def _kbar_text(kbar: float) -> str:
+    return "rigid" if math.isinf(kbar) else f"{kbar:.3g}"
+
+
+def _convergence_cases(conv: xr.Dataset, quantity: str) -> list[dict[str, object]]:
+    """Case coordinates (every dim but grid) with at least one finite value."""
+    raw = conv[quantity]
+    dims = [d for d in raw.dims if d != "grid"]
+    stacked = raw.stack(case=dims) if dims else raw.expand_dims(case=[0])
+    keep = np.isfinite(stacked).any("grid").values
+    cases = []
+    for i in np.flatnonzero(keep):
+        one = stacked.isel(case=int(i))
+        cases.append({d: one[d].values.item() for d in dims})
+    return cases
+
+
+def convergence(
+    conv: xr.Dataset,
+    *,
+    quantities: Sequence[str] = QUANTITIES,
+) -> Figure:
+    """F_ad and W against the element size h/L = 1/n, one panel per case.
+
+    Parameters
+    ----------
+    conv : dataset of `brushcore.convergence.extrapolate_sweep`.
+    quantities : variables to draw, one column each per case.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Rows: cases (layout, N, kbar, seed); columns: quantities.  Dots are
+        the grids run, the dashed line f0 + C h^p, the bar at h = 0 the
+        extrapolated value with its error; flags are written in red.
+    """
+    cases = _convergence_cases(conv, quantities[0])
+    n_rows, n_cols = max(len(cases), 1), len(quantities)
+    fig = _new_figure(3.2 * n_cols, 1.9 * n_rows + 0.4)
+    axes = fig.subplots(n_rows, n_cols, squeeze=False)
+    if not cases:
+        _no_data(axes[0][0], "no case with results")
+        return fig
+    h_all = conv["h"].values
+    h_line = np.linspace(0.0, float(np.nanmax(h_all)) * 1.05, 200)
+    for row, case in enumerate(cases):
+        title = (f"{case.get('layout', '')} N={case.get('n_pillars', '')}, "
+                 rf"$\bar k$={_kbar_text(float(case.get('kbar', math.nan)))}")
+        if case.get("seed", 0):
+            title += f", seed {case['seed']}"
+        radius = float(conv["pillar_radius_elements_finest"].sel(case))
+        for col, q in enumerate(quantities):
+            ax = axes[row][col]
+            values = conv[q].sel(case).values
+            ok = np.isfinite(values)
+            ax.plot(h_all[ok], values[ok], "o", color="C0")
+            f0 = float(conv[f"{q}_extrapolated"].sel(case))
+            p = float(conv[f"{q}_order"].sel(case))
+            c = float(conv[f"{q}_coefficient"].sel(case))
+            if math.isfinite(f0) and math.isfinite(p) and math.isfinite(c):
+                err = float(conv[f"{q}_error"].sel(case))
+                ax.plot(h_line, f0 + c * h_line**p, "--", color="C1")
+                ax.errorbar([0.0], [f0], yerr=[err], fmt="s", color="C1", capsize=3)
+                ax.text(0.03, 0.95, f"$f_0$ = {f0:.4g} ± {err:.2g}, p = {p:.2f}",
+                        ha="left", va="top", transform=ax.transAxes, fontsize="small")
+            flags = [f.replace("_", " ") for f in ("non_monotone", "poor_fit", "too_few_grids")
+                     if int(conv[f"{q}_{f}"].sel(case))]
+            if math.isfinite(radius) and radius < UNDER_RESOLVED_RADIUS:
+                flags.append(f"under-resolved ({radius:.1f} el./radius)")
+            if flags:
+                ax.text(0.97, 0.05, ", ".join(flags), color="tab:red", ha="right",
+                        va="bottom", transform=ax.transAxes, fontsize="small")
+            ax.set_xlim(left=-0.02 * h_line[-1], right=h_line[-1])
+            ax.set_title(title, fontsize="small")
+            ax.set_ylabel(CONVERGENCE_LABELS.get(q, q))
+            if row == n_rows - 1:
+                ax.set_xlabel("element size $h/L = 1/n$")
+    handles = [
+        Line2D([], [], marker="o", ls="", color="C0", label="grids run"),
+        Line2D([], [], ls="--", color="C1", label=r"fit $f_0 + C h^p$"),
+        Line2D([], [], marker="s", ls="", color="C1", label=r"$f_0$ ± error at $h = 0$"),
+    ]
+    fig.legend(handles=handles, loc="outside upper center", ncols=3, fontsize="small")
     return fig
 
 

@@ -4,6 +4,9 @@ The reductions used by both the summary table and the figures live here:
 averaging over seeds, the soft-plateau value, where the plateau starts, and
 the N^(1/4) prefactor fit.  Everything works on whatever part of the paper's
 grid a sweep contains; a missing case gives NaN here and "n/a" in the table.
+On a sweep over several grids every case is taken at the finest grid it ran
+on (`brushcore.aggregate.finest_grid`), and the table says how many elements
+a pillar radius spans there, marking fewer than 4 as under-resolved.
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ import numpy as np
 import xarray as xr
 
 from brushcore import theory
+from brushcore.aggregate import GRID_DIM, finest_grid
+from brushcore.convergence import UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
 PLATEAU_RTOL = 0.05
@@ -34,6 +39,9 @@ def seed_mean(sweep: xr.Dataset, name: str, layout: str, n_pillars: int) -> xr.D
     """
     if layout not in sweep.layout or n_pillars not in sweep.n_pillars:
         return xr.DataArray(np.array([]), dims="kbar", coords={"kbar": np.array([])})
+    if GRID_DIM in sweep.dims:  # only the variables needed, not the padded curves
+        keep = list(dict.fromkeys([name, "adhesive_force_normalized"]))
+        sweep = finest_grid(sweep[keep])
     values = sweep[name].sel(layout=layout, n_pillars=n_pillars)
     return values.mean("seed", skipna=True).dropna("kbar")
 
@@ -122,7 +130,9 @@ class Row:
 
 
 def _fmt(value: float, digits: int = 3) -> str:
-    return NOT_AVAILABLE if value is None or not math.isfinite(value) else f"{value:.{digits}g}"
+    if value is None or math.isnan(value):
+        return NOT_AVAILABLE
+    return f"{value:.{digits}g}"  # inf stays "inf": kbar = inf is a rigid run, not a gap
 
 
 def _brushes(sweep: xr.Dataset) -> list[tuple[str, int]]:
@@ -141,6 +151,9 @@ def headline_rows(
     fig5_n_pillars, fig5_kbar : the Fig. 5a case quoted in the text (16 x 16, 0.455).
     """
     phi = float(sweep.attrs.get("phi", math.nan))
+    scalars = [v for v in sweep.data_vars if "step" not in sweep[v].dims and "case" not in
+               sweep[v].dims]
+    sweep = finest_grid(sweep[scalars])
     rigid_theory = theory.rigid_limit(phi) if math.isfinite(phi) else math.nan
     rows = [
         Row("F_ad (normalised), Fig. 5a", "regular", str(fig5_n_pillars), _fmt(fig5_kbar),
@@ -169,12 +182,32 @@ def headline_rows(
     enhancement = float(big.max()) if big.size else math.nan
     rows.append(Row("enhancement F_ad / F_K, 2304 pillars (max over kbar)", "regular", "2304",
                     "", _fmt(enhancement), "~6", "Fig. 6a soft plateau"))
+    for layout, n in brushes:
+        rows.append(_resolution_row(sweep, layout, n))
     paper_onset = {64: "~1e-3", 2304: "~1e-5"}
     for layout, n in brushes:
         rows.append(Row(f"kbar where the soft plateau is reached (within {PLATEAU_RTOL:.0%})",
                         layout, str(n), "", _fmt(plateau_onset(sweep, layout, n), 2),
                         paper_onset.get(n, ""), "Fig. 6"))
     return rows
+
+
+def _resolution_row(sweep: xr.Dataset, layout: str, n_pillars: int) -> Row:
+    """Elements per pillar radius of a brush (finest grid run), marked when under-resolved."""
+    if "pillar_radius_elements" not in sweep:
+        return Row("pillar radius in elements", layout, str(n_pillars), "", NOT_AVAILABLE, "",
+                   "not recorded in this sweep")
+    radius = seed_mean(sweep, "pillar_radius_elements", layout, n_pillars)
+    grid = seed_mean(sweep, "grid_used", layout, n_pillars) if "grid_used" in sweep else radius
+    r_min = float(radius.min()) if radius.size else math.nan
+    grids = sorted({int(g) for g in np.asarray(grid.values) if math.isfinite(g)}) \
+        if "grid_used" in sweep else []
+    note = f"grid {', '.join(map(str, grids))}" if grids else ""
+    if math.isfinite(r_min) and r_min < UNDER_RESOLVED_RADIUS:
+        note = (note + "; " if note else "") + \
+            f"UNDER-RESOLVED (< {UNDER_RESOLVED_RADIUS:g} elements): not converged in h"
+    return Row("pillar radius in elements (finest grid run)", layout, str(n_pillars), "",
+               _fmt(r_min), "", note)
 
 
 def write_summary(rows: Sequence[Row], csv_path: str | Path, md_path: str | Path | None = None

@@ -60,3 +60,11 @@ def test_sweep_keeps_every_parameter(curve_files):
                  "units_convention", "symbols", "grid", "phi"):
         assert name in sweep.attrs, name
     assert "a0 = sqrt(A / pi)" in sweep.attrs["symbols"]
+
+
+def test_convergence_is_cf_clean(curve_files, tmp_path):
+    from brushcore.convergence import extrapolate_sweep, write_dataset
+
+    path = tmp_path / "convergence.nc"
+    write_dataset(extrapolate_sweep(build_sweep(curve_files)), path)
+    assert cf_errors(path, tmp_path) == []

@@ -487,7 +487,7 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     write_sweep(sweep, tmp_path / "sweep.nc")
     assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
     flat = flat_slice(sweep)  # today's four dimensions, the flat case's numbers
-    assert flat.adhesive_force.dims == ("layout", "n_pillars", "kbar", "seed")
+    assert flat.adhesive_force.dims == ("layout", "n_pillars", "kbar", "seed", "grid")
     assert float(flat.adhesive_force.squeeze()) == pytest.approx(
         float(build_sweep(files[:1]).adhesive_force.squeeze()), rel=1e-12)
 

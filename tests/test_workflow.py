@@ -25,6 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake"]
 FIGURES = [f"fig{n}.{ext}" for n in (5, 6, 7, 8) for ext in ("png", "pdf")]
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
+SWEEP_DIMS = (*CASE_DIMS, "grid")
 SCALARS = (
     "adhesive_force_normalized",
     "work_of_separation_normalized",
@@ -98,8 +99,10 @@ def test_config(repo_copy: Path) -> dict:
 
 def test_sweep_dataset(test_run: Path, test_config: dict) -> None:
     with xr.open_dataset(test_run / "results/sweep.nc") as sweep:
-        for dim in (*CASE_DIMS, "step"):
+        for dim in (*SWEEP_DIMS, "step"):
             assert dim in sweep.dims, f"sweep.nc lacks dimension {dim}"
+        assert sweep["grid"].values.tolist() == [test_config["grid"]]
+        sweep = sweep.squeeze("grid", drop=True)  # one grid: the rest is as before
         for name in SCALARS:
             assert sweep[name].dims == CASE_DIMS, f"{name} has dims {sweep[name].dims}"
         for name in CURVES:
@@ -157,6 +160,44 @@ def test_default_config_plans_paper_grid(repo_copy: Path) -> None:
     assert config["regular"] == [64, 256, 576, 2304] and config["random"] == [64, 220, 425, 1620]
     decades = np.floor(np.log10(config["kbar"]) + 1e-9)
     assert all((decades == d).sum() >= 2 for d in range(-6, 2))
+
+
+def test_default_config_makes_no_convergence_study(repo_copy: Path) -> None:
+    proc = snakemake(repo_copy, "-n", "--cores", "2")
+    assert proc.returncode == 0, output(proc)
+    assert "rule convergence" not in output(proc)
+
+
+def test_three_grids_plan_the_convergence_rule(repo_copy: Path, tmp_path: Path) -> None:
+    """A list of grids multiplies the jobs, and three or more add the refinement study."""
+    config = tmp_path / "tiny3.yaml"
+    config.write_text(yaml.safe_dump({
+        # kbar values the test sweep does not run: every curve is new in this copy
+        "grid": [32, 48, 64], "regular": [4], "random": [], "kbar": [2.0e-2, 2.0],
+        "fig5": {"n_pillars": 4, "kbar": [2.0]},
+        "grid_by_n": [{"n_pillars": 16, "grid": 64}],
+    }))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", str(config))
+    text = output(proc)
+    assert proc.returncode == 0, text
+    assert planned_simulations(text) == 2 * 3, text  # 2 kbar x 3 grids (N = 16 not in sweep)
+    assert re.search(r"^convergence\s+1\s*$", text, flags=re.MULTILINE), text
+    for name in ("results/convergence.nc", "results/convergence.csv", "results/convergence.md",
+                 "results/figures/convergence.png"):
+        assert name in text, f"{name} not planned:\n{text}"
+    for grid in (32, 48, 64):
+        assert f"_grid{grid}_phi0.12.nc" in text
+
+
+def test_convergence_config_plans_the_study(repo_copy: Path) -> None:
+    config = yaml.safe_load((repo_copy / "config/convergence.yaml").read_text())
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/convergence.yaml")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    # 3 brushes x 3 kbar x 3 grids, and the 48 x 48 brush on its own 3 grids
+    assert planned_simulations(text) == len(config["regular"]) * len(config["kbar"]) * 3, text
+    assert re.search(r"^convergence\s+1\s*$", text, flags=re.MULTILINE), text
+    assert "_grid2048_" in text and "N64_kbar1e-06_seed0_grid2048" not in text
 
 
 def test_lint(repo_copy: Path) -> None:

@@ -48,6 +48,10 @@ def check_cases(config):
     Random layouts are packed in their jobs (seconds each); a packing failure
     fails that job.  The geometry does not depend on kbar: checked once.
     """
+    named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
+    twice = sorted({n for n in named if named.count(n) > 1})
+    if twice:
+        raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
     seen = set()
     for layout, n, kbar, seed, grid, phi, rough in sweep_cases(config):
         if (layout, n, seed, grid, phi, rough) in seen:
@@ -105,7 +109,7 @@ def sweep_cases(config):
     or graded ones (heights and stiffness drawn from the seed) run every seed.
     The Fig. 5 brush adds its own kbar values to the regular sweep.
     """
-    grid, phi = config["grid"], config["phi"]
+    phi = config["phi"]
     cases = set()
 
     def regular(n, kbar):
@@ -127,7 +131,31 @@ def sweep_cases(config):
                 for rough in _rough_tags(config, kbar):
                     cases.add(("random", n, kbar_tag(kbar), seed, rough))
     ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[4]))
-    return [(*case[:4], grid, phi, case[4]) for case in ordered]
+    return [(*case[:4], grid, phi, case[4]) for case in ordered
+            for grid in case_grids(config, case[1])]
+
+
+def grid_list(value):
+    """A config grid (an integer or a list of integers) as a sorted list."""
+    return sorted({int(value)} if isinstance(value, int) else {int(g) for g in value})
+
+
+def case_grids(config, n_pillars):
+    """The grids a brush of `n_pillars` runs on: `grid_by_n` if it names N, else `grid`."""
+    for entry in config.get("grid_by_n", []):
+        if int(entry["n_pillars"]) == int(n_pillars):
+            return grid_list(entry["grid"])
+    return grid_list(config["grid"])
+
+
+def wants_convergence(config):
+    """True when some brush runs on three or more grids: the refinement study is made."""
+    return any(len(case_grids(config, n)) >= 3 for n in sweep_brushes(config))
+
+
+def sweep_brushes(config):
+    """Every pillar number N of the sweep (both layouts and the Fig. 5 brush)."""
+    return {*config["regular"], *config["random"], config["fig5"]["n_pillars"]}
 
 
 #: One curve file per case; every parameter that changes the curve is in its name,
@@ -136,17 +164,18 @@ def sweep_cases(config):
 CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{rough}"
 
 
+def curve_file(layout, n_pillars, kbar, seed, grid, phi, rough):
+    """The curve file of one case (a tuple of `sweep_cases`)."""
+    name = CURVE_NAME.format(
+        layout=layout, n_pillars=n_pillars, kbar=kbar, seed=seed, grid=grid,
+        phi=repr(float(phi)), rough=rough,
+    )
+    return f"results/curves/{name}.nc"
+
+
 def curve_files(config):
     """The curve file of every case of the sweep."""
-    return [
-        "results/curves/"
-        + CURVE_NAME.format(
-            layout=layout, n_pillars=n, kbar=kbar, seed=seed, grid=grid, phi=repr(float(phi)),
-            rough=rough,
-        )
-        + ".nc"
-        for layout, n, kbar, seed, grid, phi, rough in sweep_cases(config)
-    ]
+    return [curve_file(*case) for case in sweep_cases(config)]
 
 
 def simulate_mem_mb(wildcards, attempt):
@@ -200,10 +229,7 @@ def rough_example_curve(config):
         return (-tag["roughness"], -tag["preload"], tag["kbar_spread"],
                 abs(math.log10(float(case[2])) + 2.0))
 
-    layout, n, kbar, seed, grid, phi, tag = min(rough, key=rank)
-    return ("results/curves/" + CURVE_NAME.format(
-        layout=layout, n_pillars=n, kbar=kbar, seed=seed, grid=grid, phi=repr(float(phi)),
-        rough=tag) + ".nc")
+    return curve_file(*min(rough, key=rank))
 
 
 def rough_figure_files(config):

@@ -1,0 +1,558 @@
+"""Mesh-refinement studies: extrapolate a result to h -> 0 with its observed order.
+
+The detachment stress sigma_c = C sqrt(E* dgamma / h) makes every brushcore
+number a number *for one resolution*.  Given one result f on three or more
+grids, this module fits
+
+    f(h) = f0 + C h^p                                                    (1)
+
+with the observed order p, and returns the extrapolated value f0, an error
+estimate, p, and flags that say when (1) does not describe the data.
+
+Method
+------
+* Three grids: (1) through the three points exactly.  With a constant
+  refinement ratio r = h2/h1 = h3/h2 this is Richardson's closed form
+  p = ln[(f3 - f2)/(f2 - f1)] / ln r, f0 = f1 + (f1 - f2)/(r^p - 1);
+  with uneven ratios p is the root of
+  (f3 - f2)/(f2 - f1) = (h3^p - h2^p)/(h2^p - h1^p), which is monotone in p
+  (Celik et al. 2008 solve the same equation by fixed-point iteration).
+* Four or more grids: least squares of (1) by variable projection: for a
+  fixed p, f0 and C are a linear least-squares problem; p minimises the
+  residual over a bounded interval.
+* Error estimate (``error``, the uncertainty of f0):
+  - three grids: Roache's grid convergence index of the finest grid,
+    GCI = Fs |f1 - f2| / (r21^p - 1) with Fs = 1.25 (order observed from
+    three grids; Roache 1998, Celik et al. 2008).  It is the band around f1
+    that holds f0, widened by Fs; since |f1 - f0| = GCI / Fs it is used here
+    as the uncertainty of f0 as well.
+  - four or more grids: Eca & Hoekstra (2014), who fit scattered data by
+    least squares: U = Fs |fit(h1) - f0| + sigma + |f1 - fit(h1)|, sigma the
+    standard deviation of the fit, Fs = 1.25 for monotone data and 3 when the
+    values oscillate (the fit is then kept, flagged ``non_monotone``, as
+    long as its order and residual pass).
+  The GCI is returned for every fit (``gci``), and the half range of the raw
+  values, (max f - min f)/2, always (``spread``): the uncertainty Stern et
+  al. (2001) use for oscillatory convergence, where no extrapolation exists.
+* Flags, never a silent number:
+  ``too_few_grids`` (fewer than ``min_grids`` finite values),
+  ``non_monotone`` (successive differences change sign: oscillatory
+  convergence; with three grids (1) has no solution and f0 is NaN),
+  ``poor_fit`` (order outside ``order_range``, no positive order (the
+  differences grow under refinement), or an rms residual above
+  ``max_relative_residual`` of the range of f).
+  Where a flag makes (1) meaningless, f0 and the error are NaN; the order
+  that was observed is kept (negative when the differences grow under
+  refinement), NaN when none was (oscillation, or no root with uneven
+  ratios); the raw values stay with the caller (and in
+  `extrapolate_sweep`'s output).
+
+All functions are pure.  h is any length proportional to the element size;
+brushcore uses h/L = 1/n (n elements per side of the square L x L), so the
+brush (L, pillars, k-bar) is the same on every grid.
+
+References
+----------
+Roache, P. J. (1998) Verification and Validation in Computational Science and
+Engineering, Hermosa, ch. 5; Roache, J. Fluids Eng. 116 (1994) 405-413.
+Celik, Ghia, Roache, Freitas, Coleman & Raad, J. Fluids Eng. 130 (2008)
+078001 ("Procedure for estimation and reporting of uncertainty due to
+discretization in CFD applications").
+Stern, Wilson, Coleman & Paterson, J. Fluids Eng. 123 (2001) 793-802.
+Eca & Hoekstra, J. Comput. Phys. 262 (2014) 104-130 ("A procedure for the
+estimation of the numerical uncertainty of CFD calculations based on grid
+refinement studies").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+from scipy import optimize
+
+#: Results the workflow extrapolates.
+QUANTITIES = ("adhesive_force_normalized", "work_of_separation_normalized")
+#: Dimension of the sweep that holds the resolution n (elements per side).
+GRID_DIM = "grid"
+#: Under this many elements per pillar radius a result is marked under-resolved.
+UNDER_RESOLVED_RADIUS = 4.0
+
+
+@dataclass(frozen=True)
+class ConvergenceOptions:
+    """Settings of the extrapolation.
+
+    Parameters
+    ----------
+    min_grids : fewest finite values that give an extrapolation (>= 3: three
+        unknowns f0, C, p).
+    order_range : (low, high] of plausible observed orders; outside it the
+        fit is flagged poor.  brushcore's edge-stress criterion is expected
+        near p = 1/2 ... 1 for forces; 0.3 ... 4 leaves room on both sides.
+    safety_factor : Roache's Fs of the grid convergence index (1.25 when the
+        order is observed from three or more grids).
+    scattered_safety_factor : Fs for four or more grids whose values are not
+        monotone (3, Eca & Hoekstra 2014).
+    max_relative_residual : largest rms residual of the least-squares fit
+        (four or more grids), relative to max f - min f, before the fit is
+        flagged poor.
+    order_bounds : interval searched for p (least squares and uneven
+        three-grid roots) [-].
+    flat_rtol : successive differences below this fraction of max |f| count
+        as zero: the sequence is converged to rounding, f0 = f1, error 0.
+    """
+
+    min_grids: int = 3
+    order_range: tuple[float, float] = (0.3, 4.0)
+    safety_factor: float = 1.25
+    scattered_safety_factor: float = 3.0
+    max_relative_residual: float = 0.1
+    order_bounds: tuple[float, float] = (0.02, 12.0)
+    flat_rtol: float = 1e-12
+
+    def __post_init__(self) -> None:
+        if self.min_grids < 3:
+            raise ValueError(f"min_grids={self.min_grids} is invalid: allowed >= 3")
+        lo, hi = self.order_range
+        if not 0 <= lo < hi:
+            raise ValueError(f"order_range={self.order_range} is invalid: allowed 0 <= low < high")
+        blo, bhi = self.order_bounds
+        if not 0 < blo < bhi:
+            raise ValueError(f"order_bounds={self.order_bounds} is invalid: allowed 0 < low < high")
+
+
+@dataclass(frozen=True)
+class Extrapolation:
+    """Result of fitting f(h) = f0 + C h^p.
+
+    Attributes
+    ----------
+    value : extrapolated f0 [units of f]; NaN when flagged meaningless.
+    error : estimated uncertainty of ``value`` [units of f] (see module doc).
+    order : observed order p [-].
+    coefficient : C [units of f / units of h^p].
+    finest : f on the finest grid used [units of f].
+    spread : half range (max f - min f)/2 of the finite values [units of f].
+    gci : Roache's grid convergence index of the finest grid [units of f].
+    residual : rms residual of the fit [units of f] (0 for three grids).
+    n_grids : finite values used.
+    non_monotone, poor_fit, too_few_grids : flags (see module doc).
+    """
+
+    value: float
+    error: float
+    order: float
+    coefficient: float
+    finest: float
+    spread: float
+    gci: float
+    residual: float
+    n_grids: int
+    non_monotone: bool
+    poor_fit: bool
+    too_few_grids: bool
+
+    @property
+    def ok(self) -> bool:
+        """True when no flag is raised."""
+        return not (self.non_monotone or self.poor_fit or self.too_few_grids)
+
+
+_NAN = math.nan
+
+
+def _prepare(h: Sequence[float], f: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Finite (h, f) pairs sorted finest first; checks h."""
+    h = np.asarray(h, dtype=np.float64).ravel()
+    f = np.asarray(f, dtype=np.float64).ravel()
+    if h.shape != f.shape:
+        raise ValueError(f"h and f differ in length: {h.size} and {f.size}")
+    if np.any(~np.isfinite(h)) or np.any(h <= 0):
+        raise ValueError(f"h={h.tolist()} is invalid: allowed finite values > 0")
+    keep = np.isfinite(f)
+    h, f = h[keep], f[keep]
+    order = np.argsort(h)
+    h, f = h[order], f[order]
+    if np.any(np.diff(h) <= 0):
+        raise ValueError(f"h={h.tolist()} is invalid: two grids with the same h")
+    return h, f
+
+
+def is_monotone(f_finest_first: np.ndarray, atol: float = 0.0) -> bool:
+    """True when successive differences never change sign (zeros ignored).
+
+    Parameters
+    ----------
+    f_finest_first : values ordered by increasing h.
+    atol : differences with magnitude <= atol count as zero.
+    """
+    d = np.diff(np.asarray(f_finest_first, dtype=np.float64))
+    s = np.sign(np.where(np.abs(d) <= atol, 0.0, d))
+    s = s[s != 0]
+    return bool(np.all(s == s[0])) if s.size else True
+
+
+def _ratio_gap(p: float, h: np.ndarray, target: float) -> float:
+    """(h3^p - h2^p)/(h2^p - h1^p) - target, with h scaled so h1 = 1."""
+    x = h / h[0]
+    return (x[2] ** p - x[1] ** p) / (x[1] ** p - 1.0) - target
+
+
+def _three_grid_order(h: np.ndarray, f: np.ndarray, bounds: tuple[float, float]) -> float:
+    """Observed order through three points; NaN when none is positive."""
+    target = (f[2] - f[1]) / (f[1] - f[0])
+    if not target > 0:
+        return _NAN  # oscillation: the caller flags it
+    r21, r32 = h[1] / h[0], h[2] / h[1]
+    if math.isclose(r21, r32, rel_tol=1e-9):
+        return math.log(target) / math.log(r21)  # Richardson's closed form
+    lo, hi = bounds
+    g_lo, g_hi = _ratio_gap(lo, h, target), _ratio_gap(hi, h, target)
+    if not np.isfinite(g_lo) or not np.isfinite(g_hi) or g_lo * g_hi > 0:
+        return _NAN
+    return float(optimize.brentq(_ratio_gap, lo, hi, args=(h, target), xtol=1e-12))
+
+
+def _linear_fit(x: np.ndarray, f: np.ndarray, p: float) -> tuple[float, float, float]:
+    """f0, C (for scaled x) and rms residual of f = f0 + C x^p at fixed p."""
+    design = np.column_stack([np.ones_like(x), x**p])
+    coef, *_ = np.linalg.lstsq(design, f, rcond=None)
+    resid = f - design @ coef
+    return float(coef[0]), float(coef[1]), float(np.sqrt(np.mean(resid**2)))
+
+
+def _least_squares_order(x: np.ndarray, f: np.ndarray, bounds: tuple[float, float]) -> float:
+    """p minimising the residual of the variable-projection fit (x scaled, x1 = 1)."""
+    lo, hi = bounds
+    # A log-spaced scan first: the residual can have several minima in p.
+    grid = np.geomspace(lo, hi, 241)
+    res = np.array([_linear_fit(x, f, p)[2] for p in grid])
+    i = int(np.argmin(res))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)]
+    if a == b:
+        return float(grid[i])
+    sol = optimize.minimize_scalar(
+        lambda p: _linear_fit(x, f, p)[2], bounds=(a, b), method="bounded",
+        options={"xatol": 1e-10},
+    )
+    return float(sol.x) if sol.fun <= res[i] else float(grid[i])
+
+
+def _extrapolate_sorted(
+    h: np.ndarray, f: np.ndarray, opts: ConvergenceOptions
+) -> tuple[float, float, float, float]:
+    """(f0, C, p, rms residual) of (1) on sorted finite data, NaN p on failure."""
+    x = h / h[0]  # scaled: x1 = 1, so C x^p stays representable for any p
+    if h.size == 3:
+        p = _three_grid_order(h, f, opts.order_bounds)
+        if not np.isfinite(p) or p <= 0:
+            return _NAN, _NAN, p, 0.0
+        f0 = f[0] + (f[0] - f[1]) / (x[1] ** p - 1.0)
+        c_scaled, resid = f[0] - f0, 0.0
+    else:
+        p = _least_squares_order(x, f, opts.order_bounds)
+        f0, c_scaled, resid = _linear_fit(x, f, p)
+    return f0, c_scaled / h[0] ** p, p, resid
+
+
+def extrapolate(
+    h: Sequence[float], f: Sequence[float], options: ConvergenceOptions | None = None
+) -> Extrapolation:
+    """Extrapolate f(h) = f0 + C h^p to h -> 0 with the observed order p.
+
+    Parameters
+    ----------
+    h : element sizes (any length proportional to h; brushcore uses 1/n) [length].
+    f : the result on each grid [any units]; NaN marks a grid not run.
+    options : `ConvergenceOptions`; defaults when None.
+
+    Returns
+    -------
+    Extrapolation
+        f0, error, p and the flags.  Flagged cases carry NaN where (1) is
+        meaningless, and always the finest value and the raw spread.
+
+    Raises
+    ------
+    ValueError
+        If h and f differ in length, an h is not positive and finite, or two
+        grids share an h.
+    """
+    opts = options or ConvergenceOptions()
+    h, f = _prepare(h, f)
+    n = int(h.size)
+    finest = float(f[0]) if n else _NAN
+    spread = float(0.5 * (f.max() - f.min())) if n else _NAN
+
+    def result(value=_NAN, error=_NAN, order=_NAN, coef=_NAN, gci=_NAN, resid=_NAN,
+               non_monotone=False, poor_fit=False, too_few=False) -> Extrapolation:
+        return Extrapolation(float(value), float(error), float(order), float(coef), finest,
+                             spread, float(gci), float(resid), n, bool(non_monotone),
+                             bool(poor_fit), bool(too_few))
+
+    if n < opts.min_grids:
+        return result(too_few=True)
+    flat = opts.flat_rtol * float(np.max(np.abs(f)))
+    if np.all(np.abs(np.diff(f)) <= flat):
+        # Converged to rounding: nothing to extrapolate, and no order to observe.
+        return result(value=finest, error=0.0, gci=0.0, resid=0.0)
+    monotone = is_monotone(f, atol=flat)
+    if not monotone and n == 3:
+        # Three points that oscillate admit no f0 + C h^p with p > 0.
+        return result(non_monotone=True)
+
+    f0, coef, p, resid = _extrapolate_sorted(h, f, opts)
+    if not np.isfinite(p) or p <= 0:
+        # Differences grow under refinement: no limit exists.  A negative
+        # observed order (constant ratio) is still reported: it says how fast.
+        return result(order=p, resid=resid, non_monotone=not monotone, poor_fit=True)
+    lo, hi = opts.order_range
+    scale = float(f.max() - f.min())
+    poor = not (lo < p <= hi) or resid > opts.max_relative_residual * scale
+    # Roache's GCI of the finest grid, from the two finest values.
+    gci = opts.safety_factor * abs(f[0] - f[1]) / ((h[1] / h[0]) ** p - 1.0)
+    if n == 3:
+        error = gci
+    else:
+        # Eca & Hoekstra (2014): U = Fs |fit(h1) - f0| + sigma + |f1 - fit(h1)|,
+        # sigma the standard deviation of the fit; Fs = 3 for scattered data.
+        fit1 = f0 + coef * h[0] ** p
+        sigma = resid * math.sqrt(n / (n - 3))
+        fs = opts.safety_factor if monotone else opts.scattered_safety_factor
+        error = fs * abs(fit1 - f0) + sigma + abs(f[0] - fit1)
+    if poor:
+        # Report the order that was observed, but no limit built on it.
+        return result(order=p, coef=coef, gci=gci, resid=resid, non_monotone=not monotone,
+                      poor_fit=True)
+    return result(value=f0, error=error, order=p, coef=coef, gci=gci, resid=resid,
+                  non_monotone=not monotone)
+
+
+# ---------------------------------------------------------------------------
+# Sweep datasets
+# ---------------------------------------------------------------------------
+
+#: Per-quantity outputs of `extrapolate_sweep`: suffix -> (long-name template, is_flag).
+_OUTPUTS = {
+    "extrapolated": ("{q} extrapolated to h -> 0", False),
+    "error": ("estimated uncertainty of the extrapolated {q}", False),
+    "order": ("observed order p of {q} = f0 + C h^p", False),
+    "coefficient": ("coefficient C of {q} = f0 + C h^p, h = 1/n", False),
+    "finest": ("{q} on the finest grid run", False),
+    "spread": ("half range of {q} over the grids", False),
+    "gci": ("grid convergence index of the finest {q} (Roache, Fs = 1.25)", False),
+    "n_grids": ("grids with a finite {q}", False),
+    "non_monotone": ("{q} oscillates under refinement (1 = yes)", True),
+    "poor_fit": ("{q} does not follow f0 + C h^p with a plausible order (1 = yes)", True),
+    "too_few_grids": ("fewer than three grids with a finite {q} (1 = yes)", True),
+}
+
+
+def _apply(values: np.ndarray, h: np.ndarray, opts: ConvergenceOptions) -> tuple[float, ...]:
+    e = extrapolate(h, values, opts)
+    return (e.value, e.error, e.order, e.coefficient, e.finest, e.spread, e.gci,
+            float(e.n_grids), float(e.non_monotone), float(e.poor_fit), float(e.too_few_grids))
+
+
+def _finest_index(values: np.ndarray) -> int:
+    """Index (along grid, ascending n) of the finest finite value, -1 if none."""
+    idx = np.flatnonzero(np.isfinite(values))
+    return int(idx[-1]) if idx.size else -1
+
+
+def extrapolate_sweep(
+    sweep: xr.Dataset,
+    quantities: Sequence[str] = QUANTITIES,
+    options: ConvergenceOptions | None = None,
+) -> xr.Dataset:
+    """Extrapolate every case of a sweep to h -> 0 along its ``grid`` dimension.
+
+    Parameters
+    ----------
+    sweep : aggregated sweep with a ``grid`` dimension (coordinate: elements
+        per side n) beside the case dimensions (layout, n_pillars, kbar, seed,
+        and any other); NaN where a combination was not run.  If it holds
+        ``pillar_radius_elements`` (same dims) that is used, else the nominal
+        radius n sqrt(phi / (pi N)) with the ``phi`` coordinate or attribute.
+    quantities : variables to extrapolate.
+    options : `ConvergenceOptions`; defaults when None.
+
+    Returns
+    -------
+    xarray.Dataset
+        On the case dimensions: ``{q}_extrapolated``, ``{q}_error``,
+        ``{q}_order``, ``{q}_coefficient``, ``{q}_finest``, ``{q}_spread``, ``{q}_gci``,
+        ``{q}_n_grids`` and the int8 flags ``{q}_non_monotone``,
+        ``{q}_poor_fit``, ``{q}_too_few_grids``; the raw values ``{q}`` on
+        (cases..., grid); ``finest_grid`` and ``pillar_radius_elements_finest``
+        of the finest grid run; ``h`` = 1/n on ``grid``.
+
+    Raises
+    ------
+    ValueError
+        If the sweep has no ``grid`` dimension or lacks a quantity.
+    """
+    opts = options or ConvergenceOptions()
+    if GRID_DIM not in sweep.dims:
+        raise ValueError(f"the sweep has no '{GRID_DIM}' dimension (dims: {dict(sweep.sizes)})")
+    missing = [q for q in quantities if q not in sweep]
+    if missing:
+        raise ValueError(f"the sweep lacks {missing}")
+    sweep = sweep.sortby(GRID_DIM)
+    n = sweep[GRID_DIM].astype(np.float64)
+    h = xr.DataArray(1.0 / n.values, dims=GRID_DIM, coords={GRID_DIM: sweep[GRID_DIM]},
+                     attrs={"units": "1", "long_name": "element size h / L = 1/n"})
+    out: dict[str, xr.DataArray] = {}
+    for q in quantities:
+        raw = sweep[q]
+        results = xr.apply_ufunc(
+            _apply, raw, kwargs={"h": h.values, "opts": opts},
+            input_core_dims=[[GRID_DIM]], output_core_dims=[[]] * len(_OUTPUTS),
+            vectorize=True, output_dtypes=[np.float64] * len(_OUTPUTS),
+        )
+        units = raw.attrs.get("units", "1")
+        for (suffix, (long_name, is_flag)), da in zip(_OUTPUTS.items(), results):
+            attrs = {"long_name": long_name.format(q=q)}
+            if is_flag:
+                da = da.astype(np.int8)
+                attrs.update(units="1", flag_values=np.array([0, 1], dtype=np.int8),
+                             flag_meanings="no yes")
+            elif suffix in ("order", "n_grids"):
+                attrs["units"] = "1"
+            else:
+                attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
+            out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
+        out[q] = raw.copy()
+    # Finest grid run per case (finite first quantity), and its resolution.
+    anyq = sweep[quantities[0]]
+    finest_i = xr.apply_ufunc(_finest_index, anyq, input_core_dims=[[GRID_DIM]],
+                              vectorize=True, output_dtypes=[np.int64])
+    idx = finest_i.clip(min=0)
+    finest_n = xr.where(finest_i >= 0, sweep[GRID_DIM].isel({GRID_DIM: idx}, drop=True), np.nan)
+    out["finest_grid"] = finest_n.astype(np.float64).assign_attrs(
+        units="1", long_name="elements per side n of the finest grid run")
+    if "pillar_radius_elements" in sweep:
+        rad = sweep["pillar_radius_elements"].isel({GRID_DIM: idx}, drop=True)
+        rad = xr.where(finest_i >= 0, rad, np.nan)
+    else:
+        phi = sweep["phi"] if "phi" in sweep.coords else float(sweep.attrs.get("phi", np.nan))
+        rad = finest_n * np.sqrt(phi / (np.pi * sweep["n_pillars"].astype(np.float64)))
+    out["pillar_radius_elements_finest"] = rad.assign_attrs(
+        units="1", long_name="pillar radius a_p / h on the finest grid run [elements]")
+    ds = xr.Dataset(out).assign_coords(h=h)
+    ds.attrs = {
+        "title": "brushcore mesh-refinement study: results extrapolated to h -> 0",
+        "Conventions": "CF-1.10",
+        "comment": ("f(h) = f0 + C h^p with the observed order p; error = Roache's GCI "
+                    "(3 grids) or Eca & Hoekstra's least-squares uncertainty (>= 4 grids); "
+                    "f0 is NaN where a flag makes the fit meaningless"),
+        "references": ("Roache (1998); Celik et al., J. Fluids Eng. 130 (2008) 078001; "
+                       "Eca & Hoekstra, J. Comput. Phys. 262 (2014) 104; "
+                       "Stern et al., J. Fluids Eng. 123 (2001) 793"),
+        "order_range": f"({opts.order_range[0]}, {opts.order_range[1]}]",
+        "safety_factor": opts.safety_factor,
+        "scattered_safety_factor": opts.scattered_safety_factor,
+        "max_relative_residual": opts.max_relative_residual,
+        "min_grids": opts.min_grids,
+        "under_resolved_radius_elements": UNDER_RESOLVED_RADIUS,
+    }
+    return ds
+
+
+def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
+    """Write `extrapolate_sweep`'s dataset to netCDF4 atomically (CF: no fill on coordinates)."""
+    from brushcore.io import publish
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        conv.to_netcdf(tmp, engine="netcdf4",
+                       encoding={name: {"_FillValue": None} for name in conv.coords})
+        publish(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+# ---------------------------------------------------------------------------
+# Tables
+# ---------------------------------------------------------------------------
+
+_SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
+
+
+def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
+    """One row per (case, quantity) that was run on at least one grid.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Case columns, the quantity, one column ``n=<grid>`` per grid with the
+        raw value, the finest radius in elements, extrapolated value, error,
+        order and the flags (as a comma-separated ``flags`` column).
+    """
+    import pandas as pd
+
+    case_dims = [d for d in conv[f"{quantities[0]}_extrapolated"].dims]
+    grids = [int(g) for g in conv[GRID_DIM].values]
+    rows = []
+    stacked = conv.stack(case=case_dims) if case_dims else conv.expand_dims(case=[0])
+    for i in range(stacked.sizes["case"]):
+        one = stacked.isel(case=i)
+        for q in quantities:
+            raw = one[q].values
+            if not np.any(np.isfinite(raw)):
+                continue
+            row = {d: one[d].values.item() for d in case_dims}
+            row["quantity"] = _SHORT.get(q, q)
+            for g, v in zip(grids, raw):
+                row[f"n={g}"] = float(v)
+            row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
+            for s in ("extrapolated", "error", "order"):
+                row[s] = float(one[f"{q}_{s}"])
+            flags = [f for f in ("non_monotone", "poor_fit", "too_few_grids")
+                     if int(one[f"{q}_{f}"])]
+            if row["radius_elements_finest"] < UNDER_RESOLVED_RADIUS:
+                flags.append("under_resolved")
+            row["flags"] = ",".join(flags)
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _fmt(value: object) -> str:
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "NaN"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return f"{value:.5g}"
+    return str(value)
+
+
+def to_markdown(table) -> str:
+    """A GitHub-flavoured Markdown table (no optional dependency)."""
+    cols = list(table.columns)
+    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    for _, row in table.iterrows():
+        lines.append("| " + " | ".join(_fmt(row[c]) for c in cols) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
+                 quantities: Sequence[str] = QUANTITIES) -> None:
+    """Write `convergence_table` as CSV (full precision) and Markdown (5 digits)."""
+    table = convergence_table(conv, quantities)
+    for p in (csv_path, md_path):
+        Path(p).parent.mkdir(parents=True, exist_ok=True)
+    table.to_csv(csv_path, index=False)
+    header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
+              "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
+              "uncertainty (>= 4 grids). "
+              f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements.\n\n")
+    Path(md_path).write_text(header + to_markdown(table))

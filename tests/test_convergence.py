@@ -1,0 +1,331 @@
+"""Mesh-refinement extrapolation (brushcore.convergence): synthetic data with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from brushcore.convergence import (
+    ConvergenceOptions,
+    convergence_table,
+    extrapolate,
+    extrapolate_sweep,
+    is_monotone,
+    write_tables,
+)
+
+F0, C = 1.7, 0.8
+
+
+def law(h, p, f0=F0, c=C):
+    return f0 + c * np.asarray(h, dtype=float) ** p
+
+
+@pytest.mark.parametrize("p", [0.5, 1.0, 2.0, 3.5])
+def test_three_grids_constant_ratio_exact(p):
+    h = 1.0 / np.array([128.0, 256.0, 512.0])
+    e = extrapolate(h, law(h, p))
+    assert e.ok, e
+    assert e.order == pytest.approx(p, rel=1e-6), "Richardson's closed-form order"
+    assert e.value == pytest.approx(F0, rel=1e-10)
+    assert e.coefficient == pytest.approx(C, rel=1e-5)
+    # Roache's GCI: Fs |f1 - f2| / (r^p - 1) = Fs |f1 - f0|, and it covers f0.
+    assert e.error == pytest.approx(1.25 * abs(e.finest - F0), rel=1e-8)
+    assert abs(e.finest - F0) <= e.error
+
+
+def test_order_of_input_does_not_matter():
+    h = 1.0 / np.array([512.0, 128.0, 256.0])
+    e = extrapolate(h, law(h, 1.0))
+    assert e.value == pytest.approx(F0, rel=1e-10) and e.order == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("p", [0.6, 1.0, 2.5])
+def test_three_grids_uneven_ratio(p):
+    h = 1.0 / np.array([100.0, 300.0, 420.0])  # ratios 1.4 and 3
+    e = extrapolate(h, law(h, p))
+    assert e.ok, e
+    assert e.order == pytest.approx(p, rel=1e-8)
+    assert e.value == pytest.approx(F0, rel=1e-9)
+
+
+@pytest.mark.parametrize("p", [0.5, 1.0, 2.0])
+def test_five_uneven_grids_least_squares(p):
+    h = 1.0 / np.array([96.0, 160.0, 256.0, 400.0, 700.0])
+    e = extrapolate(h, law(h, p))
+    assert e.ok, e
+    assert e.order == pytest.approx(p, rel=1e-5)
+    assert e.value == pytest.approx(F0, rel=1e-7)
+    assert e.residual < 1e-9
+
+
+def test_five_grids_with_noise_error_bar_covers_limit():
+    rng = np.random.default_rng(12)
+    h = 1.0 / np.array([128.0, 192.0, 256.0, 384.0, 512.0])
+    clean = law(h, 1.0)
+    noise = 2e-4 * (clean.max() - clean.min())
+    hits = 0
+    for _ in range(20):
+        e = extrapolate(h, clean + rng.normal(0.0, noise, h.size))
+        assert not e.non_monotone and not e.too_few_grids
+        assert e.order == pytest.approx(1.0, abs=0.15)
+        hits += abs(e.value - F0) <= e.error
+    assert hits >= 19, f"error bar covers the true limit in {hits}/20 noisy fits"
+
+
+def test_three_grids_with_noise():
+    h = 1.0 / np.array([256.0, 512.0, 1024.0])
+    f = law(h, 1.0) * (1 + np.array([1e-6, -1e-6, 1e-6]))
+    e = extrapolate(h, f)
+    assert e.ok and e.order == pytest.approx(1.0, abs=0.05)
+    assert abs(e.value - F0) <= e.error
+
+
+def test_non_monotone_flagged_with_nan():
+    h = 1.0 / np.array([128.0, 256.0, 512.0])
+    f = [1.7228, 1.7262, 1.6998]  # measured: rigid 8 x 8 brush, F_ad/F_K
+    e = extrapolate(h, f)
+    assert e.non_monotone and not e.ok
+    assert math.isnan(e.value) and math.isnan(e.order) and math.isnan(e.error)
+    assert e.finest == 1.6998 and e.spread == pytest.approx(0.0132)
+    assert not is_monotone(np.array([1.0, 2.0, 1.5]))
+    assert is_monotone(np.array([1.0, 1.0, 2.0, 3.0]))
+
+
+def test_divergent_sequence_is_poor_fit():
+    # Differences grow under refinement (order < 0): there is no limit.
+    h = 1.0 / np.array([128.0, 256.0, 512.0])
+    e = extrapolate(h, [1.4365, 1.4050, 1.3529])
+    assert e.poor_fit and math.isnan(e.value) and math.isnan(e.error)
+    assert e.order == pytest.approx(math.log(0.0315 / 0.0521) / math.log(2), rel=1e-6), \
+        "the (negative) observed order is reported"
+
+
+def test_order_outside_plausible_range_is_poor_fit():
+    h = 1.0 / np.array([128.0, 256.0, 512.0])
+    e = extrapolate(h, law(h, 6.0, c=1e10))
+    assert e.poor_fit
+    assert e.order == pytest.approx(6.0, rel=1e-9), "the observed order is still reported"
+    assert math.isnan(e.value)
+    loose = extrapolate(h, law(h, 6.0, c=1e10), ConvergenceOptions(order_range=(0.3, 8.0)))
+    assert loose.ok and loose.value == pytest.approx(F0, rel=1e-9)
+
+
+def test_scattered_many_grids_kept_with_wider_error():
+    # A clear trend with a small oscillation on top (the staircase of a
+    # pillar's disc on the grid does this): fitted, flagged, Fs = 3.
+    h = 1.0 / np.array([128.0, 160.0, 192.0, 256.0, 320.0, 384.0, 512.0])
+    wiggle = 4e-4 * np.array([1, -1, 1, -1, 1, -1, 1])
+    e = extrapolate(h, law(h, 1.0) + wiggle)
+    assert e.non_monotone and not e.poor_fit
+    assert 0.5 < e.order < 2.5
+    assert abs(e.value - F0) <= e.error
+    assert e.error > e.gci, "Fs = 3 and the scatter widen the band beyond Roache's GCI"
+
+
+def test_large_residual_is_poor_fit():
+    # Monotone, but not a power law: a kink a single h^p cannot follow.
+    h = 1.0 / np.array([64.0, 128.0, 256.0, 512.0, 1024.0])
+    f = np.array([1.0, 1.0001, 1.0002, 1.2, 1.21])
+    e = extrapolate(h, f)
+    assert e.poor_fit and math.isnan(e.value)
+    assert e.residual > 0
+
+
+def test_too_few_grids_and_nan():
+    h = 1.0 / np.array([128.0, 256.0, 512.0, 1024.0])
+    f = law(h, 1.0)
+    two = extrapolate(h, [f[0], np.nan, np.nan, f[3]])
+    assert two.too_few_grids and two.n_grids == 2
+    assert math.isnan(two.value) and two.finest == f[3]
+    three = extrapolate(h, [f[0], np.nan, f[2], f[3]])  # uneven after the gap
+    assert three.ok and three.n_grids == 3
+    assert three.value == pytest.approx(F0, rel=1e-9)
+    none = extrapolate(h, [np.nan] * 4)
+    assert none.too_few_grids and math.isnan(none.finest)
+
+
+def test_converged_to_rounding():
+    e = extrapolate([0.1, 0.2, 0.4], [2.0, 2.0, 2.0])
+    assert e.ok and e.value == 2.0 and e.error == 0.0 and math.isnan(e.order)
+
+
+def test_bad_input_raises():
+    with pytest.raises(ValueError, match="same h"):
+        extrapolate([0.1, 0.1, 0.2], [1, 2, 3])
+    with pytest.raises(ValueError, match="differ in length"):
+        extrapolate([0.1, 0.2], [1, 2, 3])
+    with pytest.raises(ValueError, match="h=.*invalid"):
+        extrapolate([0.1, -0.2, 0.3], [1, 2, 3])
+    with pytest.raises(ValueError, match="min_grids"):
+        ConvergenceOptions(min_grids=2)
+
+
+def _sweep() -> xr.Dataset:
+    """Two cases on four grids, one case missing its finest grid, one oscillating."""
+    grids = np.array([128, 256, 512, 1024])
+    h = 1.0 / grids
+    layouts, n_pillars, kbars, seeds = ["regular"], [64, 256], [1e-6, np.inf], [0]
+    shape = (1, 2, 2, 1, 4)
+    fad = np.full(shape, np.nan)
+    wsep = np.full(shape, np.nan)
+    fad[0, 0, 0, 0] = law(h, 1.0, f0=2.4)
+    fad[0, 0, 1, 0] = law(h, 0.5, f0=1.7)
+    fad[0, 1, 0, 0, :3] = law(h[:3], 2.0, f0=3.0)  # 1024 not run
+    fad[0, 1, 1, 0] = [1.8, 1.9, 1.85, 1.88]  # oscillates
+    wsep[:] = 2.0 * fad
+    dims = ("layout", "n_pillars", "kbar", "seed", "grid")
+    coords = {"layout": layouts, "n_pillars": n_pillars, "kbar": kbars, "seed": seeds,
+              "grid": grids}
+    attrs = {"units": "1", "long_name": "x"}
+    return xr.Dataset(
+        {"adhesive_force_normalized": (dims, fad, attrs),
+         "work_of_separation_normalized": (dims, wsep, attrs)},
+        coords=coords, attrs={"phi": 0.12},
+    )
+
+
+def test_sweep_dataset_round_trip(tmp_path):
+    conv = extrapolate_sweep(_sweep())
+    q = "adhesive_force_normalized"
+    sel = dict(layout="regular", seed=0)
+    assert float(conv[f"{q}_extrapolated"].sel(n_pillars=64, kbar=1e-6, **sel)) == \
+        pytest.approx(2.4, rel=1e-8)
+    assert float(conv[f"{q}_order"].sel(n_pillars=64, kbar=np.inf, **sel)) == \
+        pytest.approx(0.5, rel=1e-5)
+    three = conv.sel(n_pillars=256, kbar=1e-6, **sel)
+    assert float(three[f"{q}_extrapolated"]) == pytest.approx(3.0, rel=1e-8)
+    assert int(three[f"{q}_n_grids"]) == 3 and float(three["finest_grid"]) == 512
+    assert float(three["pillar_radius_elements_finest"]) == pytest.approx(
+        512 * math.sqrt(0.12 / (math.pi * 256)))
+    osc = conv.sel(n_pillars=256, kbar=np.inf, **sel)
+    assert int(osc[f"{q}_non_monotone"]) == 1 and np.isnan(float(osc[f"{q}_extrapolated"]))
+    assert float(osc[q].sel(grid=1024)) == 1.88, "raw values are kept"
+    w = "work_of_separation_normalized"
+    assert float(conv[f"{w}_extrapolated"].sel(n_pillars=64, kbar=1e-6, **sel)) == \
+        pytest.approx(4.8, rel=1e-8)
+
+    path = tmp_path / "convergence.nc"
+    conv.to_netcdf(path)
+    with xr.open_dataset(path) as back:
+        xr.testing.assert_allclose(back.load(), conv)
+        assert back[f"{q}_non_monotone"].dtype == np.int8
+
+    csv, md = tmp_path / "c.csv", tmp_path / "c.md"
+    write_tables(conv, csv, md)
+    table = convergence_table(conv)
+    assert len(table) == 8  # 4 cases x 2 quantities
+    assert "n=1024" in table.columns and "radius_elements_finest" in table.columns
+    text = md.read_text()
+    assert "non_monotone" in text and "| regular |" in text
+    assert csv.read_text().count("\n") == 9
+
+
+def test_sweep_uses_recorded_radius_and_needs_grid():
+    sweep = _sweep()
+    rad = xr.full_like(sweep["adhesive_force_normalized"], 7.0)
+    conv = extrapolate_sweep(sweep.assign(pillar_radius_elements=rad))
+    assert float(conv["pillar_radius_elements_finest"].max()) == 7.0
+    with pytest.raises(ValueError, match="no 'grid' dimension"):
+        extrapolate_sweep(sweep.isel(grid=0))
+
+
+# ---------------------------------------------------------------------------
+# Grid as a sweep dimension: real (tiny) curve files through build_sweep
+# ---------------------------------------------------------------------------
+
+GRIDS = (32, 48, 64)
+
+
+@pytest.fixture(scope="module")
+def refinement_curves(tmp_path_factory: pytest.TempPathFactory) -> list:
+    """2 x 2 regular brushes, rigid and soft, on 32, 48, 64; soft misses 48 (not run)."""
+    from brushcore import BrushParams, simulate
+    from brushcore.io import write_curve
+
+    folder = tmp_path_factory.mktemp("refinement")
+    paths = []
+    for kbar in (math.inf, 1e-3):
+        for grid in GRIDS:
+            if kbar == 1e-3 and grid == 48:
+                continue  # a missing combination
+            curve = simulate(BrushParams("regular", 4, kbar, grid))
+            paths.append(write_curve(curve, folder / f"k{kbar}_g{grid}.nc"))
+    return paths
+
+
+def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, tmp_path):
+    from brushcore.aggregate import GRID_DIM, build_sweep, finest_grid, write_sweep
+
+    sweep = build_sweep(refinement_curves)
+    assert sweep["adhesive_force_normalized"].dims == (
+        "layout", "n_pillars", "kbar", "seed", GRID_DIM)
+    assert sweep["force"].dims[-2:] == (GRID_DIM, "step")
+    assert sweep[GRID_DIM].values.tolist() == list(GRIDS)
+    assert np.atleast_1d(sweep.attrs["grid"]).tolist() == list(GRIDS)
+    soft = sweep.sel(layout="regular", n_pillars=4, kbar=1e-3, seed=0)
+    rigid = sweep.sel(layout="regular", n_pillars=4, kbar=np.inf, seed=0)
+    assert np.isnan(float(soft["adhesive_force_normalized"].sel(grid=48)))
+    assert np.isnan(soft["force"].sel(grid=48).values).all()
+    assert np.isfinite(rigid["adhesive_force_normalized"].values).all()
+    radius = rigid["pillar_radius_elements"].values
+    assert radius == pytest.approx(np.array(GRIDS) * math.sqrt(0.12 / (4 * math.pi)))
+    # Snapshot maps of different grids cannot share (y, x): only the finest is kept.
+    if "contact_snapshot" in sweep:
+        assert set(sweep["case_grid"].values.tolist()) == {64}
+        assert sweep.sizes["x"] == 64
+
+    # One value per case for the figures and the summary: the finest grid run.
+    one = finest_grid(sweep)
+    assert GRID_DIM not in one.dims
+    assert float(one["grid_used"].sel(kbar=1e-3, layout="regular", n_pillars=4, seed=0)) == 64
+    assert float(one["adhesive_force_normalized"].sel(
+        kbar=1e-3, layout="regular", n_pillars=4, seed=0)) == \
+        float(soft["adhesive_force_normalized"].sel(grid=64))
+
+    path = tmp_path / "sweep.nc"
+    write_sweep(sweep, path)
+    with xr.open_dataset(path) as back:
+        conv = extrapolate_sweep(back)
+    q = "adhesive_force_normalized"
+    assert int(conv[f"{q}_n_grids"].sel(kbar=1e-3).squeeze()) == 2
+    assert int(conv[f"{q}_too_few_grids"].sel(kbar=1e-3).squeeze()) == 1
+    assert int(conv[f"{q}_n_grids"].sel(kbar=np.inf).squeeze()) == 3
+    assert float(conv["pillar_radius_elements_finest"].sel(kbar=1e-3).squeeze()) == \
+        pytest.approx(radius[-1])
+
+
+def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
+    from brushcore import figures
+    from brushcore.aggregate import build_sweep
+    from brushcore.summary import headline_rows, value_at
+
+    sweep = build_sweep(refinement_curves)
+    assert value_at(sweep, "adhesive_force_normalized", "regular", 4, math.inf) == float(
+        sweep["adhesive_force_normalized"].sel(grid=64, kbar=np.inf).squeeze())
+    rows = headline_rows(sweep, fig5_n_pillars=4, fig5_kbar=math.inf)
+    radius_rows = [r for r in rows if r.quantity.startswith("pillar radius")]
+    assert radius_rows and radius_rows[0].value == f"{64 * math.sqrt(0.12 / (4 * math.pi)):.3g}"
+    assert "UNDER-RESOLVED" not in radius_rows[0].note and "grid 64" in radius_rows[0].note
+    for draw in (figures.fig6, figures.fig7, figures.fig8):
+        draw(sweep)
+    figures.fig5(sweep, n_pillars=4, kbar=(1e-3,))
+    figures.save(figures.convergence(extrapolate_sweep(sweep)), tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 0
+
+
+def test_summary_marks_under_resolved():
+    from brushcore.summary import _resolution_row
+
+    dims = ("layout", "n_pillars", "kbar", "seed")
+    coords = {"layout": ["regular"], "n_pillars": [2304], "kbar": [1.0], "seed": [0]}
+    sweep = xr.Dataset({
+        "adhesive_force_normalized": (dims, np.full((1, 1, 1, 1), 1.9)),
+        "pillar_radius_elements": (dims, np.full((1, 1, 1, 1), 2.08)),
+        "grid_used": (dims, np.full((1, 1, 1, 1), 512.0)),
+    }, coords=coords)
+    row = _resolution_row(sweep, "regular", 2304)
+    assert row.value == "2.08" and "UNDER-RESOLVED" in row.note and "grid 512" in row.note
