@@ -22,7 +22,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.convolution import Convolver
+from brushcore.numerics.convolution import Convolver
 
 CASES = [("regular", 256, 0.455), ("regular", 64, 1e-3), ("regular", 2304, 1e-4)]
 

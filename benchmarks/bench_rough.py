@@ -19,7 +19,7 @@ import argparse
 import time
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.threads import pin_threads
+from brushcore.numerics.threads import pin_threads
 
 
 def main() -> None:

@@ -6,7 +6,7 @@
 Runs each (kbar, grid) once (curve files already in --out are reused), then
 prints the values per grid, the realised filling factor, the pillar radius in
 elements, the wall time, and the extrapolation of F_ad and W to h -> 0
-(`brushcore.convergence`), for the whole grid set and for every subset of
+(`brushcore.data.convergence`), for the whole grid set and for every subset of
 three grids given with --subsets.
 """
 
@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.aggregate import build_sweep
-from brushcore.convergence import (QUANTITIES, convergence_table, extrapolate,
+from brushcore.data.aggregate import build_sweep
+from brushcore.data.convergence import (QUANTITIES, convergence_table, extrapolate,
                                    extrapolate_sweep, to_markdown)
-from brushcore.io import write_curve
-from brushcore.threads import pin_threads
+from brushcore.data.io import write_curve
+from brushcore.numerics.threads import pin_threads
 
 
 def _kbar(text: str) -> float:

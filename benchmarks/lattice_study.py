@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from brushcore import BrushParams, simulate, theory
-from brushcore.lattices import hexagonal_fill
-from brushcore.layout import build_labels
+from brushcore.model.lattices import hexagonal_fill
+from brushcore.model.layout import build_labels
 
 KBARS = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, math.inf)
 LAYOUTS = ("regular", "hexagonal", "random")

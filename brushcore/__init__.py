@@ -4,9 +4,22 @@ Boundary elements on a non-periodic elastic half space (pruned DC-FFT),
 pillar springs coupled into the influence operator, preconditioned CG, the
 mesh-dependent JKR detachment criterion of Pohrt & Popov (2015), and an
 event-driven displacement-controlled pull-off (He, Li & Popov 2020).
+
+The package is layered; imports point down only:
+
+- ``brushcore.numerics``: the engine (kernel, DC-FFT convolution, operator,
+  preconditioners, CG, event-driven pull-off and protocols, options, threads);
+- ``brushcore.model``: the physical problem (parameters, layouts and shapes,
+  rough and graded inputs, theory, one curve as a Dataset, provenance);
+- ``brushcore.data``: files and analysis (curve files, the aggregated sweep,
+  convergence studies, summary tables, figures, job logs);
+- ``brushcore.cli`` on top, and ``brushcore.validation`` (the error type) below all.
 """
 
-from .params import BrushParams, ParameterError, SolverOptions
-from .curve import simulate
+from brushcore.model import theory
+from brushcore.model.curve import simulate
+from brushcore.model.params import BrushParams
+from brushcore.numerics.options import SolverOptions
+from brushcore.validation import ParameterError
 
-__all__ = ["BrushParams", "ParameterError", "SolverOptions", "simulate"]
+__all__ = ["BrushParams", "ParameterError", "SolverOptions", "simulate", "theory"]

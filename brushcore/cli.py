@@ -17,12 +17,14 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from .cg import ConvergenceError
-from .joblog import EXIT_INTERRUPTED, INTERRUPTED
-from .params import LAYOUTS, MAX_ASPECT, BrushParams, ParameterError, SolverOptions
-from .provenance import version
-from .pulloff import SolverError
-from .shapes import SHAPES
+from brushcore.numerics.cg import ConvergenceError
+from brushcore.data.joblog import EXIT_INTERRUPTED, INTERRUPTED
+from brushcore.model.params import LAYOUTS, MAX_ASPECT, BrushParams
+from brushcore.numerics.options import SolverOptions
+from brushcore.validation import ParameterError
+from brushcore.model.provenance import version
+from brushcore.numerics.pulloff import SolverError
+from brushcore.model.shapes import SHAPES
 
 #: API parameter -> the flag that sets it, for error messages.
 FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "--phi",
@@ -204,7 +206,7 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
                   dgamma=args.dgamma, h=args.h, allow_coarse=args.allow_coarse,
                   shape=args.shape, aspect=args.aspect, orientation=args.orientation)
     if args.layout == "file":
-        from .layout_file import file_params
+        from brushcore.model.layout_file import file_params
 
         if args.layout_file is None:
             raise _Missing("--layout-file is required for --layout file")
@@ -225,11 +227,11 @@ class _Missing(Exception):
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .curve import simulate
-    from .io import check_output_path, write_curve
-    from .layout import build_labels
-    from .inputs import read_gap_map, read_pillar_values
-    from .threads import pin_threads
+    from brushcore.model.curve import simulate
+    from brushcore.data.io import check_output_path, write_curve
+    from brushcore.model.layout import build_labels
+    from brushcore.model.inputs import read_gap_map, read_pillar_values
+    from brushcore.numerics.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
     try:

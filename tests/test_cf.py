@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from brushcore import BrushParams, simulate
-from brushcore.aggregate import build_sweep, write_sweep
-from brushcore.io import write_curve
+from brushcore.data.aggregate import build_sweep, write_sweep
+from brushcore.data.io import write_curve
 
 pytest.importorskip("compliance_checker")
 
@@ -63,7 +63,7 @@ def test_sweep_keeps_every_parameter(curve_files):
 
 
 def test_convergence_is_cf_clean(curve_files, tmp_path):
-    from brushcore.convergence import extrapolate_sweep, write_dataset
+    from brushcore.data.convergence import extrapolate_sweep, write_dataset
 
     path = tmp_path / "convergence.nc"
     write_dataset(extrapolate_sweep(build_sweep(curve_files)), path)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from brushcore.cli import main
-from brushcore.io import CurveFileError, read_curve, write_curve
+from brushcore.data.io import CurveFileError, read_curve, write_curve
 
 
 def test_simulate_writes_a_complete_curve(tmp_path, capsys):

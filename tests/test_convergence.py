@@ -1,4 +1,4 @@
-"""Mesh-refinement extrapolation (brushcore.convergence): synthetic data with known answers."""
+"""Mesh-refinement extrapolation (brushcore.data.convergence): synthetic data with known answers."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from brushcore.convergence import (
+from brushcore.data.convergence import (
     ConvergenceOptions,
     convergence_table,
     extrapolate,
@@ -244,7 +244,7 @@ GRIDS = (32, 48, 64)
 def refinement_curves(tmp_path_factory: pytest.TempPathFactory) -> list:
     """2 x 2 regular brushes, rigid and soft, on 32, 48, 64; soft misses 48 (not run)."""
     from brushcore import BrushParams, simulate
-    from brushcore.io import write_curve
+    from brushcore.data.io import write_curve
 
     folder = tmp_path_factory.mktemp("refinement")
     paths = []
@@ -258,7 +258,7 @@ def refinement_curves(tmp_path_factory: pytest.TempPathFactory) -> list:
 
 
 def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, tmp_path):
-    from brushcore.aggregate import GRID_DIM, build_sweep, finest_grid, write_sweep
+    from brushcore.data.aggregate import GRID_DIM, build_sweep, finest_grid, write_sweep
 
     sweep = build_sweep(refinement_curves)
     assert sweep["adhesive_force_normalized"].dims == (
@@ -299,9 +299,9 @@ def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, 
 
 
 def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
-    from brushcore import figures
-    from brushcore.aggregate import build_sweep
-    from brushcore.summary import headline_rows, value_at
+    from brushcore.data import figures
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.summary import headline_rows, value_at
 
     sweep = build_sweep(refinement_curves)
     assert value_at(sweep, "adhesive_force_normalized", "regular", 4, math.inf) == float(
@@ -318,7 +318,7 @@ def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
 
 
 def test_summary_marks_under_resolved():
-    from brushcore.summary import _resolution_row
+    from brushcore.data.summary import _resolution_row
 
     dims = ("layout", "n_pillars", "kbar", "seed")
     coords = {"layout": ["regular"], "n_pillars": [2304], "kbar": [1.0], "seed": [0]}

@@ -10,11 +10,11 @@ import pytest
 from conftest import punch_params
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate, theory
-from brushcore.curve import run
-from brushcore.lattices import hexagonal_fill, hexagonal_lattice
-from brushcore.layout import build_labels, hexagonal_centres, touching_pillars
-from brushcore.layout_file import file_params, read_label_map, save_label_map
-from brushcore.params import MAX_PHI_ERROR
+from brushcore.model.curve import run
+from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
+from brushcore.model.layout import build_labels, hexagonal_centres, touching_pillars
+from brushcore.model.layout_file import file_params, read_label_map, save_label_map
+from brushcore.model.params import MAX_PHI_ERROR
 
 SHAPES = [("disc", 1.0, 0.0), ("square", 1.0, 0.0), ("square", 1.0, 30.0),
           ("ellipse", 2.0, 0.0), ("ellipse", 2.5, 60.0)]
@@ -240,7 +240,7 @@ def test_refused_label_maps_name_the_file_and_the_pillars(tmp_path):
 def test_image_over_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):
     import matplotlib.pyplot as plt
 
-    from brushcore import layout_file
+    from brushcore.model import layout_file
 
     path = tmp_path / "big.png"
     plt.imsave(path, np.ones((40, 40)), cmap="gray")
@@ -307,7 +307,7 @@ def test_square_punch_pull_off_against_fine_grid_and_equal_disc(square_punches):
 
 def test_cli_runs_shapes_and_file_layouts_and_records_them(tmp_path):
     from brushcore.cli import main
-    from brushcore.io import read_curve
+    from brushcore.data.io import read_curve
 
     out = tmp_path / "hex.nc"
     assert main(["simulate", "--layout", "hexagonal", "--pillars", "12", "--kbar", "0.1",

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from brushcore import BrushParams, ParameterError
-from brushcore.layout import build_labels, random_centres, regular_centres
+from brushcore.model.layout import build_labels, random_centres, regular_centres
 
 
 @pytest.mark.parametrize("n_pillars", [64, 220, 425, 1620])

@@ -7,11 +7,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brushcore import theory
-from brushcore.cg import ConvergenceError, pcg
-from brushcore.convolution import Convolver
-from brushcore.kernel import dense_influence_matrix, love_coefficient
-from brushcore.operator import BrushOperator
+from brushcore.model import theory
+from brushcore.numerics.cg import ConvergenceError, pcg
+from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.kernel import dense_influence_matrix, love_coefficient
+from brushcore.numerics.operator import BrushOperator
 
 
 def test_love_coefficient_matches_quadrature():
@@ -76,7 +76,7 @@ def test_operator_symmetric_and_matches_dense(seed, use_block):
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, seed):
-    from brushcore.precondition import BlockInverse
+    from brushcore.numerics.precondition import BlockInverse
 
     rng, labels, compliance = _random_problem(seed)
     with pytest.MonkeyPatch.context() as mp:
@@ -102,8 +102,8 @@ def test_two_level_preconditioner_is_spd_and_the_balancing_formula(seed):
     that, and the one-solve application must equal the textbook balancing form
     P = Z E^-1 Z^T + (I - Z E^-1 W^T) G (I - W E^-1 Z^T), E = C (I + R C)."""
     from brushcore import BrushParams
-    from brushcore.layout import build_labels
-    from brushcore.precondition import BlockInverse
+    from brushcore.model.layout import build_labels
+    from brushcore.numerics.precondition import BlockInverse
 
     rng = np.random.default_rng(seed)
     labels = build_labels(BrushParams("random", 6, 1.0, 32, phi=0.2, seed=seed % 1000))

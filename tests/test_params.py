@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from brushcore import BrushParams, ParameterError, SolverOptions
-from brushcore.layout import build_labels
+from brushcore.model.layout import build_labels
 
 
 def test_numpy_scalars_are_accepted_and_normalised():

@@ -9,8 +9,8 @@ import pytest
 from conftest import punch_params
 
 from brushcore import BrushParams, SolverOptions, simulate, theory
-from brushcore.curve import run
-from brushcore.layout import build_labels
+from brushcore.model.curve import run
+from brushcore.model.layout import build_labels
 
 
 def _stiffness(ds) -> float:

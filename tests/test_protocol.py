@@ -1,6 +1,6 @@
 """Rough, graded and preloaded brushes: the protocol engine against theory.
 
-Soft-limit targets are the elastic-foundation formulas of `brushcore.theory`
+Soft-limit targets are the elastic-foundation formulas of `brushcore.model.theory`
 (DESIGN.md, "Rough, graded and preloaded brushes").  They ignore the
 pillars' interaction through the half space, which the solver keeps; every
 soft-limit tolerance below is derived from the measured interaction of the
@@ -16,12 +16,12 @@ import pytest
 from conftest import punch_params
 
 from brushcore import BrushParams, SolverOptions, simulate, theory
-from brushcore.convolution import Convolver
-from brushcore.curve import run, run_protocol_curve
-from brushcore.layout import build_labels
-from brushcore.operator import BrushOperator
-from brushcore.precondition import BlockInverse
-from brushcore.protocol import (Waypoint, loop_energy, positive_work, preload_protocol)
+from brushcore.numerics.convolution import Convolver
+from brushcore.model.curve import run, run_protocol_curve
+from brushcore.model.layout import build_labels
+from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.protocol import (Waypoint, loop_energy, positive_work, preload_protocol)
 
 EXACT = SolverOptions.exact()  # CG to 1e-8, global cascades: reference results
 
@@ -398,7 +398,7 @@ def test_per_pillar_inputs_are_exported_in_label_order():
 
 
 def test_spread_draws_are_reproducible_and_have_the_asked_moments():
-    from brushcore.rough import gaussian_heights, lognormal_kbar
+    from brushcore.model.rough import gaussian_heights, lognormal_kbar
 
     k = lognormal_kbar(0.4, 0.3, 200_000, seed=5)
     assert k.mean() == pytest.approx(0.4, rel=5e-3) and k.std() / k.mean() == pytest.approx(
@@ -438,7 +438,7 @@ def test_cli_refuses_negative_loads_and_spreads(tmp_path, capsys, flag, value):
 
 
 def test_gap_map_file_shape_is_checked(tmp_path):
-    from brushcore.inputs import read_gap_map
+    from brushcore.model.inputs import read_gap_map
 
     np.save(tmp_path / "g.npy", np.zeros((8, 9)))
     with pytest.raises(Exception, match="shape"):
@@ -451,7 +451,7 @@ def test_gap_map_file_shape_is_checked(tmp_path):
 def test_cg_carries_the_field_of_its_iterate():
     """pcg_image: the same iterate as pcg, and y = K x at every pillar element
     without applying K to x (what the engine reads the gaps from)."""
-    from brushcore.cg import pcg, pcg_image
+    from brushcore.numerics.cg import pcg, pcg_image
 
     params = BrushParams("regular", 4, 0.01, 64, phi=0.2)
     op = BrushOperator(Convolver(64), build_labels(params), np.full(4, 1 / 0.64), 1.0, 1.0)
@@ -471,8 +471,8 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     pytest.importorskip("compliance_checker")
     from test_cf import cf_errors
 
-    from brushcore.aggregate import build_sweep, flat_slice, write_sweep
-    from brushcore.io import write_curve
+    from brushcore.data.aggregate import build_sweep, flat_slice, write_sweep
+    from brushcore.data.io import write_curve
 
     files = []
     for i, (roughness, preload) in enumerate(((0.0, 0.0), (0.2, 1.0), (0.0, 1.0))):
@@ -494,7 +494,7 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
 
 def test_loop_and_load_sharing_figures_show_the_curve():
     """The one-curve figures mark F_ad and the preload of the curve and sum to F_ad."""
-    from brushcore import figures
+    from brushcore.data import figures
 
     ds = simulate(BrushParams("regular", 16, 0.01, 64, roughness=0.5, preload=1.0, seed=1))
     fig = figures.rough_loop(ds)

@@ -27,9 +27,9 @@ import pytest
 xr = pytest.importorskip("xarray")
 
 from brushcore import BrushParams, SolverOptions, simulate  # noqa: E402
-from brushcore.aggregate import AggregationError, build_sweep  # noqa: E402
-from brushcore.cg import ConvergenceError  # noqa: E402
-from brushcore.io import CurveFileError, read_curve, write_curve  # noqa: E402
+from brushcore.data.aggregate import AggregationError, build_sweep  # noqa: E402
+from brushcore.numerics.cg import ConvergenceError  # noqa: E402
+from brushcore.data.io import CurveFileError, read_curve, write_curve  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake"]
@@ -286,7 +286,7 @@ def test_aggregate_rule_fails_on_a_truncated_curve(clean_run: Path, tmp_path: Pa
 SUBPROCESS_SIMULATE = textwrap.dedent("""
     import sys
     from brushcore import BrushParams, SolverOptions, simulate
-    from brushcore.io import write_curve
+    from brushcore.data.io import write_curve
     write_curve(simulate(BrushParams(**{params!r}), SolverOptions()), sys.argv[1])
 """)
 
@@ -341,7 +341,7 @@ def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
 
 
 def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:
-    import brushcore.pulloff as pulloff
+    import brushcore.numerics.pulloff as pulloff
 
     real_pcg = pulloff.pcg
     calls = []
@@ -360,12 +360,12 @@ def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:
 
 CLI_FAILING = textwrap.dedent("""
     import sys
-    import brushcore.cg, brushcore.pulloff, brushcore.cli
+    import brushcore.numerics.cg, brushcore.numerics.pulloff, brushcore.cli
 
     def fail(*args, **kwargs):
-        raise brushcore.cg.ConvergenceError("injected CG failure")
+        raise brushcore.numerics.cg.ConvergenceError("injected CG failure")
 
-    brushcore.cg.pcg = brushcore.pulloff.pcg = fail
+    brushcore.numerics.cg.pcg = brushcore.numerics.pulloff.pcg = fail
     sys.exit(brushcore.cli.main(sys.argv[1:]))
 """)
 
@@ -383,7 +383,7 @@ def test_cli_failure_exits_non_zero_without_output(tmp_path: Path) -> None:
 KILL_IN_WRITE = textwrap.dedent("""
     import os, signal, sys
     import numpy as np, xarray as xr
-    from brushcore.io import write_curve
+    from brushcore.data.io import write_curve
 
     real = xr.Dataset.to_netcdf
 
@@ -463,7 +463,7 @@ def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
 
 def test_failed_sweep_write_keeps_the_old_sweep(cli_curves: list[Path], tmp_path: Path,
                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    from brushcore.aggregate import write_sweep
+    from brushcore.data.aggregate import write_sweep
 
     target = tmp_path / "sweep.nc"
     write_sweep(build_sweep(cli_curves[:2]), target)
@@ -478,7 +478,7 @@ def test_failed_sweep_write_keeps_the_old_sweep(cli_curves: list[Path], tmp_path
 
 def test_interrupted_job_logs_one_line_and_exits_130(tmp_path: Path, capfd) -> None:
     """Ctrl-C inside a workflow script: no traceback, one line, status 130."""
-    from brushcore.joblog import EXIT_INTERRUPTED, logged
+    from brushcore.data.joblog import EXIT_INTERRUPTED, logged
 
     log = tmp_path / "job.log"
     with pytest.raises(SystemExit) as stop:

@@ -262,7 +262,7 @@ def test_curve_names_carry_grid_and_phi(repo_copy: Path, tmp_path: Path) -> None
 
 
 def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> None:
-    from brushcore.aggregate import AggregationError, build_sweep
+    from brushcore.data.aggregate import AggregationError, build_sweep
 
     good = sorted((test_run / "results/curves").rglob("*.nc"))
     bad = tmp_path / "truncated.nc"

@@ -6,8 +6,8 @@ import math
 import jsonschema
 import yaml
 
-from brushcore.params import BrushParams, ParameterError
-from brushcore.layout import build_labels
+from brushcore.model.params import BrushParams, ParameterError
+from brushcore.model.layout import build_labels
 
 
 def check_config(config, schema_path):

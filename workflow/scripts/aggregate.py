@@ -1,7 +1,7 @@
 """Script of rule `aggregate`: all curve files -> results/sweep.nc."""
 
-from brushcore.aggregate import build_sweep, write_sweep
-from brushcore.joblog import logged
+from brushcore.data.aggregate import build_sweep, write_sweep
+from brushcore.data.joblog import logged
 
 
 def main(smk) -> None:

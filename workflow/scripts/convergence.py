@@ -2,9 +2,9 @@
 
 import xarray as xr
 
-from brushcore import figures
-from brushcore.convergence import extrapolate_sweep, write_dataset, write_tables
-from brushcore.joblog import logged
+from brushcore.data import figures
+from brushcore.data.convergence import extrapolate_sweep, write_dataset, write_tables
+from brushcore.data.joblog import logged
 
 
 def main(smk) -> None:

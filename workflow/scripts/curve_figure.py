@@ -1,8 +1,8 @@
 """Script of rule `curve_figure`: one curve file -> one figure (issue 11)."""
 
-from brushcore import figures
-from brushcore.io import read_curve
-from brushcore.joblog import logged
+from brushcore.data import figures
+from brushcore.data.io import read_curve
+from brushcore.data.joblog import logged
 
 
 def main(smk) -> None:

@@ -2,9 +2,9 @@
 
 import xarray as xr
 
-from brushcore import figures
-from brushcore.aggregate import flat_slice
-from brushcore.joblog import logged
+from brushcore.data import figures
+from brushcore.data.aggregate import flat_slice
+from brushcore.data.joblog import logged
 
 
 def main(smk) -> None:

@@ -7,13 +7,13 @@ import os
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = str(snakemake.threads)  # noqa: F821
 
-from brushcore.joblog import logged  # noqa: E402 - light; the rest is imported under it
+from brushcore.data.joblog import logged  # noqa: E402 - light; the rest is imported under it
 
 
 def main(smk) -> None:
     from brushcore import BrushParams, SolverOptions, simulate
-    from brushcore.io import remove_stale_temporaries, write_curve
-    from brushcore.threads import pin_threads
+    from brushcore.data.io import remove_stale_temporaries, write_curve
+    from brushcore.numerics.threads import pin_threads
 
     remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)

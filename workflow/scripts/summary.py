@@ -2,9 +2,9 @@
 
 import xarray as xr
 
-from brushcore.aggregate import flat_slice
-from brushcore.summary import headline_rows, write_summary
-from brushcore.joblog import logged
+from brushcore.data.aggregate import flat_slice
+from brushcore.data.summary import headline_rows, write_summary
+from brushcore.data.joblog import logged
 
 
 def main(smk) -> None:

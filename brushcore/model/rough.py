@@ -14,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import theory
-from .params import BrushParams, ParameterError
+from brushcore.model import theory
+from brushcore.model.params import BrushParams
+from brushcore.validation import ParameterError
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .kernel import wrapped_kernel
+from brushcore.numerics.kernel import wrapped_kernel
 
 try:  # pyfftw is a declared dependency; the fallback keeps the package importable
     import pyfftw

@@ -13,19 +13,20 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import threadpool_limits
 
-from . import theory
-from .convolution import cached_convolver
-from .lattices import hexagonal_fill, hexagonal_lattice
-from .layout import build_labels
-from .operator import BrushOperator
-from .params import BrushParams, SolverOptions
-from .provenance import git_commit, parameter_hash, version
-from .cg import ConvergenceError
-from .protocol import (APPROACH, RETRACT, START, ProtocolCurve, Waypoint, loop_energy,
+from brushcore.model import theory
+from brushcore.numerics.convolution import cached_convolver
+from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
+from brushcore.model.layout import build_labels
+from brushcore.numerics.operator import BrushOperator
+from brushcore.model.params import BrushParams
+from brushcore.numerics.options import SolverOptions
+from brushcore.model.provenance import git_commit, parameter_hash, version
+from brushcore.numerics.cg import ConvergenceError
+from brushcore.numerics.protocol import (APPROACH, RETRACT, START, ProtocolCurve, Waypoint, loop_energy,
                        positive_work, preload_protocol, run_protocol)
-from .rough import pillar_centroids, pillar_inputs
-from .pulloff import Progress, PullOffCurve, SolverError, pull_off
-from .threads import fft_threads
+from brushcore.model.rough import pillar_centroids, pillar_inputs
+from brushcore.numerics.pulloff import Progress, PullOffCurve, SolverError, pull_off
+from brushcore.numerics.threads import fft_threads
 
 #: How to read dimensional values: the inputs define the unit system.
 UNITS_CONVENTION = ("SI: e_star in Pa, dgamma in J m-2, h in m, so lengths in m, forces in N, "
@@ -129,7 +130,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     Parameters
     ----------
     params, options : the problem and the numerics
-    protocol : waypoints (see `brushcore.protocol`), e.g. `preload_protocol(P)`
+    protocol : waypoints (see `brushcore.numerics.protocol`), e.g. `preload_protocol(P)`
     heights : protrusion z_p per pillar in label order [length] (default 0);
         a larger z reaches the substrate first
     gap_map : extra gap per element, shape (n, n) [length] (default 0): the
@@ -296,7 +297,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
         waypoints = preload_protocol(inputs.preload)
     else:
         if params.preload != 0:
-            from .params import ParameterError
+            from brushcore.validation import ParameterError
             raise ParameterError("preload", params.preload,
                                  "0 when a protocol is given (its first waypoint is the load)")
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))

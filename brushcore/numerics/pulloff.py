@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cg import ConvergenceError, pcg
-from .operator import BrushOperator
-from .params import SolverOptions
+from brushcore.numerics.cg import ConvergenceError, pcg
+from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.options import SolverOptions
 
 
 class SolverError(RuntimeError):

@@ -17,6 +17,8 @@ import math
 
 import numpy as np
 
+from brushcore.numerics.kernel import self_compliance  # noqa: F401 - a limit like the rest
+
 #: Griffith energy balance over one square element of side h under a flat
 #: punch's edge singularity (Pohrt & Popov 2015, eq. 14):
 #: beta = [4 ln(1 + sqrt 2) - (4/3)(sqrt 2 - 1)] / (2 pi).
@@ -40,11 +42,6 @@ def critical_stress(e_star: float, dgamma: float, h: float) -> float:
         Critical tensile stress [stress] (Pohrt & Popov 2015).
     """
     return math.sqrt(e_star * dgamma / (BETA * h))
-
-
-def self_compliance(e_star: float, h: float) -> float:
-    """Centre displacement of an h x h square under unit pressure, 4 ln(1+sqrt2) h / (pi E*)."""
-    return 4.0 * math.log(1.0 + math.sqrt(2.0)) * h / (math.pi * e_star)
 
 
 def flat_punch_stiffness(radius: float, e_star: float) -> float:

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .convolution import Convolver
-from .precondition import BlockInverse
-from .theory import self_compliance
+from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.kernel import self_compliance
 
 
 class BrushOperator:
@@ -37,7 +37,7 @@ class BrushOperator:
     Vectors are compressed to the attached elements in the order of
     `elements[attached]`.  `detach` shrinks the set; it never grows during
     a pull-off.  `attach` grows it again (approach and re-attachment, see
-    `brushcore.protocol`).
+    `brushcore.numerics.protocol`).
     """
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,

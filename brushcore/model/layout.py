@@ -19,10 +19,11 @@ import math
 
 import numpy as np
 
-from .lattices import hexagonal_lattice, hexagonal_pitch
-from .layout_file import read_label_map
-from .params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams, ParameterError
-from .shapes import PillarShape
+from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
+from brushcore.model.layout_file import read_label_map
+from brushcore.model.params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams
+from brushcore.validation import ParameterError
+from brushcore.model.shapes import PillarShape
 
 
 class LayoutError(ValueError):

@@ -12,6 +12,8 @@ asinh form avoids the cancellation of the usual log-ratio form far away.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -71,3 +73,8 @@ def dense_influence_matrix(n: int, h: float, e_star: float) -> np.ndarray:
     dx = (ix[:, None] - ix[None, :]) * h
     dy = (iy[:, None] - iy[None, :]) * h
     return love_coefficient(dy, dx, h, e_star)
+
+
+def self_compliance(e_star: float, h: float) -> float:
+    """Centre displacement of an h x h square under unit pressure, 4 ln(1+sqrt2) h / (pi E*)."""
+    return 4.0 * math.log(1.0 + math.sqrt(2.0)) * h / (math.pi * e_star)

@@ -34,10 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cg import ConvergenceError, pcg_image
-from .operator import BrushOperator
-from .params import SolverOptions
-from .pulloff import Progress, SolverError, pull_off
+from brushcore.numerics.cg import ConvergenceError, pcg_image
+from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.pulloff import Progress, SolverError, pull_off
 
 APPROACH, START, RETRACT = -1, 0, 1
 KINDS = ("force", "displacement", "separation")

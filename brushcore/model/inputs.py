@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .params import ParameterError
+from brushcore.validation import ParameterError
 
 
 def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:

@@ -5,7 +5,7 @@ averaging over seeds, the soft-plateau value, where the plateau starts, and
 the N^(1/4) prefactor fit.  Everything works on whatever part of the paper's
 grid a sweep contains; a missing case gives NaN here and "n/a" in the table.
 On a sweep over several grids every case is taken at the finest grid it ran
-on (`brushcore.aggregate.finest_grid`), and the table says how many elements
+on (`brushcore.data.aggregate.finest_grid`), and the table says how many elements
 a pillar radius spans there, marking fewer than 4 as under-resolved.
 """
 
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore import theory
-from brushcore.aggregate import GRID_DIM, finest_grid
-from brushcore.convergence import UNDER_RESOLVED_RADIUS
+from brushcore.model import theory
+from brushcore.data.aggregate import GRID_DIM, finest_grid
+from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
 PLATEAU_RTOL = 0.05
@@ -147,7 +147,7 @@ def headline_rows(
 
     Parameters
     ----------
-    sweep : dataset from `brushcore.aggregate.build_sweep`.
+    sweep : dataset from `brushcore.data.aggregate.build_sweep`.
     fig5_n_pillars, fig5_kbar : the Fig. 5a case quoted in the text (16 x 16, 0.455).
     """
     phi = float(sweep.attrs.get("phi", math.nan))

@@ -31,7 +31,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.linalg import blas
 
-from .kernel import love_coefficient
+from brushcore.numerics.kernel import love_coefficient
 
 
 class BlockInverse:

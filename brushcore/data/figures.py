@@ -1,8 +1,8 @@
 """The paper's Figures 5-8 drawn from a sweep dataset (matplotlib, no pyplot).
 
-`convergence` draws a mesh-refinement study (`brushcore.convergence`).
+`convergence` draws a mesh-refinement study (`brushcore.data.convergence`).
 
-Each ``figN`` function takes the dataset of `brushcore.aggregate.build_sweep`
+Each ``figN`` function takes the dataset of `brushcore.data.aggregate.build_sweep`
 and returns a `matplotlib.figure.Figure`; `save` writes it.  Figures are
 built on the object API with the Agg canvas, so no global pyplot state or GUI
 backend is involved.  Brushes or layouts absent from a sweep are skipped, and
@@ -23,10 +23,10 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
-from brushcore import theory
-from brushcore.aggregate import finest_grid, snapshots
-from brushcore.convergence import QUANTITIES, UNDER_RESOLVED_RADIUS
-from brushcore.summary import fit_soft_prefactor, seed_mean, soft_plateau
+from brushcore.model import theory
+from brushcore.data.aggregate import finest_grid, snapshots
+from brushcore.data.convergence import QUANTITIES, UNDER_RESOLVED_RADIUS
+from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
 
 F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
 D_LABEL = r"$\bar d = d / \sqrt{2\pi\Delta\gamma\sqrt{A/\pi}/E^*}$"
@@ -235,7 +235,7 @@ def fig8(sweep: xr.Dataset) -> Figure:
     """Fig. 8: work of separation against kbar per N, with eq. 27's soft limit.
 
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
-    (`brushcore.theory.soft_work`); W = 1 is the rigid compact punch.
+    (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch.
     """
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
@@ -451,7 +451,7 @@ def convergence(
 
     Parameters
     ----------
-    conv : dataset of `brushcore.convergence.extrapolate_sweep`.
+    conv : dataset of `brushcore.data.convergence.extrapolate_sweep`.
     quantities : variables to draw, one column each per case.
 
     Returns

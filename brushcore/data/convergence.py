@@ -466,7 +466,7 @@ def extrapolate_sweep(
 
 def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
     """Write `extrapolate_sweep`'s dataset to netCDF4 atomically (CF: no fill on coordinates)."""
-    from brushcore.io import publish
+    from brushcore.data.io import publish
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,12 +1,12 @@
 """Collect one-curve files into the analysis-ready sweep dataset (``sweep.nc``).
 
 One curve file holds one pull-off simulation (one layout, N, kbar, seed,
-grid).  `build_sweep` reads them all with `brushcore.io.read_curve` and lays
+grid).  `build_sweep` reads them all with `brushcore.data.io.read_curve` and lays
 the scalars out on the full (layout, n_pillars, kbar, seed, grid) product,
 NaN where a combination was not run, with the force-displacement curves
 NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
 when a sweep has one grid, so that mesh-refinement studies
-(`brushcore.convergence`) and single-grid sweeps share one layout;
+(`brushcore.data.convergence`) and single-grid sweeps share one layout;
 `finest_grid` reduces it to one value per case for the figures and tables.
 Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore import provenance
-from brushcore.io import publish, read_curve
+from brushcore.model import provenance
+from brushcore.data.io import publish, read_curve
 
 LAYOUTS = ("regular", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
@@ -212,7 +212,7 @@ def build_sweep(
 
     Parameters
     ----------
-    paths : curve files written by `brushcore.io.write_curve`.
+    paths : curve files written by `brushcore.data.io.write_curve`.
     keep_snapshots : (layout, n_pillars) whose contact snapshots are kept.
     all_snapshots_below_mb : keep all snapshots when they total less [MiB].
 
@@ -396,7 +396,7 @@ def _provenance(
         "title": "brushcore sweep: adhesive pull-off of spring-mounted brushes",
         "Conventions": "CF-1.10",
         "references": "He, Li & Popov, Lubricants 8 (2020) 94",
-        "history": f"{now} aggregated {len(files)} curve files by brushcore.aggregate",
+        "history": f"{now} aggregated {len(files)} curve files by brushcore.data.aggregate",
         "date_created": now,
         "brushcore_version": provenance.version(),
         "git_commit": provenance.git_commit(),

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .params import ParameterError
+from brushcore.validation import ParameterError
 
 #: Variables and attributes a curve file must have to be aggregated.
 REQUIRED_VARS = ("displacement", "force", "contact_area", "attached_pillars",

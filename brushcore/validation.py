@@ -1,0 +1,80 @@
+"""Checking parameters at the edge: one error type and the checks every layer shares.
+
+`ParameterError` names the parameter and the allowed range; the helpers
+turn NumPy scalars into Python numbers and raise it.  Nothing here knows
+the physics: `brushcore.model.params` and `brushcore.numerics.options`
+hold the rules.
+"""
+
+from __future__ import annotations
+
+import numbers
+import re
+from collections.abc import Mapping
+
+import numpy as np
+
+
+class ParameterError(ValueError):
+    """A parameter is outside its allowed range; the message names both.
+
+    Attributes
+    ----------
+    name : the parameter's name in the Python API (``n_pillars``)
+    value : the value given
+    allowed : what would be accepted
+    reason : why the value fails, where more than "out of range" (may be "")
+
+    `in_terms_of` renders the same error in another vocabulary (the CLI's
+    flags, the workflow's config keys), so that users read the name they
+    typed.
+    """
+
+    def __init__(self, name: str, value: object, allowed: str, reason: str = "") -> None:
+        self.name, self.value, self.allowed, self.reason = name, value, allowed, reason
+        super().__init__(self.in_terms_of({}))
+
+    def in_terms_of(self, names: Mapping[str, str], sep: str = "=") -> str:
+        """The message with ``name`` replaced by ``names[name]`` (if present)."""
+        label = names.get(self.name, self.name)
+
+        def translate(text: str) -> str:
+            for api, user in names.items():
+                text = re.sub(rf"(?<![\w-]){re.escape(api)}(?![\w-])", user, text)
+            return text
+
+        reason = f" ({translate(self.reason)})" if self.reason else ""
+        value = self.value if isinstance(self.value, str) and sep != "=" else repr(self.value)
+        return f"{label}{sep}{value} is invalid{reason}: allowed {translate(self.allowed)}"
+
+
+def require(ok: bool, name: str, value: object, allowed: str, reason: str = "") -> None:
+    if not ok:
+        raise ParameterError(name, value, allowed, reason)
+
+
+def is_real(value: object) -> bool:
+    """Python and NumPy reals (np.float32, np.int64, ...), not booleans."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def is_integer(value: object) -> bool:
+    """Python and NumPy integers, not booleans."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
+def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...]) -> None:
+    """Turn NumPy scalars of a frozen dataclass into Python int / float in place.
+
+    Users loop over ``np.array([64, 128])``; the checks and the netCDF
+    attributes want plain Python numbers.  Anything else is left for the
+    range checks to refuse.
+    """
+    for name in integers:
+        value = getattr(obj, name)
+        if is_integer(value):
+            object.__setattr__(obj, name, int(value))
+    for name in reals:
+        value = getattr(obj, name)
+        if is_real(value):
+            object.__setattr__(obj, name, float(value))
