@@ -12,7 +12,8 @@ from conftest import punch_params
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate, theory
 from brushcore.model.curve import run
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
-from brushcore.model.layout import build_labels, hexagonal_centres, touching_pillars
+from brushcore.model.labelmap import touching_pillars
+from brushcore.model.layout import build_labels, hexagonal_centres
 from brushcore.model.layout_file import file_params, read_label_map, save_label_map
 from brushcore.model.params import MAX_PHI_ERROR
 

@@ -32,6 +32,7 @@ import numpy as np
 
 from brushcore.model.params import BrushParams
 
+from brushcore.model.labelmap import check_not_touching
 from brushcore.validation import ParameterError
 
 #: Largest image accepted (the largest grid, 8192^2), checked before decoding.
@@ -144,7 +145,6 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
         raise _refuse(path, f"pillar labels 0 ... N-1 each on at least one element",
                       f"labels up to {n_pillars - 1}, but no element has label {shown}"
                       + (f" and {missing.size - 10} more" if missing.size > 10 else ""))
-    from brushcore.model.layout import check_not_touching  # noqa: PLC0415 - layout imports this module
     check_not_touching(labels, _NAME, str(path))
     return labels
 
