@@ -37,6 +37,7 @@ import numpy as np
 from brushcore.numerics.cg import ConvergenceError, pcg_image
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
+from brushcore.validation import is_real, require
 from brushcore.numerics.pulloff import Progress, SolverError, pull_off
 
 APPROACH, START, RETRACT = -1, 0, 1
@@ -64,10 +65,9 @@ class Waypoint:
     value: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise ValueError(f"waypoint kind={self.kind!r} is invalid: allowed one of {KINDS}")
-        if not np.isfinite(self.value):
-            raise ValueError(f"waypoint value={self.value!r} is invalid: allowed a finite number")
+        require(self.kind in KINDS, "waypoint kind", self.kind, f"one of {KINDS}")
+        require(is_real(self.value) and np.isfinite(self.value), "waypoint value", self.value,
+                "a finite number")
 
 
 def preload_protocol(preload: float) -> tuple[Waypoint, ...]:
