@@ -39,46 +39,11 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         With the residual history's last values when the tolerance is not
         met in ``max_iter`` iterations or a NaN/inf appears.
     """
-    x = x0.copy()
-    r = b - apply(x)
-    z = precondition(r)
-    history: list[float] = []
-
-    def converged() -> bool:
-        xmax = float(np.abs(x).max()) if x.size else 0.0
-        zmax = float(np.abs(z).max()) if z.size else 0.0
-        if not np.isfinite(zmax):
-            raise ConvergenceError(f"CG produced a non-finite correction after "
-                                   f"{len(history)} iterations")
-        if xmax > 0:
-            history.append(zmax / xmax)
-        return zmax <= rtol * xmax
-
-    if converged():
-        return x, 0
-    p = z.copy()
-    rz = float(r @ z)
-    for it in range(1, max_iter + 1):
-        q = apply(p)
-        pq = float(p @ q)
-        if not np.isfinite(pq) or pq <= 0.0:
-            raise ConvergenceError(f"CG broke down at iteration {it}: p.Ap = {pq!r} "
-                                   f"(operator not positive definite or non-finite)")
-        alpha = rz / pq
-        x += alpha * p
-        r -= alpha * q
-        z = precondition(r)
-        if converged():
-            return x, it
-        rz_new = float(r @ z)
-        p *= rz_new / rz
-        p += z
-        rz = rz_new
-    raise ConvergenceError(
-        f"CG did not converge in {max_iter} iterations: relative correction "
-        f"{history[-1] if history else float('nan'):.3e} > rtol {rtol:.1e} (size {b.size}; "
-        f"last values "
-        f"{', '.join(f'{h:.2e}' for h in history[-5:])})")
+    # One loop serves both: a pcg_image whose image is empty.
+    empty = np.empty(0)
+    x, _, iterations = pcg_image(lambda p: (apply(p), empty), precondition, b, x0,
+                                 apply(x0), empty, rtol, max_iter)
+    return x, iterations
 
 
 def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
