@@ -168,6 +168,50 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     return labels, op, curve, conv.applications - before
 
 
+def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
+    """A CF variable: values with long_name, units and any extra attributes."""
+    return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
+
+
+def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
+               area_total: float, *, events: int, steps: int, applications: int,
+               cg_iterations: int, wall: float, title: str, references: str,
+               hashed: tuple[dict, ...] = ()) -> dict[str, object]:
+    """Attributes every curve file carries: inputs, discretisation, cost, provenance."""
+    return {
+        **params.as_attrs(),
+        **asdict(options),
+        "phi_actual": area_total / params.side**2,
+        "real_contact_area": area_total,
+        "pillar_radius": params.pillar_radius,
+        "pillar_radius_elements": params.pillar_radius_elements,
+        "side_length": params.side,
+        "critical_stress": theory.critical_stress(params.e_star, params.dgamma, params.h),
+        **geometry_attrs(params, labels),
+        "events": events,
+        "steps": steps,
+        "operator_applications": applications,
+        "cg_iterations": cg_iterations,
+        "wall_time_s": wall,
+        "brushcore_version": version(),
+        "git_commit": git_commit(),
+        "parameter_hash": parameter_hash(params.as_attrs(), asdict(options), *hashed),
+        "Conventions": "CF-1.10",
+        "title": title,
+        "references": references,
+        "history": f"{dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} "
+                   f"brushcore {version()} simulate",
+        "sign_convention": "d > 0 pulls away from the half space; F > 0 is tensile",
+        "units_convention": UNITS_CONVENTION,
+        "symbols": SYMBOLS,
+    }
+
+
+#: The papers every curve file cites.
+REFERENCES = ("He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
+              "Facta Univ. Mech. Eng. 13 (2015) 3")
+
+
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
              progress: Progress | None = None, labels: np.ndarray | None = None,
              protocol: Sequence[Waypoint] | None = None) -> xr.Dataset:
@@ -207,8 +251,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                       np.int8(-1)).astype(np.int8)
     coord = (np.arange(params.grid) + 0.5) * h
 
-    def var(dims, data, name, units, **extra):
-        return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
+    var = _var
 
     data = {
         "displacement": var("step", curve.displacement, "pull-off displacement d", "m"),
@@ -236,34 +279,11 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "work_of_separation_normalized": var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
                                              "1"),
     }
-    attrs = {
-        **params.as_attrs(),
-        **{k: v for k, v in asdict(options).items()},
-        "phi_actual": area_total / params.side**2,
-        "real_contact_area": area_total,
-        "pillar_radius": params.pillar_radius,
-        "pillar_radius_elements": params.pillar_radius_elements,
-        "side_length": params.side,
-        "critical_stress": theory.critical_stress(es, dg, h),
-        "events": curve.events,
-        "steps": int(curve.displacement.size),
-        "operator_applications": applications,
-        "cg_iterations": curve.cg_iterations,
-        "wall_time_s": wall,
-        "brushcore_version": version(),
-        "git_commit": git_commit(),
-        "parameter_hash": parameter_hash(params.as_attrs(), asdict(options)),
-        "Conventions": "CF-1.10",
-        "title": "Adhesive pull-off of a spring-mounted pillar brush",
-        "references": "He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
-                      "Facta Univ. Mech. Eng. 13 (2015) 3",
-        "history": f"{dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} "
-                   f"brushcore {version()} simulate",
-        "sign_convention": "d > 0 pulls away from the half space; F > 0 is tensile",
-        **geometry_attrs(params, labels),
-        "units_convention": UNITS_CONVENTION,
-        "symbols": SYMBOLS,
-    }
+    attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
+                       steps=int(curve.displacement.size), applications=applications,
+                       cg_iterations=curve.cg_iterations, wall=wall,
+                       title="Adhesive pull-off of a spring-mounted pillar brush",
+                       references=REFERENCES)
     return xr.Dataset(data, coords={
         "step": var("step", np.arange(curve.displacement.size, dtype=np.int32),
                     "step of the pull-off (one per solve)", "1"),
@@ -341,8 +361,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     if pillar_force is None:
         pillar_force = np.full(n_pillars, np.nan)
 
-    def var(dims, data, name, units, **extra):
-        return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
+    var = _var
 
     coord = (np.arange(params.grid) + 0.5) * h
     data = {
@@ -412,16 +431,13 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     }
     if inputs.gap_map is not None:
         data["gap_map"] = var(("y", "x"), inputs.gap_map, "extra gap of each element", "m")
-    attrs = {
-        **params.as_attrs(),
-        **{k: v for k, v in asdict(options).items()},
-        "phi_actual": area_total / params.side**2,
-        "real_contact_area": area_total,
-        "pillar_radius": params.pillar_radius,
-        "pillar_radius_elements": params.pillar_radius_elements,
-        "side_length": params.side,
-        "critical_stress": theory.critical_stress(es, dg, h),
-        **geometry_attrs(params, labels),
+    attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
+                       steps=int(d.size), applications=applications,
+                       cg_iterations=curve.cg_iterations, wall=wall,
+                       title="Approach, preload and pull-off of a rough, graded pillar brush",
+                       references=f"{REFERENCES}; He, Li & Popov, J. Adhesion (2021)",
+                       hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
+    attrs.update({
         "displacement_unit_d_K": ds_,
         "force_unit_F_K": fs,
         "preload_force": float(-waypoints[0].value) if waypoints[0].kind == "force" else 0.0,
@@ -430,25 +446,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                         "((i+1/2) L/sqrt(N), (j+1/2) L/sqrt(N)) along (y, x); random brushes "
                         "in placement order; other layouts as labelled; pillar_y, pillar_x "
                         "give every pillar's centroid",
-        "events": curve.events,
-        "steps": int(d.size),
-        "operator_applications": applications,
-        "cg_iterations": curve.cg_iterations,
-        "wall_time_s": wall,
-        "brushcore_version": version(),
-        "git_commit": git_commit(),
-        "parameter_hash": parameter_hash(params.as_attrs(), asdict(options),
-                                         {"protocol": [(w.kind, w.value) for w in waypoints]}),
-        "Conventions": "CF-1.10",
-        "title": "Approach, preload and pull-off of a rough, graded pillar brush",
-        "references": "He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
-                      "Facta Univ. Mech. Eng. 13 (2015) 3; He, Li & Popov, J. Adhesion (2021)",
-        "history": f"{dt.datetime.now(dt.timezone.utc).isoformat(timespec='seconds')} "
-                   f"brushcore {version()} simulate",
-        "sign_convention": "d > 0 pulls away from the half space; F > 0 is tensile",
-        "units_convention": UNITS_CONVENTION,
-        "symbols": SYMBOLS,
-    }
+    })
     return xr.Dataset(data, coords={
         "step": var("step", np.arange(d.size, dtype=np.int32),
                     "step of the protocol (one per event or solve)", "1"),
