@@ -18,7 +18,6 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import math
-import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +26,7 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import provenance
-from brushcore.data.io import publish, read_curve
+from brushcore.data.io import read_curve, write_dataset_atomic
 
 LAYOUTS = ("regular", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
@@ -427,15 +426,7 @@ def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, objec
 
 def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
     """Write the sweep to netCDF4 atomically (temporary file + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        sweep.to_netcdf(tmp, engine="netcdf4", encoding=encoding(sweep))
-        publish(tmp, path)  # on disk, with the umask's mode, before it replaces the old sweep
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_dataset_atomic(sweep, path, encoding(sweep))
 
 
 def flat_slice(sweep: xr.Dataset) -> xr.Dataset:

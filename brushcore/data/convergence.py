@@ -466,18 +466,9 @@ def extrapolate_sweep(
 
 def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
     """Write `extrapolate_sweep`'s dataset to netCDF4 atomically (CF: no fill on coordinates)."""
-    from brushcore.data.io import publish
+    from brushcore.data.io import write_dataset_atomic
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        conv.to_netcdf(tmp, engine="netcdf4",
-                       encoding={name: {"_FillValue": None} for name in conv.coords})
-        publish(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_dataset_atomic(conv, path, {name: {"_FillValue": None} for name in conv.coords})
 
 
 # ---------------------------------------------------------------------------

@@ -116,6 +116,23 @@ def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     os.replace(tmp, path)
 
 
+def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict) -> None:
+    """Write a Dataset to netCDF4 under a temporary name, then `publish` it as ``path``.
+
+    A killed writer leaves the old file (or none) and at most a ``.tmp``
+    beside it, never half a file under ``path``.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
+        publish(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     """Write a curve Dataset to netCDF4 atomically.
 
