@@ -375,6 +375,7 @@ def _snapshots(
         if "detachment_step" in c:
             detach[i] = c["detachment_step"].values
     first = with_snaps[keys[0]]
+    extra = dims[len(SWEEP_DIMS):]  # shape and rough dims of the sweep, if any
     dims = ("case", "snapshot")
     out = {
         "contact_snapshot": xr.DataArray(
@@ -395,7 +396,7 @@ def _snapshots(
         "case_grid": xr.DataArray(np.array([k.grid for k in keys]), dims="case",
                                   attrs={"long_name": "grid n of the snapshot case", "units": "1"}),
     }
-    for dim in dims[len(SWEEP_DIMS):]:
+    for dim in extra:
         units = {} if dim == SHAPE_DIM else {"units": "1"}  # shape is a label
         out[f"case_{dim}"] = xr.DataArray(np.array([getattr(k, dim) for k in keys]), dims="case",
                                           attrs={"long_name": f"{dim} of the snapshot case",
