@@ -26,6 +26,7 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
+from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM, finest_grid, shape_slice, snapshots
 from brushcore.data.convergence import QUANTITIES, UNDER_RESOLVED_RADIUS
 from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
@@ -52,6 +53,13 @@ def _new_figure(width: float, height: float) -> Figure:
 
 def _layouts(sweep: xr.Dataset) -> list[str]:
     return [str(v) for v in sweep.layout.values]
+
+
+def _shape_text(label: str) -> str:
+    """A `shape_label` for people: "disc", "square at 30°", "ellipse 2:1 at 30°"."""
+    shape = parse_shape_label(label)
+    text = shape["shape"] + (f" {shape['aspect']:g}:1" if shape["shape"] == "ellipse" else "")
+    return text + (f" at {shape['orientation']:g}°" if shape["orientation"] else "")
 
 
 def _panel_title(index: int, layout: str) -> str:
@@ -111,7 +119,7 @@ def fig5(
     grid = fig.add_gridspec(rows, 1 + n_snap, width_ratios=[3.0] + [1.0] * n_snap)
     side = math.isqrt(n_pillars)
     name = f"{side} x {side}" if layout == "regular" and side * side == n_pillars else str(n_pillars)
-    pillars = "" if shape == "disc" else f" ({shape.replace('_', ', ')} deg)"
+    pillars = "" if shape == "disc" else f" ({_shape_text(shape)})"
     fig.suptitle(f"{layout} brush, N = {name} pillars{pillars}")
     if not cases:
         _no_data(fig.add_subplot(grid[0, :]), f"no {layout} runs with N = {n_pillars}")
@@ -330,11 +338,11 @@ def lattices(sweep: xr.Dataset) -> Figure:
             x = np.where(np.isinf(k), x_inf, k)
             mean = runs.mean("seed", skipna=True).values
             low, high = runs.min("seed", skipna=True).values, runs.max("seed", skipna=True).values
-            marker, line = SHAPE_MARKERS.get(shape.rstrip("0123456789._-"), ("^", "-."))
+            marker, line = SHAPE_MARKERS.get(parse_shape_label(shape)["shape"], ("^", "-."))
             ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker=marker, ls=line, ms=4,
                         capsize=2, color=LAYOUT_COLORS.get(layout, f"C{3 + index}"),
                         mfc="none" if shape != "disc" else None,
-                        label=f"{layout}, {shape.replace('_', ' ')}")
+                        label=f"{layout}, {_shape_text(shape)}")
         if math.isfinite(phi):
             ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
                        label=rf"rigid limit $\varphi^{{-1/4}}$")

@@ -54,7 +54,6 @@ def check_cases(config):
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
         raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
-    check_fig5(config)
     seen = set()
     for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
         if (layout, n, seed, grid, phi, rough, shape) in seen:
@@ -75,15 +74,6 @@ def check_cases(config):
                 f"(case {layout} N = {n}, grid = {grid}, phi = {phi}"
                 f"{', shape ' + shape[1:] if shape else ''}{rough})"
             ) from None
-
-
-def check_fig5(config):
-    """The Fig. 5 brush's shape must be one the sweep runs (its snapshots are drawn)."""
-    fig5 = config["fig5"]
-    if fig5["shape"] not in config["shape"]:
-        raise ConfigError(
-            f"config key 'fig5.shape': {fig5['shape']} is not in 'shape' {config['shape']}"
-        )
 
 
 #: Deterministic layouts: their label maps are built at plan time, and a flat
