@@ -8,6 +8,9 @@ NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
 when a sweep has one grid, so that mesh-refinement studies
 (`brushcore.data.convergence`) and single-grid sweeps share one layout;
 `finest_grid` reduces it to one value per case for the figures and tables.
+Pillar shapes other than discs (issue 13) and rough brushes (issue 11) add
+the dimensions ``shape`` and roughness, preload, kbar_spread, only when such
+a case ran; `flat_slice` gives the flat disc brushes the paper's figures show.
 Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
 ``xarray.open_dataset``; `encoding` gives the compression to write it with.
@@ -237,8 +240,8 @@ def build_sweep(
     Returns
     -------
     xarray.Dataset
-        Scalars on (layout, n_pillars, kbar, seed, grid); curves on the same
-        dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
+        Scalars on (layout, n_pillars, kbar, seed, grid) (+ shape, + the
+        rough dims, see `case_dims`); curves on the same dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
         provenance attrs.
 
     Raises
