@@ -43,6 +43,7 @@ localrules:
     rough_figure,
     curve_figure,
     convergence,
+    lattices,
 
 
 rule all:
@@ -53,6 +54,7 @@ rule all:
         "results/summary.md",
         expand("results/figures/fig{n}.{ext}", n=[5, 6, 7, 8], ext=["png", "pdf"]),
         rough_figure_files(config),
+        lattice_figure_files(config),
         # the refinement study only where some brush runs on three or more grids
         (
             [

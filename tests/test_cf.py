@@ -68,3 +68,19 @@ def test_convergence_is_cf_clean(curve_files, tmp_path):
     path = tmp_path / "convergence.nc"
     write_dataset(extrapolate_sweep(build_sweep(curve_files)), path)
     assert cf_errors(path, tmp_path) == []
+
+
+def test_sweep_with_shapes_and_hexagonal_is_cf_clean(curve_files, tmp_path):
+    """Issue 13: the layout "hexagonal" and the label coordinate `shape` keep sweep.nc CF-clean."""
+    extra = []
+    for layout, shape in (("hexagonal", "disc"), ("regular", "ellipse")):
+        path = tmp_path / f"{layout}_{shape}.nc"
+        params = BrushParams(layout, 4, 0.01, 64, shape=shape,
+                             aspect=1.5 if shape == "ellipse" else 1.0)
+        write_curve(simulate(params), path)
+        extra.append(path)
+    sweep_nc = tmp_path / "sweep_shapes.nc"
+    sweep = build_sweep([*curve_files, *extra], keep_snapshots=[("regular", 4)])
+    assert "shape" in sweep.dims and "case_shape" in sweep.coords
+    write_sweep(sweep, sweep_nc)
+    assert cf_errors(sweep_nc, tmp_path) == []

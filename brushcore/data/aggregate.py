@@ -8,6 +8,9 @@ NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
 when a sweep has one grid, so that mesh-refinement studies
 (`brushcore.data.convergence`) and single-grid sweeps share one layout;
 `finest_grid` reduces it to one value per case for the figures and tables.
+Pillar shapes other than discs (issue 13) and rough brushes (issue 11) add
+the dimensions ``shape`` and roughness, preload, kbar_spread, only when such
+a case ran; `flat_slice` gives the flat disc brushes the paper's figures show.
 Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
 ``xarray.open_dataset``; `encoding` gives the compression to write it with.
@@ -26,10 +29,16 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import provenance
+from brushcore.model.shapes import shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
 
-LAYOUTS = ("regular", "random")
+#: Order of the layout coordinate (others follow, sorted).
+LAYOUTS = ("regular", "hexagonal", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
+#: Pillar cross-section (issue 13): a dimension only when a non-disc case ran,
+#: with `brushcore.model.shapes.shape_label` values ("disc", "square",
+#: "ellipse2.0_30.0"), so a sweep of discs keeps today's dimensions.
+SHAPE_DIM = "shape"
 #: Extra case dimensions of rough, preloaded or graded brushes (issue 11).  A
 #: sweep of flat brushes only keeps today's four dimensions.
 ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
@@ -87,6 +96,8 @@ class CaseKey:
     kbar : normalised spring stiffness k / (E* L) [-].
     seed : random-layout seed (0 for regular layouts).
     grid : elements per side n of the L x L square.
+    roughness, preload, kbar_spread : rough-brush parameters (0 when flat).
+    shape : `shape_label` of the pillar cross-section ("disc" by default).
     """
 
     layout: str
@@ -97,6 +108,7 @@ class CaseKey:
     roughness: float = 0.0
     preload: float = 0.0
     kbar_spread: float = 0.0
+    shape: str = "disc"
 
     @property
     def is_flat(self) -> bool:
@@ -107,8 +119,11 @@ class CaseKey:
 def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
+    shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
+                        float(a.get("orientation", 0.0)))  # files before issue 13: discs
     return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
-                   int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS))
+                   int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS),
+                   shape=shape)
 
 
 def file_sha256(path: str | Path) -> str:
@@ -159,8 +174,12 @@ def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> o
 
 
 def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:
-    """The case dimensions and grid, plus ROUGH_DIMS when any case is not flat."""
-    return SWEEP_DIMS if all(k.is_flat for k in keys) else SWEEP_DIMS + ROUGH_DIMS
+    """The case dimensions and grid, plus SHAPE_DIM when any pillar is not a disc
+    and ROUGH_DIMS when any case is not flat."""
+    keys = list(keys)
+    shape = (SHAPE_DIM,) if any(k.shape != "disc" for k in keys) else ()
+    rough = () if all(k.is_flat for k in keys) else ROUGH_DIMS
+    return SWEEP_DIMS + shape + rough
 
 
 def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
@@ -176,6 +195,8 @@ def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
     }
     for dim in ROUGH_DIMS:
         coords[dim] = np.array(sorted({getattr(k, dim) for k in keys}), dtype=np.float64)
+    shapes = sorted({k.shape for k in keys}, key=lambda label: (label != "disc", label))
+    coords[SHAPE_DIM] = np.array(shapes, dtype=object)
     return coords
 
 
@@ -218,8 +239,8 @@ def build_sweep(
     Returns
     -------
     xarray.Dataset
-        Scalars on (layout, n_pillars, kbar, seed, grid); curves on the same
-        dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
+        Scalars on (layout, n_pillars, kbar, seed, grid) (+ shape, + the
+        rough dims, see `case_dims`); curves on the same dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
         provenance attrs.
 
     Raises
@@ -234,7 +255,7 @@ def build_sweep(
     shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
     first = next(iter(curves.values()))[1]
-    rough_scalars = ROUGH_SCALARS if dims != SWEEP_DIMS else ()
+    rough_scalars = ROUGH_SCALARS if ROUGH_DIMS[0] in dims else ()
 
     data: dict[str, xr.DataArray] = {}
     scalars = {name: np.full(shape, np.nan)
@@ -313,9 +334,14 @@ def _coordinate_arrays(coords: dict[str, np.ndarray],
         "roughness": {"units": "1", "long_name": "std of pillar heights / d_K"},
         "preload": {"units": "1", "long_name": "preload / F_K"},
         "kbar_spread": {"units": "1", "long_name": "coefficient of variation of kbar"},
+        # a label, like layout: no units
+        SHAPE_DIM: {"long_name": "pillar cross-section: disc, square[_orientation in "
+                                 "degrees] or ellipse{aspect}_{orientation in degrees}"},
     }
     out = {d: xr.DataArray(coords[d], dims=d, attrs=attrs[d]) for d in dims}
-    out["layout"] = out["layout"].astype(str)
+    for d in ("layout", SHAPE_DIM):
+        if d in out:
+            out[d] = out[d].astype(str)
     return out
 
 
@@ -351,6 +377,7 @@ def _snapshots(
         if "detachment_step" in c:
             detach[i] = c["detachment_step"].values
     first = with_snaps[keys[0]]
+    extra = dims[len(SWEEP_DIMS):]  # shape and rough dims of the sweep, if any
     dims = ("case", "snapshot")
     out = {
         "contact_snapshot": xr.DataArray(
@@ -371,10 +398,11 @@ def _snapshots(
         "case_grid": xr.DataArray(np.array([k.grid for k in keys]), dims="case",
                                   attrs={"long_name": "grid n of the snapshot case", "units": "1"}),
     }
-    for dim in dims[len(SWEEP_DIMS):]:
+    for dim in extra:
+        units = {} if dim == SHAPE_DIM else {"units": "1"}  # shape is a label
         out[f"case_{dim}"] = xr.DataArray(np.array([getattr(k, dim) for k in keys]), dims="case",
                                           attrs={"long_name": f"{dim} of the snapshot case",
-                                                 "units": "1"})
+                                                 **units})
     if "detachment_step" in first:
         out["detachment_step"] = xr.DataArray(
             detach, dims=("case", "y", "x"), attrs=dict(first["detachment_step"].attrs)
@@ -429,13 +457,15 @@ def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
     write_dataset_atomic(sweep, path, encoding(sweep))
 
 
-def flat_slice(sweep: xr.Dataset) -> xr.Dataset:
-    """The flat brushes of a sweep (roughness, preload, kbar_spread all 0).
+def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
+    """The flat brushes of a sweep (roughness, preload, kbar_spread all 0) of one shape.
 
     A sweep of flat brushes is returned as it is; in one with rough cases the
-    ROUGH_DIMS are selected at 0 (NaN everywhere when no flat case ran), so
-    that the paper's figures and summary see today's four dimensions.
+    ROUGH_DIMS are selected at 0 (NaN everywhere when no flat case ran), and
+    the pillar shape at `shape` (`shape_slice`), so that the paper's figures
+    and summary see today's four dimensions.  ``shape=None`` keeps every shape.
     """
+    sweep = shape_slice(sweep, shape)
     if not set(ROUGH_DIMS) & set(sweep.dims):
         return sweep
     flat = sweep.reindex({d: [0.0] for d in ROUGH_DIMS}).isel({d: 0 for d in ROUGH_DIMS})
@@ -445,6 +475,24 @@ def flat_slice(sweep: xr.Dataset) -> xr.Dataset:
         keep = np.logical_and.reduce([flat[v].values == 0 for v in case_vars])
         flat = flat.isel(case=np.flatnonzero(keep)).drop_vars(case_vars)
     return flat
+
+
+def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
+    """The brushes of one pillar shape (a `shape_label`), without the shape dimension.
+
+    A sweep without SHAPE_DIM holds discs only and is returned as it is for
+    "disc" (and for None, which keeps every shape); a shape that did not run
+    gives NaN everywhere.  Snapshots of other shapes are dropped.
+    """
+    if shape is None or (SHAPE_DIM not in sweep.dims and shape == "disc"):
+        return sweep
+    if SHAPE_DIM not in sweep.dims:  # discs only: nothing of this shape
+        return sweep.where(False)
+    out = sweep.reindex({SHAPE_DIM: [shape]}).isel({SHAPE_DIM: 0}).drop_vars(SHAPE_DIM)
+    name = f"case_{SHAPE_DIM}"
+    if name in out.variables:
+        out = out.isel(case=np.flatnonzero(out[name].values == shape)).drop_vars(name)
+    return out
 
 
 def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0):

@@ -1,6 +1,7 @@
 """The paper's Figures 5-8 drawn from a sweep dataset (matplotlib, no pyplot).
 
-`convergence` draws a mesh-refinement study (`brushcore.data.convergence`).
+`convergence` draws a mesh-refinement study (`brushcore.data.convergence`),
+`lattices` compares layouts and pillar shapes of the same N (issue 13).
 
 Each ``figN`` function takes the dataset of `brushcore.data.aggregate.build_sweep`
 and returns a `matplotlib.figure.Figure`; `save` writes it.  Figures are
@@ -24,7 +25,9 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
-from brushcore.data.aggregate import finest_grid, snapshots
+from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
+from brushcore.model.shapes import parse_shape_label
+from brushcore.data.aggregate import SHAPE_DIM, finest_grid, shape_slice, snapshots
 from brushcore.data.convergence import QUANTITIES, UNDER_RESOLVED_RADIUS
 from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
 
@@ -33,7 +36,9 @@ D_LABEL = r"$\bar d = d / \sqrt{2\pi\Delta\gamma\sqrt{A/\pi}/E^*}$"
 K_LABEL = r"$\bar k = k / (E^* L)$"
 FAD_LABEL = r"$\bar F_{ad}$"
 W_LABEL = r"$\bar W = W / (2\pi a_0^2 \Delta\gamma)$"
-PANEL_TITLES = {"regular": "(a) regular", "random": "(b) random"}
+#: Colours of the layouts and markers of the pillar shapes in the lattice figure.
+LAYOUT_COLORS = {"regular": "C0", "hexagonal": "C1", "random": "C2"}
+SHAPE_MARKERS = {"disc": ("o", "-"), "square": ("s", "--"), "ellipse": ("D", ":")}
 #: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
 SOFT_WORK_FLOOR = 0.3
 # detached / attached pillar element on a white background (no pillar)
@@ -48,6 +53,18 @@ def _new_figure(width: float, height: float) -> Figure:
 
 def _layouts(sweep: xr.Dataset) -> list[str]:
     return [str(v) for v in sweep.layout.values]
+
+
+def _shape_text(label: str) -> str:
+    """A `shape_label` for people: "disc", "square at 30°", "ellipse 2:1 at 30°"."""
+    shape = parse_shape_label(label)
+    text = shape["shape"] + (f" {shape['aspect']:g}:1" if shape["shape"] == "ellipse" else "")
+    return text + (f" at {shape['orientation']:g}°" if shape["orientation"] else "")
+
+
+def _panel_title(index: int, layout: str) -> str:
+    """"(a) regular", "(b) hexagonal", ...: one panel per layout that ran."""
+    return f"({chr(ord('a') + index)}) {layout}"
 
 
 def _brush_colors(n_pillars: Sequence[int]) -> dict[int, str]:
@@ -84,11 +101,15 @@ def fig5(
     kbar: Sequence[float] = (0.455, 0.005, 0.001),
     layout: str = "regular",
     seed: int = 0,
+    shape: str = "disc",
 ) -> Figure:
     """Fig. 5: F-d curves of one brush at a few kbar, contact snapshots beside.
 
     Numbered dots on each curve mark the steps of the snapshots to its right
-    (red: attached element, grey: detached, white: no pillar).
+    (red: attached element, grey: detached, white: no pillar): the label map
+    itself, so squares, ellipses and lattices show as they were meshed.
+    `shape` (a `shape_label`) only names the pillars in the title: the sweep
+    passed in holds one shape (`brushcore.data.aggregate.shape_slice`).
     """
     sweep = finest_grid(sweep)  # one curve per case: the best-resolved one
     cases = [k for k in kbar if _curve(sweep, layout, n_pillars, k, seed) is not None]
@@ -98,7 +119,8 @@ def fig5(
     grid = fig.add_gridspec(rows, 1 + n_snap, width_ratios=[3.0] + [1.0] * n_snap)
     side = math.isqrt(n_pillars)
     name = f"{side} x {side}" if layout == "regular" and side * side == n_pillars else str(n_pillars)
-    fig.suptitle(f"{layout} brush, N = {name} pillars")
+    pillars = "" if shape == "disc" else f" ({_shape_text(shape)})"
+    fig.suptitle(f"{layout} brush, N = {name} pillars{pillars}")
     if not cases:
         _no_data(fig.add_subplot(grid[0, :]), f"no {layout} runs with N = {n_pillars}")
         return fig
@@ -144,10 +166,10 @@ def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, 
     return [(n, s) for n, s in series if s.size]
 
 
-def _kbar_axes(ax, layout: str, ylabel: str) -> None:
+def _kbar_axes(ax, title: str, ylabel: str) -> None:
     """Log kbar axis, panel title and labels shared by Figs. 6 and 8."""
     ax.set_xscale("log")
-    ax.set_title(PANEL_TITLES.get(layout, layout), loc="left")
+    ax.set_title(title, loc="left")
     ax.set_xlabel(K_LABEL)
     ax.set_ylabel(ylabel)
 
@@ -162,7 +184,7 @@ def fig6(sweep: xr.Dataset) -> Figure:
     fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
-    for layout, ax in axes.items():
+    for index, (layout, ax) in enumerate(axes.items()):
         brushes = _brush_series(sweep, "adhesive_force_normalized", layout)
         for n, series in brushes:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
@@ -170,7 +192,7 @@ def fig6(sweep: xr.Dataset) -> Figure:
             low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
             ax.errorbar(series.kbar, series, yerr=[series - low, high - series], marker="o",
                         ms=4, capsize=2, color=colors[n], label=f"N = {n}")
-        _kbar_axes(ax, layout, FAD_LABEL)
+        _kbar_axes(ax, _panel_title(index, layout), FAD_LABEL)
         if not brushes:
             _no_data(ax, f"no {layout} runs")
             continue
@@ -194,7 +216,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     ax = fig.add_subplot()
     ax.set_title("Soft plateau of the adhesive force")
     all_n, all_f = [], []
-    markers = {"regular": "s", "random": "o"}
+    markers = {"regular": "s", "random": "o", "hexagonal": "h"}
     for layout in _layouts(sweep):
         points = [(int(n), *soft_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
         points = [(n, k, f) for n, k, f in points if math.isfinite(f)]
@@ -241,7 +263,7 @@ def fig8(sweep: xr.Dataset) -> Figure:
     fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
-    for layout, ax in axes.items():
+    for index, (layout, ax) in enumerate(axes.items()):
         brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
         for n, series in brushes:
             ax.plot(series.kbar, series, "o-", ms=4, color=colors[n], label=f"N = {n}")
@@ -252,12 +274,90 @@ def fig8(sweep: xr.Dataset) -> Figure:
                 keep = soft >= SOFT_WORK_FLOOR
                 ax.plot(kbar[keep], soft[keep], "--", lw=1, color=colors[n])
         ax.set_yscale("log")
-        _kbar_axes(ax, layout, W_LABEL)
+        _kbar_axes(ax, _panel_title(index, layout), W_LABEL)
         if not brushes:
             _no_data(ax, f"no {layout} runs")
             continue
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
         ax.plot([], [], "k--", lw=1, label=r"soft limit $\bar W_S$ (eq. 27)")
+        ax.legend(fontsize=7)
+    return fig
+
+
+def _shape_labels(sweep: xr.Dataset) -> list[str]:
+    """Pillar shapes of a sweep: its shape coordinate, or discs only."""
+    return [str(v) for v in sweep[SHAPE_DIM].values] if SHAPE_DIM in sweep.dims else ["disc"]
+
+
+def _lattice_series(sweep: xr.Dataset, n_pillars: int) -> list[tuple[str, str, xr.DataArray]]:
+    """(layout, shape, F_ad on (kbar, seed)) of every brush of N pillars that ran."""
+    out = []
+    for shape in _shape_labels(sweep):
+        one = shape_slice(sweep, shape)["adhesive_force_normalized"]
+        for layout in _layouts(sweep):
+            runs = one.sel(layout=layout, n_pillars=n_pillars)
+            runs = runs.dropna("kbar", how="all")
+            if runs.sizes["kbar"]:
+                out.append((layout, shape, runs))
+    return out
+
+
+def lattices(sweep: xr.Dataset) -> Figure:
+    """Adhesive force against kbar for every (layout, shape) of the same N (issue 13).
+
+    One panel per N run with more than one layout or shape.  Colour is the
+    layout, marker and line style the pillar shape; with several seeds
+    (random layouts) the dots are the mean and the bars span min to max.
+    Rigid pillars (kbar = inf) are drawn one decade right of the stiffest
+    finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, dashed) and
+    the soft limit N^(1/4) (eq. 6, dotted); orange dashed: the hexagonal
+    lattice's rigid limit at its local filling factor phi / fill (its cells
+    cover `lattices.hexagonal_fill` of the square).
+
+    Parameters
+    ----------
+    sweep : flat brushes of a sweep with every shape (`flat_slice(sweep, None)`).
+    """
+    sweep = finest_grid(sweep[["adhesive_force_normalized"]])
+    series = {int(n): _lattice_series(sweep, int(n)) for n in sweep.n_pillars.values}
+    compared = {n: s for n, s in series.items() if len(s) > 1} or \
+        {n: s for n, s in series.items() if s}
+    fig = _new_figure(5.2 * max(len(compared), 1), 4.0)
+    axes = fig.subplots(1, max(len(compared), 1), squeeze=False)[0]
+    fig.suptitle("Adhesive force of lattices and pillar shapes of the same N")
+    if not compared:
+        _no_data(axes[0], "no runs")
+        return fig
+    phi = _phi(sweep)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    finite = kbars[np.isfinite(kbars)]
+    x_inf = finite.max() * 10.0 if finite.size else 1.0  # where rigid pillars are drawn
+    for index, (ax, (n, brushes)) in enumerate(zip(axes, compared.items())):
+        for layout, shape, runs in brushes:
+            k = np.asarray(runs.kbar.values, dtype=float)
+            x = np.where(np.isinf(k), x_inf, k)
+            mean = runs.mean("seed", skipna=True).values
+            low, high = runs.min("seed", skipna=True).values, runs.max("seed", skipna=True).values
+            marker, line = SHAPE_MARKERS.get(parse_shape_label(shape)["shape"], ("^", "-."))
+            ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker=marker, ls=line, ms=4,
+                        capsize=2, color=LAYOUT_COLORS.get(layout, f"C{3 + index}"),
+                        mfc="none" if shape != "disc" else None,
+                        label=f"{layout}, {_shape_text(shape)}")
+        if math.isfinite(phi):
+            ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
+                       label=rf"rigid limit $\varphi^{{-1/4}}$")
+            if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
+                ax.axhline(theory.rigid_limit(phi / hexagonal_fill(n)), color="C1", ls="--",
+                           lw=0.8, label=r"hexagonal: $(\varphi/\mathrm{fill})^{-1/4}$")
+        ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8, label=r"soft limit $N^{1/4}$")
+        ax.set_xscale("log")
+        if np.isinf(kbars).any() and finite.size:
+            ticks = [10.0**e for e in range(int(np.floor(np.log10(finite.min()))),
+                                            int(np.ceil(np.log10(finite.max()))) + 1)]
+            ax.set_xticks([*ticks, x_inf], [f"{t:g}" for t in ticks] + ["rigid"])
+        ax.set_title(f"({chr(ord('a') + index)}) N = {n}", loc="left")
+        ax.set_xlabel(K_LABEL)
+        ax.set_ylabel(FAD_LABEL)
         ax.legend(fontsize=7)
     return fig
 

@@ -88,3 +88,35 @@ class PillarShape:
         if self.kind == "square":
             return (np.abs(u) <= a) & (np.abs(v) <= b)
         return (u / a) ** 2 + (v / b) ** 2 <= 1.0
+
+
+def shape_label(kind: str = "disc", aspect: float = 1.0, orientation: float = 0.0) -> str:
+    """Short text name of a pillar shape, used in file names and as a sweep coordinate.
+
+    "disc", "square" (orientation 0), "square_30.0", "ellipse2.0_30.0"; floats
+    in their shortest exact repr, so that `parse_shape_label` inverts it.
+
+    Parameters
+    ----------
+    kind : "disc", "square" or "ellipse".
+    aspect : semi-major / semi-minor axis (ellipses only).
+    orientation : angle of the major axis or a side from the x axis [degrees].
+    """
+    if kind == "disc":
+        return "disc"
+    if kind == "square":
+        return "square" if float(orientation) == 0.0 else f"square_{float(orientation)!r}"
+    return f"ellipse{float(aspect)!r}_{float(orientation)!r}"
+
+
+def parse_shape_label(label: str) -> dict[str, str | float]:
+    """`BrushParams` fields (shape, aspect, orientation) of a `shape_label`."""
+    if label == "disc":
+        return {"shape": "disc", "aspect": 1.0, "orientation": 0.0}
+    if label.startswith("square"):
+        angle = label[len("square_"):] or "0.0"
+        return {"shape": "square", "aspect": 1.0, "orientation": float(angle)}
+    if label.startswith("ellipse"):
+        aspect, angle = label[len("ellipse"):].split("_")
+        return {"shape": "ellipse", "aspect": float(aspect), "orientation": float(angle)}
+    raise ValueError(f"unknown pillar shape label {label!r}")

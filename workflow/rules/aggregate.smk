@@ -12,7 +12,7 @@ rule aggregate:
         mem_mb=4000,
         runtime=30,
     params:
-        keep_snapshots=[("regular", config["fig5"]["n_pillars"])],
+        keep_snapshots=[(config["fig5"]["layout"], config["fig5"]["n_pillars"])],
     script:
         "../scripts/aggregate.py"
 

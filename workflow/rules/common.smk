@@ -8,6 +8,7 @@ import yaml
 
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels
+from brushcore.model.shapes import parse_shape_label, shape_label
 
 
 def check_config(config, schema_path):
@@ -43,8 +44,9 @@ def check_cases(config):
     """Run every check that needs no solve, for every case, before any job starts.
 
     Builds the parameters of each case (ranges, the grid rule: pillar radius
-    >= 2 elements) and the label map of each regular brush (realised phi within
-    5 %), so that a config that cannot run stops `snakemake -n` already.
+    >= 2 elements, hexagonal N) and the label map of each lattice brush
+    (regular, hexagonal: realised phi within 5 %, for every pillar shape), so
+    that a config that cannot run stops `snakemake -n` already.
     Random layouts are packed in their jobs (seconds each); a packing failure
     fails that job.  The geometry does not depend on kbar: checked once.
     """
@@ -53,23 +55,30 @@ def check_cases(config):
     if twice:
         raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
     seen = set()
-    for layout, n, kbar, seed, grid, phi, rough in sweep_cases(config):
-        if (layout, n, seed, grid, phi, rough) in seen:
+    for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
+        if (layout, n, seed, grid, phi, rough, shape) in seen:
             continue
-        seen.add((layout, n, seed, grid, phi, rough))
+        seen.add((layout, n, seed, grid, phi, rough, shape))
         try:
             params = BrushParams(
                 layout, n, float(kbar), grid, phi=phi, seed=seed,
                 allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
+                **parse_shape_tag(shape),
             )
-            if layout == "regular":
+            if layout in LATTICES:
                 build_labels(params)
         except ParameterError as exc:
             keys = {"n_pillars": layout, "allow_coarse": "allow_coarse: true"}
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} "
-                f"(case {layout} N = {n}, grid = {grid}, phi = {phi}{rough})"
+                f"(case {layout} N = {n}, grid = {grid}, phi = {phi}"
+                f"{', shape ' + shape[1:] if shape else ''}{rough})"
             ) from None
+
+
+#: Deterministic layouts: their label maps are built at plan time, and a flat
+#: brush runs seed 0 only.
+LATTICES = ("regular", "hexagonal")
 
 
 def kbar_tag(kbar):
@@ -102,36 +111,56 @@ def _rough_tags(config, kbar):
                    for p in config["preload"] for c in spreads})
 
 
-def sweep_cases(config):
-    """Every (layout, n_pillars, kbar, seed, grid, phi, rough) the config asks for, once.
+def shape_tag(config, shape):
+    """File-name suffix of a pillar shape: "" for discs (names unchanged), else
+    "_" + `shape_label` with the config's aspect (ellipses) and orientation."""
+    if shape == "disc":
+        return ""
+    aspect = config["aspect"] if shape == "ellipse" else 1.0
+    return "_" + shape_label(shape, aspect, config["orientation"])
 
-    Flat regular brushes ignore the seed, so they run with seed 0 only; rough
-    or graded ones (heights and stiffness drawn from the seed) run every seed.
-    The Fig. 5 brush adds its own kbar values to the regular sweep.
+
+def parse_shape_tag(tag):
+    """BrushParams fields of a `shape_tag` suffix ({} for discs)."""
+    return parse_shape_label(tag[1:]) if tag else {}
+
+
+def sweep_cases(config):
+    """Every (layout, n_pillars, kbar, seed, grid, phi, rough, shape) the config asks for, once.
+
+    Flat lattice brushes (regular, hexagonal) ignore the seed, so they run with
+    seed 0 only; rough or graded ones (heights and stiffness drawn from the
+    seed) run every seed.  Every brush runs every pillar shape of `shape`.
+    The Fig. 5 brush adds its own kbar values to the sweep of its layout and
+    shape.
     """
     phi = config["phi"]
     cases = set()
+    shapes = [shape_tag(config, s) for s in config["shape"]]
 
-    def regular(n, kbar):
+    def lattice(layout, n, kbar, shape):
         for rough in _rough_tags(config, kbar):
             drawn = rough and parse_rough_tag(rough)["roughness"] + parse_rough_tag(
                 rough)["kbar_spread"] > 0
             for seed in (config["seeds"] if drawn else [0]):
-                cases.add(("regular", n, kbar_tag(kbar), seed, rough))
+                cases.add((layout, n, kbar_tag(kbar), seed, rough, shape))
 
-    for n in config["regular"]:
-        for kbar in config["kbar"]:
-            regular(n, kbar)
+    for layout in LATTICES:
+        for n in config[layout]:
+            for kbar in config["kbar"]:
+                for shape in shapes:
+                    lattice(layout, n, kbar, shape)
     fig5 = config["fig5"]
     for kbar in fig5["kbar"]:
-        regular(fig5["n_pillars"], kbar)
+        lattice(fig5["layout"], fig5["n_pillars"], kbar, shape_tag(config, fig5["shape"]))
     for n in config["random"]:
         for kbar in config["kbar"]:
             for seed in config["seeds"]:
                 for rough in _rough_tags(config, kbar):
-                    cases.add(("random", n, kbar_tag(kbar), seed, rough))
-    ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[4]))
-    return [(*case[:4], grid, phi, case[4]) for case in ordered
+                    for shape in shapes:
+                        cases.add(("random", n, kbar_tag(kbar), seed, rough, shape))
+    ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[5], c[4]))
+    return [(*case[:4], grid, phi, case[4], case[5]) for case in ordered
             for grid in case_grids(config, case[1])]
 
 
@@ -154,21 +183,22 @@ def wants_convergence(config):
 
 
 def sweep_brushes(config):
-    """Every pillar number N of the sweep (both layouts and the Fig. 5 brush)."""
-    return {*config["regular"], *config["random"], config["fig5"]["n_pillars"]}
+    """Every pillar number N of the sweep (every layout and the Fig. 5 brush)."""
+    return {*config["regular"], *config["hexagonal"], *config["random"],
+            config["fig5"]["n_pillars"]}
 
 
 #: One curve file per case; every parameter that changes the curve is in its name,
 #: so that a sweep on another grid or filling factor never overwrites it.  The
-#: rough suffix is empty for today's flat brush.
-CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{rough}"
+#: shape and rough suffixes are empty for today's flat brush of discs.
+CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{shape}{rough}"
 
 
-def curve_file(layout, n_pillars, kbar, seed, grid, phi, rough):
+def curve_file(layout, n_pillars, kbar, seed, grid, phi, rough, shape=""):
     """The curve file of one case (a tuple of `sweep_cases`)."""
     name = CURVE_NAME.format(
         layout=layout, n_pillars=n_pillars, kbar=kbar, seed=seed, grid=grid,
-        phi=repr(float(phi)), rough=rough,
+        phi=repr(float(phi)), shape=shape, rough=rough,
     )
     return f"results/curves/{name}.nc"
 
@@ -202,10 +232,12 @@ ROUGH_FIGURES = ("rough_roughness", "rough_preload")
 
 
 def rough_brush(config):
-    """(layout, N) the rough figures show: the first regular brush, else the first random."""
-    if config["regular"]:
-        return "regular", int(config["regular"][0])
-    return "random", int(config["random"][0])
+    """(layout, N) the rough figures show: the first regular brush, else the first
+    hexagonal, else the first random."""
+    for layout in (*LATTICES, "random"):
+        if config[layout]:
+            return layout, int(config[layout][0])
+    return config["fig5"]["layout"], int(config["fig5"]["n_pillars"])
 
 
 CURVE_FIGURES = ("rough_loop", "load_sharing")
@@ -219,8 +251,8 @@ def rough_example_curve(config):
     enough that pillars share load, stiff enough that they interact).
     """
     brush = rough_brush(config)
-    rough = [c for c in sweep_cases(config)
-             if c[6] and (c[0], c[1]) == brush and c[3] == 0 and float(c[2]) < float("inf")]
+    rough = [c for c in sweep_cases(config) if c[6] and not c[7] and (c[0], c[1]) == brush
+             and c[3] == 0 and float(c[2]) < float("inf")]
     if not rough:
         return None
 
@@ -240,3 +272,26 @@ def rough_figure_files(config):
         return []
     names = ROUGH_FIGURES + (CURVE_FIGURES if rough_example_curve(config) else ())
     return [f"results/figures/{name}.{ext}" for name in names for ext in ("png", "pdf")]
+
+
+def wants_lattice_figure(config):
+    """True when the sweep compares lattices or shapes: hexagonal brushes or non-disc pillars."""
+    return bool(config["hexagonal"]) or any(s != "disc" for s in config["shape"])
+
+
+def lattice_figure_files(config):
+    """The lattice comparison figure (issue 13), for configs that ask for one."""
+    if not wants_lattice_figure(config):
+        return []
+    return [f"results/figures/lattices.{ext}" for ext in ("png", "pdf")]
+
+
+def fig5_shape(config):
+    """`shape_label` of the Fig. 5 brush's pillars (the sweep slice it is drawn from)."""
+    tag = shape_tag(config, config["fig5"]["shape"])
+    return tag[1:] if tag else "disc"
+
+
+def fig5_options(config):
+    """Keyword arguments of `figures.fig5`: the Fig. 5 config with its shape label."""
+    return {**config["fig5"], "shape": fig5_shape(config)}

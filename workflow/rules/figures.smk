@@ -18,7 +18,8 @@ rule fig5:
         runtime=10,
     params:
         figure="fig5",
-        options=config["fig5"],
+        options=fig5_options(config),
+        shape=fig5_shape(config),
     script:
         "../scripts/figure.py"
 
@@ -150,3 +151,29 @@ rule curve_figure:
         figure=lambda wildcards: wildcards.curve_figure,
     script:
         "../scripts/curve_figure.py"
+
+
+rule lattices:
+    """Issue 13: F_ad against kbar for every layout and pillar shape of the same N."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/lattices.png",
+            caption="../report/lattices.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/lattices.pdf",
+    log:
+        "logs/figures/lattices.log",
+    benchmark:
+        "results/benchmarks/figures/lattices.tsv"
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        figure="lattices",
+        options={},
+        shape=None,
+    script:
+        "../scripts/figure.py"

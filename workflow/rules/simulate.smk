@@ -1,5 +1,5 @@
 rule simulate:
-    """One pull-off simulation: one (layout, N, kbar, seed, grid, phi, rough) -> one curve file."""
+    """One pull-off simulation: one (layout, N, kbar, seed, grid, phi, shape, rough) -> one curve file."""
     output:
         f"results/curves/{CURVE_NAME}.nc",
     log:
@@ -7,12 +7,13 @@ rule simulate:
     benchmark:
         f"results/benchmarks/simulate/{CURVE_NAME}.tsv"
     wildcard_constraints:
-        layout="regular|random",
+        layout="regular|hexagonal|random",
         n_pillars=r"[0-9]+",
         kbar=r"[0-9][0-9.e+-]*|inf",
         seed=r"[0-9]+",
         grid=r"[0-9]+",
         phi=r"[0-9][0-9.e+-]*",
+        shape=r"(_square(_-?[0-9][0-9.e+-]*)?|_ellipse[0-9][0-9.e+-]*_-?[0-9][0-9.e+-]*)?",
         rough=r"(_S[0-9][0-9.e+-]*_P[0-9][0-9.e+-]*_C[0-9][0-9.e+-]*)?",
     threads: config["threads"]
     resources:
@@ -21,6 +22,7 @@ rule simulate:
     params:
         solver=config["solver"],
         rough=lambda wildcards: parse_rough_tag(wildcards.rough),
+        shape=lambda wildcards: parse_shape_tag(wildcards.shape),
         allow_coarse=config["allow_coarse"],
     script:
         "../scripts/simulate.py"

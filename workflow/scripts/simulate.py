@@ -1,4 +1,4 @@
-"""Script of rule `simulate`: one (layout, N, kbar, seed) -> one curve file."""
+"""Script of rule `simulate`: one (layout, N, kbar, seed, shape, ...) -> one curve file."""
 
 import os
 
@@ -27,6 +27,7 @@ def main(smk) -> None:
         seed=int(w.seed),
         allow_coarse=bool(smk.params.allow_coarse),
         **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
+        **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
     print(f"{params} on {smk.threads} thread(s)", flush=True)
     curve = simulate(params, SolverOptions(**smk.params.solver))
