@@ -386,6 +386,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     `theory.gaussian_spread_pull_off` and lambda `theory.foundation_stretch`,
     drawn for kbar <= 0.01 where it applies.
     """
+    sweep = finest_grid(sweep)  # one value per case: the best-resolved one
     fig = _new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)), 3.6)
     if not _rough_ready(sweep, fig):
         return fig
@@ -421,6 +422,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
 def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
                   ) -> Figure:
     """Adhesive force against preload per kbar, one panel per roughness (issue 11)."""
+    sweep = finest_grid(sweep)  # one value per case: the best-resolved one
     fig = _new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
     if not _rough_ready(sweep, fig):
         return fig
