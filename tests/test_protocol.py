@@ -490,6 +490,13 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert flat.adhesive_force.dims == ("layout", "n_pillars", "kbar", "seed", "grid")
     assert float(flat.adhesive_force.squeeze()) == pytest.approx(
         float(build_sweep(files[:1]).adhesive_force.squeeze()), rel=1e-12)
+    # the rough figures draw this sweep (grid dimension included): one point per roughness
+    from brushcore.data import figures
+
+    fig = figures.rough_roughness(sweep, "regular", 4)
+    line = fig.axes[0].lines[0]
+    assert len(line.get_xdata()) == sweep.sizes["roughness"]
+    assert figures.rough_preload(sweep, "regular", 4).axes
 
 
 def test_loop_and_load_sharing_figures_show_the_curve():
