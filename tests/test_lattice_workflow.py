@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 import yaml
 
-from test_workflow import expected_cases, output, repo_copy, snakemake  # noqa: F401 - fixture
+from test_workflow import (assert_refused_at_plan_time, expected_cases, output,  # noqa: F401
+                           repo_copy, snakemake)  # repo_copy: fixture
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("snakemake")
@@ -113,15 +114,7 @@ def test_disc_config_makes_no_lattice_figure(repo_copy: Path) -> None:  # noqa: 
 def test_bad_lattice_config_stops_before_any_job(repo_copy: Path,  # noqa: F811
                                                  tmp_path: Path, bad: dict,
                                                  message: str) -> None:
-    config = tmp_path / "bad.yaml"
-    config.write_text(yaml.safe_dump(bad))
-    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
-                     str(config))
-    text = output(proc)
-    assert proc.returncode != 0, text
-    assert re.search(message, text), f"error does not say {message!r}:\n{text}"
-    assert len(text.strip().splitlines()) <= 6, text
-    assert "Job stats" not in text, text
+    assert_refused_at_plan_time(repo_copy, tmp_path, bad, message)
 
 
 # -- sweep.nc with a shape dimension, and the figures ------------------------------------

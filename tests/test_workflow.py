@@ -228,6 +228,12 @@ def test_lint(repo_copy: Path) -> None:
 def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: dict,
                                          message: str) -> None:
     """One short message naming the key, from `snakemake -n` already."""
+    assert_refused_at_plan_time(repo_copy, tmp_path, bad, message)
+
+
+def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict,
+                                message: str) -> None:
+    """`snakemake -n` with `bad` over the test config stops with one short message."""
     config = tmp_path / "bad.yaml"
     config.write_text(yaml.safe_dump(bad))
     proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",

@@ -140,8 +140,8 @@ def sweep_cases(config):
 
     def lattice(layout, n, kbar, shape):
         for rough in _rough_tags(config, kbar):
-            drawn = rough and parse_rough_tag(rough)["roughness"] + parse_rough_tag(
-                rough)["kbar_spread"] > 0
+            fields = parse_rough_tag(rough)
+            drawn = fields.get("roughness", 0.0) + fields.get("kbar_spread", 0.0) > 0
             for seed in (config["seeds"] if drawn else [0]):
                 cases.add((layout, n, kbar_tag(kbar), seed, rough, shape))
 
