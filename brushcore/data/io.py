@@ -116,43 +116,35 @@ def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     os.replace(tmp, path)
 
 
-def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict) -> None:
-    """Write a Dataset to netCDF4 under a temporary name, then `publish` it as ``path``.
+def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict) -> Path:
+    """Write a Dataset to netCDF4 under a unique temporary name, then `publish` it as ``path``.
 
-    A killed writer leaves the old file (or none) and at most a ``.tmp``
-    beside it, never half a file under ``path``.
+    The temporary file lies in the same directory and is flushed before the
+    rename: a killed writer leaves the old file (or none) and at most a
+    ``.{name}.*.tmp`` (see `remove_stale_temporaries`), never half a file.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        ds.to_netcdf(tmp, engine="netcdf4", encoding=encoding)
-        publish(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
-    """Write a curve Dataset to netCDF4 atomically.
-
-    The file is written to a temporary name in the same directory, flushed
-    to disk, and renamed over ``path``: a killed job leaves either no file
-    or a complete one, never half of one.
-    """
-    path = Path(path)
-    ds = ds.copy(deep=False)  # the caller's attrs stay as they were
-    ds.attrs[DIGEST_ATTR] = content_digest(ds)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=_encoding(ds))
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
         publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
+    """Write a curve Dataset to netCDF4 atomically, with its content digest.
+
+    See `write_dataset_atomic`: a killed job leaves either no file or a
+    complete one, never half of one.
+    """
+    ds = ds.copy(deep=False)  # the caller's attrs stay as they were
+    ds.attrs[DIGEST_ATTR] = content_digest(ds)
+    return write_dataset_atomic(ds, path, _encoding(ds))
 
 
 def remove_stale_temporaries(path: str | os.PathLike) -> int:
