@@ -69,7 +69,8 @@ ATTRIBUTE_SCALARS = {
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
 SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols")
 #: ... and those that may differ (numerics): kept as attributes, distinct values joined by "; ".
-SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "allow_coarse")
+SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "symmetry",
+                     "allow_coarse")
 #: Per-step curves, NaN-padded to the longest curve of the sweep.
 CURVE_VARIABLES = (
     "displacement",

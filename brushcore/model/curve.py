@@ -15,6 +15,7 @@ from threadpoolctl import threadpool_limits
 
 from brushcore.model import theory
 from brushcore.numerics.convolution import cached_convolver
+from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels
 from brushcore.numerics.operator import BrushOperator
@@ -102,10 +103,18 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     number of operator applications.
     """
     labels = build_labels(params) if labels is None else labels
-    conv = cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+    compliance = spring_compliance(params, params.n_pillars)
+    quadrant = mirror_quadrant(labels, compliance) if options.symmetry else None
+    if quadrant is None:
+        conv = cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+        grid_labels = labels
+    else:  # a quarter of the unknowns, quarter-size transforms
+        conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads())
+        grid_labels, compliance = quadrant.labels, compliance[quadrant.images[:, 0]]
+        if progress is not None:
+            progress = _scaled_progress(progress, 4)
     before = conv.applications
-    op = BrushOperator(conv, labels, spring_compliance(params, params.n_pillars),
-                       params.h, params.e_star)
+    op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
@@ -113,9 +122,18 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
             curve = pull_off(op, sigma_c, params.h, options, progress)
     except (ConvergenceError, SolverError) as exc:
         raise type(exc)(f"{exc}; problem: {params}; options: {options}") from None
-    detach = np.full(labels.size, -1, dtype=np.int32)
+    detach = np.full(grid_labels.size, -1, dtype=np.int32)
     detach[op.elements] = curve.detach_step
-    return detach.reshape(labels.shape), curve, conv.applications - before
+    detach = detach.reshape(grid_labels.shape)
+    if quadrant is not None:
+        detach, curve = quadrant.unfold_field(detach), quadrant.unfold_curve(curve)
+    return detach, curve, conv.applications - before
+
+
+def _scaled_progress(progress: Progress, factor: int) -> Progress:
+    """A progress callback fed quadrant counts, reporting full-brush counts."""
+    return lambda events, attached, total: progress(events, attached * factor,
+                                                    total * factor)
 
 
 def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
@@ -176,11 +194,13 @@ def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
 def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
                area_total: float, *, events: int, steps: int, applications: int,
                cg_iterations: int, wall: float, title: str, references: str,
-               hashed: tuple[dict, ...] = ()) -> dict[str, object]:
+               hashed: tuple[dict, ...] = (), symmetry_fold: int = 1) -> dict[str, object]:
     """Attributes every curve file carries: inputs, discretisation, cost, provenance."""
     return {
         **params.as_attrs(),
-        **asdict(options),
+        # netCDF has no boolean attributes
+        **{k: int(v) if isinstance(v, bool) else v for k, v in asdict(options).items()},
+        "symmetry_fold": symmetry_fold,
         "phi_actual": area_total / params.side**2,
         "real_contact_area": area_total,
         "pillar_radius": params.pillar_radius,
@@ -283,7 +303,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                        steps=int(curve.displacement.size), applications=applications,
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Adhesive pull-off of a spring-mounted pillar brush",
-                       references=REFERENCES)
+                       references=REFERENCES, symmetry_fold=curve.symmetry_fold)
     return xr.Dataset(data, coords={
         "step": var("step", np.arange(curve.displacement.size, dtype=np.int32),
                     "step of the pull-off (one per solve)", "1"),

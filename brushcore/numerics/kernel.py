@@ -78,3 +78,24 @@ def dense_influence_matrix(n: int, h: float, e_star: float) -> np.ndarray:
 def self_compliance(e_star: float, h: float) -> float:
     """Centre displacement of an h x h square under unit pressure, 4 ln(1+sqrt2) h / (pi E*)."""
     return 4.0 * math.log(1.0 + math.sqrt(2.0)) * h / (math.pi * e_star)
+
+
+def folded_coefficient(ya: np.ndarray, xa: np.ndarray, yb: np.ndarray, xb: np.ndarray,
+                       h: float, e_star: float) -> np.ndarray:
+    """Influence of element b and its three mirror images on element a.
+
+    Coordinates [length] are element centres in the quadrant of a field that
+    is mirror-symmetric about y = -h/2 and x = -h/2 (see
+    `brushcore.numerics.mirror`); the image of y is -h - y.  This is the
+    operator the quadrant problem solves, so sums of it are the exact
+    influence between quadrant elements.
+
+    Returns
+    -------
+    numpy.ndarray
+        Displacement at a per unit pressure on b and its images [length / stress].
+    """
+    dy, sy = ya - yb, ya + yb + h
+    dx, sx = xa - xb, xa + xb + h
+    return (love_coefficient(dy, dx, h, e_star) + love_coefficient(sy, dx, h, e_star)
+            + love_coefficient(dy, sx, h, e_star) + love_coefficient(sy, sx, h, e_star))

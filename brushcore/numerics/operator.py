@@ -53,7 +53,8 @@ class BrushOperator:
         self.conv.buffer[...] = 0.0
         self.attached = np.ones(self.elements.size, dtype=bool)
         self.block = (BlockInverse(self.elements, self.pillar_of, convolver.n,
-                                   self.compliance, h, e_star, coarse)
+                                   self.compliance, h, e_star, coarse,
+                                   getattr(convolver, "mirrored", False))
                       if use_block and BlockInverse.fits(self.pillar_of) else None)
         self._update()
 

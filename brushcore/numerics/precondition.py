@@ -31,7 +31,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.linalg import blas
 
-from brushcore.numerics.kernel import love_coefficient
+from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 
 
 class BlockInverse:
@@ -46,11 +46,15 @@ class BlockInverse:
     h, e_star : element size [length] and modulus [stress]
     coarse : allow the pillar-level coarse space (used for 1 < N <= MAX_COARSE
         when the pillars are coupled enough, see COUPLING_PER_PILLAR)
+    mirrored : the grid is the quadrant of a field mirrored about both
+        mid-lines (`brushcore.numerics.mirror`): every influence includes
+        the three images, and each block is the exact diagonal block of the
+        folded operator (a pillar near a mirror line feels its own images)
     """
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
-                 coarse: bool = True) -> None:
+                 coarse: bool = True, mirrored: bool = False) -> None:
         n_pillars = compliance.size
         order = np.argsort(pillar_of, kind="stable")
         counts = np.bincount(pillar_of, minlength=n_pillars)
@@ -67,6 +71,7 @@ class BlockInverse:
         self.inv = np.zeros((n_pillars, self.m, self.m))
         # Kept for `attach`, which borders a block with elements it lost.
         self._yy, self._xx, self._h, self._e_star = yy, xx, h, e_star
+        self._mirrored = mirrored
         self._compliance = np.asarray(compliance, dtype=float)
         self._live = np.arange(self.m)[None, :] < counts[:, None]  # attached slots
         # Pillars with the same footprint up to translation share one inverse.
@@ -74,14 +79,14 @@ class BlockInverse:
         for p in range(n_pillars):
             k = counts[p]
             key = np.stack([yy[p, :k] - yy[p, 0], xx[p, :k] - xx[p, 0]]).tobytes()
+            if mirrored:  # the images make the distance to the mirror lines matter
+                key += np.array([yy[p, 0], xx[p, 0]]).tobytes()
             shapes.setdefault(key + compliance[p].tobytes(), []).append(p)
         for group in shapes.values():
             p = group[0]
-            k = counts[p]
-            dy = yy[p, :k, None] - yy[p, None, :k]
-            dx = xx[p, :k, None] - xx[p, None, :k]
-            block = love_coefficient(dy, dx, h, e_star) + compliance[p]
-            self.inv[group, :k, :k] = np.linalg.inv(block)
+            y, x = yy[p, :counts[p]], xx[p, :counts[p]]
+            block = self._influence(y[:, None], x[:, None], y[None], x[None]) + compliance[p]
+            self.inv[group, :counts[p], :counts[p]] = np.linalg.inv(block)
         self._work = np.zeros((n_pillars, self.m))
         # Large blocks are applied from packed upper triangles (BLAS dspmv):
         # the application streams the stacked inverses from memory, and the
@@ -100,15 +105,21 @@ class BlockInverse:
         if self.interacting:
             cy = yy.sum(axis=1) / counts
             cx = xx.sum(axis=1) / counts
-            dy, dx = cy[:, None] - cy[None], cx[:, None] - cx[None]
-            self._r = love_coefficient(dy, dx, h, e_star)
+            # Diagonals are zero: a pillar's own images are in its block.
+            self._r = self._influence(cy[:, None], cx[:, None], cy[None], cx[None])
             np.fill_diagonal(self._r, 0.0)
             # For the uncertainty bound: the influence at the closest approach
             # of two footprints, not at their centroids (close random pillars).
             reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)
                             * (np.arange(self.m)[None, :] < counts[:, None])).max(axis=1)
-            gap = np.maximum(np.hypot(dy, dx) - reach[:, None] - reach[None, :], h)
-            self._r_near = love_coefficient(gap, 0.0, h, e_star)
+            self._r_near = np.zeros_like(self._r)
+            images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if mirrored else [(1, 1)]
+            for sy, sx in images:  # image of y is -h - y
+                iy = cy if sy > 0 else -h - cy
+                ix = cx if sx > 0 else -h - cx
+                dist = np.hypot(cy[:, None] - iy[None], cx[:, None] - ix[None])
+                gap = np.maximum(dist - reach[:, None] - reach[None, :], h)
+                self._r_near += love_coefficient(gap, 0.0, h, e_star)
             np.fill_diagonal(self._r_near, 0.0)
             self._z = self.inv.sum(axis=2)
             # max_p sum_q R_pq c_q: the far-field displacement of a pillar
@@ -132,6 +143,13 @@ class BlockInverse:
     MAX_INTERACTION = 4000
     #: Refactorise E once this fraction of pillars changed c by > 25 %.
     REFACTOR_FRACTION = 0.02
+
+    def _influence(self, ya: np.ndarray, xa: np.ndarray, yb: np.ndarray,
+                   xb: np.ndarray) -> np.ndarray:
+        """Influence coefficients between elements at (ya, xa) and (yb, xb) [length / stress]."""
+        if self._mirrored:
+            return folded_coefficient(ya, xa, yb, xb, self._h, self._e_star)
+        return love_coefficient(ya - yb, xa - xb, self._h, self._e_star)
 
     def _factorise(self) -> None:
         c = self._z.sum(axis=1)
@@ -222,8 +240,8 @@ class BlockInverse:
         for p in touched:
             live = np.flatnonzero(self._live[p])
             yy, xx = self._yy[p][live], self._xx[p][live]
-            block = love_coefficient(yy[:, None] - yy[None], xx[:, None] - xx[None],
-                                     self._h, self._e_star) + self._compliance[p]
+            block = self._influence(yy[:, None], xx[:, None], yy[None], xx[None]) \
+                + self._compliance[p]
             g = self.inv[p]
             g[...] = 0.0
             g[np.ix_(live, live)] = np.linalg.inv(block)

@@ -42,6 +42,8 @@ class PullOffCurve:
     cg_iterations : CG iterations over all solves
     pillar_force_at_peak : force of each pillar [force] at the largest force
         (load sharing at F_ad)
+    symmetry_fold : 4 when solved on one quadrant of a mirror-symmetric
+        brush and unfolded (`brushcore.numerics.mirror`), else 1
     """
 
     displacement: np.ndarray
@@ -52,6 +54,7 @@ class PullOffCurve:
     events: int
     cg_iterations: int
     pillar_force_at_peak: np.ndarray | None = None
+    symmetry_fold: int = 1
 
 
 Progress = Callable[[int, int, int], None]
