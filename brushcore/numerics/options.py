@@ -40,7 +40,8 @@ class SolverOptions:
         quarter-size transforms (`brushcore.numerics.mirror`); True by
         default.  The physics is the same: the full solver detaches mirror
         images together (tie_rtol); measured F_ad and W agree within 1e-9.
-        False solves the whole grid (a check, or a reference).
+        False solves the whole grid (a check, or a reference).  Protocol
+        runs (preload, rough or graded brushes) always solve the whole grid.
     """
 
     rtol: float = 1e-4

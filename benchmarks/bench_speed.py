@@ -1,0 +1,138 @@
+"""Speed and memory figures of issue 12. Prints tables; asserts nothing.
+
+    python benchmarks/bench_speed.py ratio          # one application / bare FFT pair
+    python benchmarks/bench_speed.py target         # 16 x 16, kbar 0.455 at 1024^2
+    python benchmarks/bench_speed.py fine --grid 2048 --threads 2 regular:2304:0.455 ...
+
+``ratio``: ms of one operator application on the whole grid (pruned DC-FFT)
+and on the quadrant of a mirror-symmetric brush (DCT-II/III), beside a bare
+pyfftw r2c + c2r pair of the padded 2n x 2n grid; one thread.
+
+``target``: the issue's case on one thread, three ways in one run: the whole
+grid (``symmetry=False``: today's algorithm before mirror symmetry), the
+default (quadrant), and the exact reference; applications, wall, F_ad, W and
+their deviation from the reference.
+
+``fine``: each case in its own process (so the peak memory is its own):
+applications, wall, peak resident memory, F_ad, W.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from brushcore import BrushParams, SolverOptions, simulate
+from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.mirror import MirrorConvolver
+from brushcore.numerics.threads import pin_threads
+
+sys.path.insert(0, __file__.rsplit("/", 1)[0])
+from bench_pulloff import bare_fft_pair_ms  # noqa: E402
+
+
+def _ms(conv, fill: int, repeats: int = 20) -> float:
+    conv.buffer[:, :fill] = np.random.default_rng(0).random((conv.buffer.shape[0], fill))
+    conv.apply_buffer()
+    t = time.perf_counter()
+    for _ in range(repeats):
+        conv.apply_buffer()
+    return (time.perf_counter() - t) / repeats * 1e3
+
+
+def ratio(grids: list[int]) -> None:
+    print(f"{'grid':>6} {'pair ms':>8} {'whole ms':>9} {'ratio':>6} {'quadrant ms':>12} {'ratio':>6}")
+    with threadpool_limits(1):
+        for n in grids:
+            pair = bare_fft_pair_ms(n, 10)
+            whole = _ms(Convolver(n), n)
+            quad = _ms(MirrorConvolver(n), n // 2)
+            print(f"{n:6d} {pair:8.2f} {whole:9.2f} {whole / pair:6.2f} {quad:12.2f} "
+                  f"{quad / pair:6.2f}", flush=True)
+
+
+def _row(label: str, ds, wall: float, ref=None) -> str:
+    f, w = float(ds.adhesive_force), float(ds.work_of_separation)
+    dev = ""
+    if ref is not None:
+        dev = (f" {f / float(ref.adhesive_force) - 1:+9.1e}"
+               f" {w / float(ref.work_of_separation) - 1:+9.1e}")
+    return (f"{label:>22} {ds.attrs['operator_applications']:6d} {wall:8.1f} "
+            f"{float(ds.adhesive_force_normalized):9.5f} "
+            f"{float(ds.work_of_separation_normalized):9.5f}{dev}")
+
+
+def target(grid: int) -> None:
+    params = BrushParams("regular", 256, 0.455, grid)
+    runs = {"whole grid (before)": SolverOptions(symmetry=False),
+            "default (quadrant)": SolverOptions(),
+            "exact reference": SolverOptions.exact()}
+    out = {}
+    with threadpool_limits(1):
+        for label, options in runs.items():
+            t = time.perf_counter()
+            out[label] = (simulate(params, options), time.perf_counter() - t)
+    ref = out["exact reference"][0]
+    print(f"regular N=256 kbar=0.455 grid {grid}, one thread")
+    print(f"{'run':>22} {'apps':>6} {'wall s':>8} {'F_ad/F_K':>9} {'W/W_K':>9} "
+          f"{'dF':>9} {'dW':>9}")
+    for label, (ds, wall) in out.items():
+        print(_row(label, ds, wall, ref))
+
+
+def _child(spec: str, grid: int, threads: int) -> None:
+    layout, n_pillars, kbar = spec.split(":")
+    params = BrushParams(layout, int(n_pillars), float(kbar), grid)
+    pin_threads(threads)  # FFTW plans and BLAS, as a workflow job does
+    t = time.perf_counter()
+    ds = simulate(params)
+    wall = time.perf_counter() - t
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+    print(json.dumps({"apps": int(ds.attrs["operator_applications"]), "wall": wall,
+                      "peak_gib": peak, "fold": int(ds.attrs["symmetry_fold"]),
+                      "f": float(ds.adhesive_force_normalized),
+                      "w": float(ds.work_of_separation_normalized)}))
+
+
+def fine(specs: list[str], grid: int, threads: int) -> None:
+    print(f"grid {grid}, {threads} thread(s); each case in its own process")
+    print(f"{'case':>24} {'fold':>4} {'apps':>6} {'wall s':>8} {'peak GiB':>9} "
+          f"{'F_ad/F_K':>9} {'W/W_K':>9}")
+    for spec in specs:
+        proc = subprocess.run([sys.executable, __file__, "child", spec, "--grid", str(grid),
+                               "--threads", str(threads)], capture_output=True, text=True)
+        if proc.returncode:
+            print(f"{spec:>24} failed: {proc.stderr.strip().splitlines()[-1]}", flush=True)
+            continue
+        r = json.loads(proc.stdout.strip().splitlines()[-1])
+        print(f"{spec:>24} {r['fold']:4d} {r['apps']:6d} {r['wall']:8.1f} "
+              f"{r['peak_gib']:9.2f} {r['f']:9.5f} {r['w']:9.5f}", flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("what", choices=["ratio", "target", "fine", "child"])
+    parser.add_argument("cases", nargs="*", help="layout:N:kbar (fine)")
+    parser.add_argument("--grid", type=int, default=None)
+    parser.add_argument("--threads", type=int, default=1)
+    args = parser.parse_args()
+    if args.what == "ratio":
+        ratio([args.grid] if args.grid else [512, 1024, 2048])
+    elif args.what == "target":
+        target(args.grid or 1024)
+    elif args.what == "child":
+        _child(args.cases[0], args.grid or 2048, args.threads)
+    else:
+        fine(args.cases or ["regular:2304:0.455"], args.grid or 2048, args.threads)
+
+
+if __name__ == "__main__":
+    main()
