@@ -212,10 +212,12 @@ def simulate_mem_mb(wildcards, attempt):
     """Memory of one simulation [MB], doubled on a retry.
 
     Measured peak RSS at grid 512: 0.18-0.31 GB, 0.56 GB for 48 x 48 pillars
-    (pillar-interaction matrices); FFT buffers and blocks scale with n^2.
+    (pillar-interaction matrices); FFT buffers scale with n^2.  Finer grids
+    may hold up to 4 GB of per-pillar block inverses (BlockInverse.fits).
     """
     grid = int(wildcards.grid)
-    return int(400 + 800 * (grid / 512) ** 2) * attempt
+    blocks = 4000 if grid > 512 else 0
+    return int(400 + 800 * (grid / 512) ** 2 + blocks) * attempt
 
 
 def simulate_runtime(wildcards, attempt):
