@@ -30,7 +30,7 @@ from brushcore.model.shapes import SHAPES
 FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "--phi",
          "seed": "--seed", "min_gap": "--min-gap", "e_star": "--e-star",
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
-         "lookahead": "--lookahead", "cascade": "--cascade", "threads": "--threads",
+         "lookahead": "--lookahead", "cascade": "--cascade", "symmetry": "--no-symmetry", "threads": "--threads",
          "out": "--out", "allow_coarse": "--allow-coarse", "shape": "--shape",
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
@@ -152,6 +152,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
                      help="local: per-pillar cascades where they provably do not change "
                           "the result; global: re-solve after every round (reference)")
+    sim.add_argument("--no-symmetry", dest="symmetry", action="store_false",
+                     help="solve mirror-symmetric brushes on the whole grid, not one quadrant")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
     sim.add_argument("--out", type=Path, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -247,7 +249,8 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.gap_map is not None:
             arrays["gap_map"] = read_gap_map(args.gap_map, base.grid)
         params = dataclasses.replace(base, **arrays) if arrays else base
-        options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade)
+        options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
+                                symmetry=args.symmetry)
         if args.threads < 1:
             raise ParameterError("threads", args.threads, "an integer >= 1")
         check_output_path(args.out)

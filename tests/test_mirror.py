@@ -125,3 +125,17 @@ def test_quadrant_pull_off_equals_full_grid(case):
 def test_symmetry_option_is_validated():
     with pytest.raises(ParameterError, match="symmetry"):
         SolverOptions(symmetry="yes")
+
+
+def test_cli_solves_the_quadrant_unless_told_not_to(tmp_path):
+    from brushcore.cli import main
+    from brushcore.data.io import read_curve
+
+    common = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+              "--grid", "48", "--quiet", "--rtol", "1e-8", "--cascade", "global"]
+    assert main([*common, "--out", str(tmp_path / "q.nc")]) == 0
+    assert main([*common, "--no-symmetry", "--out", str(tmp_path / "w.nc")]) == 0
+    quad, whole = read_curve(tmp_path / "q.nc"), read_curve(tmp_path / "w.nc")
+    assert (quad.attrs["symmetry_fold"], quad.attrs["symmetry"]) == (4, 1)
+    assert (whole.attrs["symmetry_fold"], whole.attrs["symmetry"]) == (1, 0)
+    assert float(quad.adhesive_force) == pytest.approx(float(whole.adhesive_force), rel=1e-8)
