@@ -123,7 +123,7 @@ def main() -> None:
     parser.add_argument("cases", nargs="*", help="layout:N:kbar (fine)")
     parser.add_argument("--grid", type=int, default=None)
     parser.add_argument("--threads", type=int, default=1)
-    args = parser.parse_args()
+    args = parser.parse_intermixed_args()
     if args.what == "ratio":
         ratio([args.grid] if args.grid else [512, 1024, 2048])
     elif args.what == "target":
