@@ -14,7 +14,9 @@ default (quadrant), and the exact reference; applications, wall, F_ad, W and
 their deviation from the reference.
 
 ``fine``: each case in its own process (so the peak memory is its own):
-applications, wall, peak resident memory, F_ad, W.
+applications, wall, peak resident memory, F_ad, W; a curve still running
+after ``--limit`` seconds (default 900, the issue's 15 minutes) is stopped
+and reported with how far it got.
 """
 
 from __future__ import annotations
@@ -87,12 +89,28 @@ def target(grid: int) -> None:
         print(_row(label, ds, wall, ref))
 
 
-def _child(spec: str, grid: int, threads: int) -> None:
+class _Stop(Exception):
+    pass
+
+
+def _child(spec: str, grid: int, threads: int, limit: float) -> None:
     layout, n_pillars, kbar = spec.split(":")
     params = BrushParams(layout, int(n_pillars), float(kbar), grid)
     pin_threads(threads)  # FFTW plans and BLAS, as a workflow job does
     t = time.perf_counter()
-    ds = simulate(params)
+    state = {}
+
+    def progress(events: int, attached: int, total: int) -> None:
+        state.update(events=events, attached=attached, total=total)
+        if time.perf_counter() - t > limit:
+            raise _Stop
+
+    try:
+        ds = simulate(params, progress=progress)
+    except _Stop:
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+        print(json.dumps({"stopped": time.perf_counter() - t, "peak_gib": peak, **state}))
+        return
     wall = time.perf_counter() - t
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
     print(json.dumps({"apps": int(ds.attrs["operator_applications"]), "wall": wall,
@@ -101,17 +119,23 @@ def _child(spec: str, grid: int, threads: int) -> None:
                       "w": float(ds.work_of_separation_normalized)}))
 
 
-def fine(specs: list[str], grid: int, threads: int) -> None:
+def fine(specs: list[str], grid: int, threads: int, limit: float) -> None:
     print(f"grid {grid}, {threads} thread(s); each case in its own process")
     print(f"{'case':>24} {'fold':>4} {'apps':>6} {'wall s':>8} {'peak GiB':>9} "
           f"{'F_ad/F_K':>9} {'W/W_K':>9}")
     for spec in specs:
         proc = subprocess.run([sys.executable, __file__, "child", spec, "--grid", str(grid),
-                               "--threads", str(threads)], capture_output=True, text=True)
+                               "--threads", str(threads), "--limit", str(limit)],
+                              capture_output=True, text=True)
         if proc.returncode:
             print(f"{spec:>24} failed: {proc.stderr.strip().splitlines()[-1]}", flush=True)
             continue
         r = json.loads(proc.stdout.strip().splitlines()[-1])
+        if "stopped" in r:
+            print(f"{spec:>24} stopped after {r['stopped']:.0f} s at event {r.get('events', 0)}, "
+                  f"{r.get('attached', '?')} of {r.get('total', '?')} elements attached, "
+                  f"peak {r['peak_gib']:.2f} GiB", flush=True)
+            continue
         print(f"{spec:>24} {r['fold']:4d} {r['apps']:6d} {r['wall']:8.1f} "
               f"{r['peak_gib']:9.2f} {r['f']:9.5f} {r['w']:9.5f}", flush=True)
 
@@ -123,15 +147,17 @@ def main() -> None:
     parser.add_argument("cases", nargs="*", help="layout:N:kbar (fine)")
     parser.add_argument("--grid", type=int, default=None)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--limit", type=float, default=900.0,
+                        help="fine: stop a curve after this many seconds and report how far it got")
     args = parser.parse_intermixed_args()
     if args.what == "ratio":
         ratio([args.grid] if args.grid else [512, 1024, 2048])
     elif args.what == "target":
         target(args.grid or 1024)
     elif args.what == "child":
-        _child(args.cases[0], args.grid or 2048, args.threads)
+        _child(args.cases[0], args.grid or 2048, args.threads, args.limit)
     else:
-        fine(args.cases or ["regular:2304:0.455"], args.grid or 2048, args.threads)
+        fine(args.cases or ["regular:2304:0.455"], args.grid or 2048, args.threads, args.limit)
 
 
 if __name__ == "__main__":
