@@ -17,6 +17,7 @@ import numpy as np
 
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.tiles import TileCoarse
 from brushcore.numerics.kernel import self_compliance
 
 
@@ -56,12 +57,20 @@ class BrushOperator:
                                    self.compliance, h, e_star, coarse,
                                    getattr(convolver, "mirrored", False))
                       if use_block and BlockInverse.fits(self.pillar_of) else None)
+        # Pillars too large for dense blocks: the two-level tile preconditioner.
+        self.tiles = (TileCoarse(self.elements, self.pillar_of, convolver.n,
+                                 self.compliance, h, e_star)
+                      if use_block and self.block is None
+                      and TileCoarse.fits(self.elements, self.pillar_of, convolver.n)
+                      else None)
         self._update()
 
     def _update(self) -> None:
         self.idx = self._padded[self.attached]
         if self.block is not None:
             self._bpos = self.block.pos[self.attached]
+        if self.tiles is not None:
+            self._tpos = self.tiles.tile_of[self.attached]
         self.pl = self.pillar_of[self.attached]
         self.counts = np.bincount(self.pl, minlength=self.n_pillars)
         # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
@@ -87,6 +96,8 @@ class BrushOperator:
         local = None
         if self.block is not None:
             local = self.block.detach(pos, stress, None if stress is None else self._bpos)
+        if self.tiles is not None:
+            self.tiles.detach(pos)
         self.attached[pos] = False
         self._update()
         return None if local is None else local[~which]
@@ -104,6 +115,8 @@ class BrushOperator:
             raise ValueError("attach: some elements are already attached")
         if self.block is not None:
             self.block.attach(positions)
+        if self.tiles is not None:
+            self.tiles.attach(positions)
         self.attached[positions] = True
         self._update()
 
@@ -155,10 +168,14 @@ class BrushOperator:
 
         With the dense blocks (`BlockInverse`) each pillar's own elastic and
         spring coupling is inverted exactly.  Pillars too large for dense
-        blocks fall back to (c I + s_p 1 1^T)^-1 with c = K_ii, applied by
-        Sherman-Morrison: exact on the spring part, so the iteration count
-        stays flat even for very soft springs where S dominates.
+        blocks take the two-level tile preconditioner (`TileCoarse`), and
+        where even that does not fit, (c I + s_p 1 1^T)^-1 with c = K_ii,
+        applied by Sherman-Morrison: exact on the spring part, so the
+        iteration count stays flat even for very soft springs where S
+        dominates.
         """
         if self.block is not None:
             return self.block.apply(r, self._bpos)
+        if self.tiles is not None:
+            return self.tiles.apply(r, self._tpos, self.diag)
         return (r - self._sm * self.pillar_sums(r)[self.pl]) / self.diag
