@@ -115,7 +115,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     fold = options.symmetry and backend.on_host
     quadrant = mirror_quadrant(labels, compliance) if fold else None
     if quadrant is None:
-        conv = _convolver(params, backend)
+        conv = grid_convolver(params, backend)
         grid_labels = labels
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads())
@@ -139,7 +139,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     return detach, curve, conv.applications - before
 
 
-def _convolver(params: BrushParams, backend: Backend):
+def grid_convolver(params: BrushParams, backend: Backend):
     """The whole-grid convolver for ``backend`` (cached per process)."""
     if backend.on_host:
         return cached_convolver(params.grid, params.h, params.e_star, fft_threads())
@@ -182,7 +182,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     backend = resolve_backend(params.backend)
     labels = build_labels(params) if labels is None else labels
     n_pillars = int(labels.max()) + 1
-    conv = _convolver(params, backend)
+    conv = grid_convolver(params, backend)
     before = conv.applications
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)
