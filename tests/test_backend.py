@@ -233,3 +233,33 @@ def test_gpu_matches_cpu(name):
     np.testing.assert_allclose(_detach_displacement(got), _detach_displacement(want),
                                rtol=GPU_RTOL)
     assert got.attrs["backend"] == "gpu" and got.attrs["device_memory_bytes"] > 0
+
+
+def _fake_gpu() -> backend_module.Backend:
+    """The gpu backend's wiring with NumPy standing in for CuPy (array_api_compat's
+    NumPy view as the namespace, a fake card of 8 GiB)."""
+    compat = pytest.importorskip("array_api_compat.numpy")
+    device = types.SimpleNamespace(id=0, synchronize=lambda: None)
+    runtime = types.SimpleNamespace(memGetInfo=lambda: (6 * 2**30, 8 * 2**30),
+                                    getDeviceProperties=lambda i: {"name": b"Fake GPU"})
+    pool = types.SimpleNamespace(total_bytes=lambda: 0, used_bytes=lambda: 0)
+    native = types.SimpleNamespace(
+        ndarray=np.ndarray, asnumpy=np.asarray, flatnonzero=np.flatnonzero,
+        bincount=np.bincount, get_default_memory_pool=lambda: pool,
+        cuda=types.SimpleNamespace(runtime=runtime, Device=lambda: device))
+    return backend_module.Backend("gpu", compat, native)
+
+
+def test_gpu_wiring_with_numpy_standing_in_for_cupy(monkeypatch):
+    fake = _fake_gpu()
+    real = resolve_backend
+    monkeypatch.setattr(curve_module, "resolve_backend",
+                        lambda name: fake if name == "gpu" else real(name))
+    params = BrushParams("random", 12, 1.0, 64, seed=1)
+    want = simulate(params, WHOLE_GRID)
+    got = simulate(params, WHOLE_GRID, backend="gpu")
+    _assert_same_curve(got, want, STRICT_RTOL)
+    np.testing.assert_array_equal(got.detachment_step.values, want.detachment_step.values)
+    assert got.attrs["device_name"] == "Fake GPU"
+    assert got.attrs["device_memory_bytes"] == 8 * 2**30
+    assert fake.free_memory() == 6 * 2**30

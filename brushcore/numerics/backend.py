@@ -8,8 +8,10 @@ which each backend provides natively:
 - ``cpu``: NumPy (the default).  Every helper is the NumPy call the engine
   made before backends existed, so CPU results are bit-identical.
 - ``gpu``: CuPy, imported only when chosen (an optional backend costs
-  nothing to those who do not use it).  cuFFT plans are cached by CuPy's
-  plan cache, float64 throughout.
+  nothing to those who do not use it), seen through `array_api_compat.cupy`
+  (CuPy 13 lacks some array-API names, e.g. ``bool``, ``concat``,
+  ``asarray(copy=...)``).  cuFFT plans are cached by CuPy's plan cache,
+  float64 throughout.
 - ``strict``: `array_api_strict` on the CPU, for tests: a call that would
   not port to another namespace fails here without a GPU.  Its helpers
   reach into the wrapped NumPy array, as CuPy's native calls would.
@@ -44,11 +46,14 @@ class Backend:
     Parameters
     ----------
     name : "cpu", "gpu" or "strict"
-    xp : the array namespace (numpy, cupy or array_api_strict)
+    xp : the array-API namespace (numpy, array_api_compat.cupy, array_api_strict)
+    native : the library itself (numpy, cupy, array_api_strict), for the
+        calls the standard lacks and for the device
     """
 
     name: str
     xp: ModuleType = field(repr=False, compare=False)
+    native: ModuleType = field(repr=False, compare=False)
 
     @property
     def on_host(self) -> bool:
@@ -60,11 +65,17 @@ class Backend:
         """A device array from host data (a no-op for NumPy arrays on cpu)."""
         if self.name == "cpu":
             return np.asarray(x, dtype=dtype)
-        if getattr(x, "__array_namespace__", lambda: None)() is self.xp:  # already here
+        if self._on_device(x):
             return self.xp.asarray(x, dtype=None if dtype is None else self._dtype(dtype))
         if dtype is None:
             dtype = np.asarray(x).dtype
         return self.xp.asarray(np.asarray(x, dtype=dtype), dtype=self._dtype(dtype))
+
+    def _on_device(self, x: Any) -> bool:
+        """Whether ``x`` is already an array of this backend."""
+        if self.name == "gpu":
+            return isinstance(x, self.native.ndarray)
+        return type(x).__module__.startswith(self.native.__name__)
 
     def _dtype(self, dtype: Any) -> Any:
         """The namespace's dtype object for a NumPy dtype."""
@@ -73,7 +84,7 @@ class Backend:
     def to_host(self, x: Any) -> np.ndarray:
         """A NumPy array from a device array (a no-op on cpu)."""
         if self.name == "gpu":
-            return self.xp.asnumpy(x)
+            return self.native.asnumpy(x)
         if self.name == "strict":
             return np.asarray(x._array)
         return np.asarray(x)
@@ -83,7 +94,7 @@ class Backend:
         """Indices of the true entries of a 1-D boolean array."""
         if self.name == "strict":
             return self.xp.nonzero(mask)[0]
-        return self.xp.flatnonzero(mask)
+        return self.native.flatnonzero(mask)
 
     def bincount(self, index: Any, weights: Any = None, minlength: int = 0) -> Any:
         """Sum of ``weights`` (or counts) per integer label, length >= ``minlength``."""
@@ -91,7 +102,7 @@ class Backend:
             w = None if weights is None else weights._array
             out = np.bincount(index._array, weights=w, minlength=minlength)
             return self.xp.asarray(out)
-        return self.xp.bincount(index, weights=weights, minlength=minlength)
+        return self.native.bincount(index, weights=weights, minlength=minlength)
 
     def put(self, target: Any, index: Any, values: Any) -> None:
         """target[index] = values in place (1-D target, integer index)."""
@@ -105,14 +116,14 @@ class Backend:
     def synchronize(self) -> None:
         """Wait for queued device work (for timing); no-op on the host."""
         if self.name == "gpu":
-            self.xp.cuda.Device().synchronize()
+            self.native.cuda.Device().synchronize()
 
     def free_memory(self) -> float:
         """Free device memory [bytes], including CuPy's cached pool blocks; inf on the host."""
         if self.name != "gpu":
             return float("inf")
-        free, _ = self.xp.cuda.runtime.memGetInfo()
-        pool = self.xp.get_default_memory_pool()
+        free, _ = self.native.cuda.runtime.memGetInfo()
+        pool = self.native.get_default_memory_pool()
         return float(free + pool.total_bytes() - pool.used_bytes())
 
     @property
@@ -120,7 +131,8 @@ class Backend:
         """The card's name, or "cpu"."""
         if self.name != "gpu":
             return "cpu"
-        props = self.xp.cuda.runtime.getDeviceProperties(self.xp.cuda.Device().id)
+        cuda = self.native.cuda
+        props = cuda.runtime.getDeviceProperties(cuda.Device().id)
         name = props["name"]
         return name.decode() if isinstance(name, bytes) else str(name)
 
@@ -129,11 +141,12 @@ class Backend:
         """Total memory of the card [bytes]; 0 on the host."""
         if self.name != "gpu":
             return 0
-        return int(self.xp.cuda.runtime.memGetInfo()[1])
+        return int(self.native.cuda.runtime.memGetInfo()[1])
 
 
-def _import_cupy() -> ModuleType:
-    """CuPy with a usable card, or ParameterError naming what is missing."""
+def _import_cupy() -> tuple[ModuleType, ModuleType]:
+    """CuPy and its array-API view, with a usable card, or ParameterError
+    naming what is missing."""
     try:
         cupy = importlib.import_module("cupy")
     except ImportError:
@@ -147,7 +160,12 @@ def _import_cupy() -> ModuleType:
         raise ParameterError("backend", "gpu", "'cpu' (the default) or 'gpu'",
                              "no CUDA device visible (check nvidia-smi and "
                              "CUDA_VISIBLE_DEVICES)")
-    return cupy
+    try:
+        compat = importlib.import_module("array_api_compat.cupy")
+    except ImportError:
+        raise ParameterError("backend", "gpu", "'cpu' (the default) or 'gpu'",
+                             f"array-api-compat is not installed: {GPU_INSTALL}") from None
+    return compat, cupy
 
 
 @lru_cache(maxsize=None)
@@ -163,7 +181,7 @@ def resolve_backend(name: str = "cpu") -> Backend:
     if name not in BACKENDS:
         raise ParameterError("backend", name, "'cpu' (the default) or 'gpu'")
     if name == "cpu":
-        return Backend("cpu", np)
+        return CPU
     if name == "strict":
         try:
             strict = importlib.import_module("array_api_strict")
@@ -171,8 +189,8 @@ def resolve_backend(name: str = "cpu") -> Backend:
             raise ParameterError("backend", name, "'cpu' (the default) or 'gpu'",
                                  "array-api-strict is not installed: "
                                  "pip install array-api-strict") from None
-        return Backend("strict", strict)
-    return Backend("gpu", _import_cupy())
+        return Backend("strict", strict, strict)
+    return Backend("gpu", *_import_cupy())
 
 
-CPU = Backend("cpu", np)
+CPU = Backend("cpu", np, np)

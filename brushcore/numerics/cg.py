@@ -14,8 +14,16 @@ class ConvergenceError(RuntimeError):
 
 
 def namespace(x: Any) -> Any:
-    """The array namespace of ``x`` (numpy, cupy, array_api_strict)."""
-    return x.__array_namespace__() if hasattr(x, "__array_namespace__") else np
+    """The array-API namespace of ``x``: numpy for NumPy arrays (the CPU path
+    as it always was), else array_api_compat's view when installed (CuPy's
+    own namespace lacks some standard names), else the array's own."""
+    if isinstance(x, np.ndarray):
+        return np
+    try:
+        from array_api_compat import array_namespace
+    except ImportError:
+        return x.__array_namespace__()
+    return array_namespace(x)
 
 
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
