@@ -322,17 +322,19 @@ def test_gpu_backend_requests_one_card_per_curve(repo_copy: Path, tmp_path: Path
     config = tmp_path / "gpu.yaml"
     config.write_text(yaml.safe_dump({"backend": "gpu"}))
     test = ("--configfile", "config/test.yaml")
-    local = snakemake(repo_copy, "-n", "--cores", "2", *test, str(config),
+    # --forceall: plan every job even where an earlier test ran the sweep here
+    local = snakemake(repo_copy, "-n", "--forceall", "--cores", "2", *test, str(config),
                       "--resources", "gpu=1")
     assert local.returncode == 0, output(local)
     jobs = _simulate_resources(output(local))
     assert jobs and all(j["gpu"] == "1" and j["gres"] == "gpu:1" for j in jobs), jobs
-    slurm = snakemake(repo_copy, "-n", "--profile", "workflow/profiles/slurm", *test,
-                      str(config))
+    slurm = snakemake(repo_copy, "-n", "--forceall", "--profile", "workflow/profiles/slurm",
+                      *test, str(config))
     assert slurm.returncode == 0, output(slurm)
     jobs = _simulate_resources(output(slurm))
     assert jobs and {_slurm_gpu_flags(j) for j in jobs} == {"--gres=gpu:1"}, jobs
-    cpu = snakemake(repo_copy, "-n", "--profile", "workflow/profiles/slurm", *test)
+    cpu = snakemake(repo_copy, "-n", "--forceall", "--profile", "workflow/profiles/slurm",
+                    *test)
     assert cpu.returncode == 0, output(cpu)
     jobs = _simulate_resources(output(cpu))
     assert jobs and {_slurm_gpu_flags(j) for j in jobs} == {""}, jobs

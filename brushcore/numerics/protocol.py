@@ -515,7 +515,7 @@ class _Engine:
                 if wp.kind == "separation" and op.size == 0:
                     break
             waypoint_step.append(len(self.rec["d"]) - 1)
-            at_waypoint.append(be.to_host(op.attached).copy())
+            at_waypoint.append(xp.asarray(op.attached, copy=True))
         r = self.rec
         retraction = np.zeros(len(r["d"]), dtype=bool)
         retraction[retraction_start:] = True
@@ -527,6 +527,7 @@ class _Engine:
             branch=np.asarray(r["br"]), direction=np.asarray(r["dir"]),
             waypoint_step=np.asarray(waypoint_step), attach_step=host(self.attach_step),
             detach_step=host(self.detach_step), pillar_force_at_peak=host(pillar_force),
-            peak_step=i_peak, let_go=host(self.let_go), attached_at_waypoint=tuple(at_waypoint),
+            peak_step=i_peak, let_go=host(self.let_go),
+            attached_at_waypoint=tuple(host(a) for a in at_waypoint),
             attached_at_peak=host(attached_peak), events=self.events, cg_iterations=self.cg_iters,
             retraction=retraction)
