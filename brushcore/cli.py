@@ -20,6 +20,7 @@ from pathlib import Path
 from brushcore.numerics.cg import ConvergenceError
 from brushcore.data.joblog import EXIT_INTERRUPTED, INTERRUPTED
 from brushcore.model.params import LAYOUTS, MAX_ASPECT, BrushParams
+from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.validation import ParameterError
 from brushcore.model.provenance import version
@@ -34,7 +35,8 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "out": "--out", "allow_coarse": "--allow-coarse", "shape": "--shape",
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
-         "heights": "--heights", "kbar_values": "--kbar-file", "gap_map": "--gap-map"}
+         "heights": "--heights", "kbar_values": "--kbar-file", "gap_map": "--gap-map",
+         "backend": "--backend"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
 
@@ -155,6 +157,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-symmetry", dest="symmetry", action="store_false",
                      help="solve mirror-symmetric brushes on the whole grid, not one quadrant")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
+    sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
+                     help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
+                          "pip install 'brushcore[gpu]' and a CUDA 12 card; whole grid, "
+                          "no symmetry fold)")
     sim.add_argument("--out", type=Path, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return parser
@@ -239,7 +245,9 @@ def _simulate(args: argparse.Namespace) -> int:
     try:
         # Files are checked against the counts the plain parameters imply.
         base = dataclasses.replace(_brush_params(args), roughness=args.roughness,
-                                   preload=args.preload, kbar_spread=args.kbar_spread)
+                                   preload=args.preload, kbar_spread=args.kbar_spread,
+                                   backend=args.backend)
+        backend = resolve_backend(base.backend)  # CuPy and a card, before any work
         arrays = {}
         if args.heights is not None:
             arrays["heights"] = read_pillar_values(args.heights, base.n_pillars, "heights")
@@ -258,7 +266,8 @@ def _simulate(args: argparse.Namespace) -> int:
         area = int((labels >= 0).sum())
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements,"
               f" phi realised {area / labels.size:.4g} (requested {params.phi:g}), "
-              f"{int(labels.max()) + 1} pillars", file=sys.stderr)
+              f"{int(labels.max()) + 1} pillars"
+              + ("" if backend.on_host else f", on {backend.device_name}"), file=sys.stderr)
         pin_threads(args.threads)
         ds = simulate(params, options, progress=progress, labels=labels)
         write_curve(ds, args.out)

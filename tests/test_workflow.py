@@ -297,3 +297,49 @@ def test_rough_keys_plan_suffixed_curves_and_leave_flat_names(repo_copy: Path,
         *(f"results/curves/regular/N16_kbar0.01_seed{s}_grid64_phi0.12_S0.2_P{p}_C0.0.nc"
           for s in (0, 1) for p in ("0.0", "1.0")),
     }, names
+
+
+def _simulate_resources(text: str) -> list[dict[str, str]]:
+    """The resources of every planned simulate job (the only rule with `gres`)."""
+    lines = re.findall(r"^\s*resources: (.*gres=.*)$", text, flags=re.MULTILINE)
+    return [dict(item.split("=", 1) for item in line.split(", ")) for line in lines]
+
+
+def _slurm_gpu_flags(resources: dict[str, str]) -> str:
+    """What snakemake-executor-plugin-slurm adds to sbatch for these resources."""
+    from snakemake_executor_plugin_slurm.utils import set_gres_string
+
+    class Resources(dict):
+        __getattr__ = dict.get
+
+    typed = Resources({k: int(v) if v.isdigit() else v for k, v in resources.items()})
+    return set_gres_string(type("Job", (), {"resources": typed})()).strip()
+
+
+def test_gpu_backend_requests_one_card_per_curve(repo_copy: Path, tmp_path: Path) -> None:
+    """backend: gpu -> resource gpu=1 locally (--resources gpu=N), --gres=gpu:1 on Slurm."""
+    pytest.importorskip("snakemake_executor_plugin_slurm")
+    config = tmp_path / "gpu.yaml"
+    config.write_text(yaml.safe_dump({"backend": "gpu"}))
+    test = ("--configfile", "config/test.yaml")
+    # --forceall: plan every job even where an earlier test ran the sweep here
+    local = snakemake(repo_copy, "-n", "--forceall", "--cores", "2", *test, str(config),
+                      "--resources", "gpu=1")
+    assert local.returncode == 0, output(local)
+    jobs = _simulate_resources(output(local))
+    assert jobs and all(j["gpu"] == "1" and j["gres"] == "gpu:1" for j in jobs), jobs
+    slurm = snakemake(repo_copy, "-n", "--forceall", "--profile", "workflow/profiles/slurm",
+                      *test, str(config))
+    assert slurm.returncode == 0, output(slurm)
+    jobs = _simulate_resources(output(slurm))
+    assert jobs and {_slurm_gpu_flags(j) for j in jobs} == {"--gres=gpu:1"}, jobs
+    cpu = snakemake(repo_copy, "-n", "--forceall", "--profile", "workflow/profiles/slurm",
+                    *test)
+    assert cpu.returncode == 0, output(cpu)
+    jobs = _simulate_resources(output(cpu))
+    assert jobs and {_slurm_gpu_flags(j) for j in jobs} == {""}, jobs
+
+
+def test_unknown_backend_key_is_refused(repo_copy: Path, tmp_path: Path) -> None:
+    assert_refused_at_plan_time(repo_copy, tmp_path, {"backend": "tpu"},
+                                "config key 'backend': 'tpu' is not one of")

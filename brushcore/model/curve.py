@@ -6,7 +6,7 @@ import datetime as dt
 import hashlib
 import time
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +14,9 @@ import xarray as xr
 from threadpoolctl import threadpool_limits
 
 from brushcore.model import theory
+from brushcore.numerics.backend import Backend, resolve_backend
 from brushcore.numerics.convolution import cached_convolver
+from brushcore.numerics.device_convolution import cached_device_convolver
 from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels
@@ -101,12 +103,19 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     -------
     detachment_step map (n, n; -1 outside pillars), the curve, and the
     number of operator applications.
+
+    Notes
+    -----
+    The mirror-symmetric quadrant path (``options.symmetry``) is CPU-only:
+    with ``params.backend`` other than "cpu" the whole grid is solved.
     """
+    backend = resolve_backend(params.backend)
     labels = build_labels(params) if labels is None else labels
     compliance = spring_compliance(params, params.n_pillars)
-    quadrant = mirror_quadrant(labels, compliance) if options.symmetry else None
+    fold = options.symmetry and backend.on_host
+    quadrant = mirror_quadrant(labels, compliance) if fold else None
     if quadrant is None:
-        conv = cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+        conv = grid_convolver(params, backend)
         grid_labels = labels
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads())
@@ -128,6 +137,13 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     if quadrant is not None:
         detach, curve = quadrant.unfold_field(detach), quadrant.unfold_curve(curve)
     return detach, curve, conv.applications - before
+
+
+def grid_convolver(params: BrushParams, backend: Backend):
+    """The whole-grid convolver for ``backend`` (cached per process)."""
+    if backend.on_host:
+        return cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+    return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 
 def _scaled_progress(progress: Progress, factor: int) -> Progress:
@@ -163,9 +179,10 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     label map, the operator (its `elements` and `pillar_of` give the order
     of the per-element outputs), the curve, and the operator applications.
     """
+    backend = resolve_backend(params.backend)
     labels = build_labels(params) if labels is None else labels
     n_pillars = int(labels.max()) + 1
-    conv = cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+    conv = grid_convolver(params, backend)
     before = conv.applications
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)
@@ -173,7 +190,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
                        params.e_star)
     z = np.zeros(op.size)
     if heights is not None:
-        z += np.asarray(heights, dtype=float)[op.pillar_of]
+        z += np.asarray(heights, dtype=float)[backend.to_host(op.pillar_of)]
     if gap_map is not None:
         z -= np.asarray(gap_map, dtype=float).ravel()[op.elements]
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
@@ -195,7 +212,12 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
                area_total: float, *, events: int, steps: int, applications: int,
                cg_iterations: int, wall: float, title: str, references: str,
                hashed: tuple[dict, ...] = (), symmetry_fold: int = 1) -> dict[str, object]:
-    """Attributes every curve file carries: inputs, discretisation, cost, provenance."""
+    """Attributes every curve file carries: inputs, discretisation, cost, provenance.
+
+    ``backend``, ``device_name`` and ``device_memory_bytes`` say where the
+    curve ran; they are not inputs (not in ``parameter_hash``).
+    """
+    backend = resolve_backend(params.backend)
     return {
         **params.as_attrs(),
         # netCDF has no boolean attributes
@@ -213,6 +235,9 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "operator_applications": applications,
         "cg_iterations": cg_iterations,
         "wall_time_s": wall,
+        "backend": backend.name,
+        "device_name": backend.device_name,
+        "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),
         "git_commit": git_commit(),
         "parameter_hash": parameter_hash(params.as_attrs(), asdict(options), *hashed),
@@ -234,10 +259,15 @@ REFERENCES = ("He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
 
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
              progress: Progress | None = None, labels: np.ndarray | None = None,
-             protocol: Sequence[Waypoint] | None = None) -> xr.Dataset:
+             protocol: Sequence[Waypoint] | None = None,
+             backend: str | None = None) -> xr.Dataset:
     """Pull-off curve, adhesive force and work of separation as a Dataset.
 
-    ``labels`` (optional) is the label map to use, see `run`.
+    ``labels`` (optional) is the label map to use, see `run`.  ``backend``
+    ("cpu" or "gpu"), when given, overrides ``params.backend``; "gpu" needs
+    CuPy and a visible CUDA device, checked before any work (ParameterError
+    naming what is missing).  GPU curves agree with CPU ones within CG
+    tolerance, not bit for bit, and solve the whole grid (no symmetry fold).
 
     A flat brush (`BrushParams.is_flat`) without ``protocol`` is today's
     pull-off from full contact.  Otherwise the brush is approached from
@@ -250,6 +280,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     Signs: d > 0 pulls the brush away, F > 0 is tensile.  Normalised values
     follow the paper (eqs. 20-24) with A the discretised real contact area.
     """
+    if backend is not None:
+        params = replace(params, backend=backend)
+    resolve_backend(params.backend)  # a missing CuPy or card fails before any work
     if protocol is not None or not params.is_flat:
         return simulate_protocol(params, options, progress, labels, protocol)
     t0 = time.perf_counter()
@@ -329,6 +362,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     integral of F dd over the whole loop) and ``pillars_in_contact_at_preload``.
     Waypoint values in ``protocol`` are normalised (F_K, d_K).
     """
+    backend = resolve_backend(params.backend)  # before any work
     t0 = time.perf_counter()
     labels = build_labels(params) if labels is None else labels
     inputs = pillar_inputs(params, labels)
@@ -357,6 +391,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     dissipated = loop_energy(d, f)
     area = curve.attached_elements * h * h
     n_pillars = op.n_pillars
+    pillar_of = backend.to_host(op.pillar_of)
 
     def on_grid(values: np.ndarray, fill, dtype) -> np.ndarray:
         out = np.full(labels.size, fill, dtype=dtype)
@@ -376,7 +411,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     centre = pillar_centroids(labels, h)
     preload_step = int(curve.waypoint_step[0])
     in_contact = int(np.count_nonzero(np.bincount(
-        op.pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
+        pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
     pillar_force = curve.pillar_force_at_peak
     if pillar_force is None:
         pillar_force = np.full(n_pillars, np.nan)

@@ -17,6 +17,7 @@ from brushcore.validation import ParameterError, is_integer, is_real, normalise,
 from brushcore.model.lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, nearest_hexagonal_counts
 from brushcore.model.shapes import SHAPES
 from brushcore.model.theory import stiffness_from_kbar
+from brushcore.numerics.backend import BACKENDS
 
 LAYOUTS = ("regular", "random", "hexagonal", "file")
 #: Largest ellipse aspect ratio: beyond it the minor axis of a pillar that
@@ -89,6 +90,12 @@ class BrushParams:
     gap_map : extra gap of every element, shape (grid, grid), in units of
         d_K, added below the pillar heights: element offset z_i = z_p -
         gap_i (a spherical tip is r^2 / 2R, a tilt a linear ramp).
+    backend : where the numbers are crunched, "cpu" (NumPy, default) or
+        "gpu" (CuPy; see `brushcore.numerics.backend`).  Not part of the
+        problem: excluded from equality, hashing, `as_attrs` and the
+        parameter hash, so a curve's identity does not depend on where it
+        ran.  Only the name is checked here; CuPy and the card are checked
+        by `simulate` before any work.
 
     Arrays are copied, stored read-only, and compared through their digest
     (``inputs_digest``), so equal parameters compare and hash equal.
@@ -123,6 +130,7 @@ class BrushParams:
     kbar_values: np.ndarray | None = field(default=None, compare=False, repr=False)
     gap_map: np.ndarray | None = field(default=None, compare=False, repr=False)
     inputs_digest: str = field(default="", init=False)
+    backend: str = field(default="cpu", compare=False)
 
     def __post_init__(self) -> None:
         normalise(self, ("n_pillars", "grid", "seed"),
@@ -161,6 +169,8 @@ class BrushParams:
                  self.allow_coarse, "True or False")
         object.__setattr__(self, "allow_coarse", bool(self.allow_coarse))
         self._check_rough()
+        require(self.backend in BACKENDS, "backend", self.backend,
+                 "'cpu' (the default) or 'gpu'")
         r = self.pillar_radius_elements
         floor = FLOOR_RADIUS_ELEMENTS if self.allow_coarse else MIN_RADIUS_ELEMENTS
         require(r >= floor, "grid", self.grid,
@@ -277,7 +287,7 @@ class BrushParams:
         """
         out = {}
         for k, v in asdict(self).items():
-            if k in ARRAY_FIELDS:
+            if k in ARRAY_FIELDS or k == "backend":  # inputs, not where they ran
                 continue
             if k in ROUGH_FIELDS and v == ROUGH_DEFAULTS[k]:
                 continue

@@ -2,13 +2,28 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 
 class ConvergenceError(RuntimeError):
     """CG did not reach its tolerance, or produced non-finite numbers."""
+
+
+def namespace(x: Any) -> Any:
+    """The array-API namespace of ``x``: numpy for NumPy arrays (the CPU path
+    as it always was), else array_api_compat's view when installed (CuPy's
+    own namespace lacks some standard names), else the array's own."""
+    if isinstance(x, np.ndarray):
+        return np
+    try:
+        from array_api_compat import array_namespace
+    except ImportError:
+        return x.__array_namespace__()
+    return array_namespace(x)
 
 
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
@@ -40,7 +55,8 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         met in ``max_iter`` iterations or a NaN/inf appears.
     """
     # One loop serves both: a pcg_image whose image is empty.
-    empty = np.empty(0)
+    xp = namespace(b)
+    empty = xp.empty(0, dtype=xp.float64)
     x, _, iterations = pcg_image(lambda p: (apply(p), empty), precondition, b, x0,
                                  apply(x0), empty, rtol, max_iter)
     return x, iterations
@@ -68,15 +84,16 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     -------
     x, Y x, iterations
     """
-    x, y = x0.copy(), y0.copy()
+    xp = namespace(b)
+    x, y = xp.asarray(x0, copy=True), xp.asarray(y0, copy=True)
     r = b - ax0
     z = precondition(r)
     history: list[float] = []
 
     def converged() -> bool:
-        xmax = float(np.abs(x).max()) if x.size else 0.0
-        zmax = float(np.abs(z).max()) if z.size else 0.0
-        if not np.isfinite(zmax):
+        xmax = float(xp.max(xp.abs(x))) if x.shape[0] else 0.0
+        zmax = float(xp.max(xp.abs(z))) if z.shape[0] else 0.0
+        if not math.isfinite(zmax):
             raise ConvergenceError(f"CG produced a non-finite correction after "
                                    f"{len(history)} iterations")
         if xmax > 0:
@@ -85,12 +102,12 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
 
     if converged():
         return x, y, 0
-    p = z.copy()
+    p = xp.asarray(z, copy=True)
     rz = float(r @ z)
     for it in range(1, max_iter + 1):
         q, yq = apply(p)
         pq = float(p @ q)
-        if not np.isfinite(pq) or pq <= 0.0:
+        if not math.isfinite(pq) or pq <= 0.0:
             raise ConvergenceError(f"CG broke down at iteration {it}: p.Ap = {pq!r} "
                                    f"(operator not positive definite or non-finite)")
         alpha = rz / pq

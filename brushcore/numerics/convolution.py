@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brushcore.numerics.backend import CPU
 from brushcore.numerics.kernel import wrapped_kernel
 
 try:  # pyfftw is a declared dependency; the fallback keeps the package importable
@@ -97,7 +98,26 @@ def planning() -> Iterator[None]:
         _save_wisdom()
 
 
-class Convolver:
+class HostBuffers:
+    """What `BrushOperator` sees of a convolver whose buffers are NumPy arrays.
+
+    Subclasses provide ``buffer`` (the padded input) and ``apply_buffer``.
+    """
+
+    #: Arrays are NumPy arrays (see `brushcore.numerics.backend`).
+    array_backend = CPU
+
+    @property
+    def flat_buffer(self) -> np.ndarray:
+        """`buffer` as a flat view (written at `padded_index` positions)."""
+        return self.buffer.ravel()
+
+    def apply_flat(self) -> np.ndarray:
+        """`apply_buffer` as a flat view."""
+        return self.apply_buffer().ravel()
+
+
+class Convolver(HostBuffers):
     """u = K * sigma on an n x n grid (non-periodic), with reusable FFT plans.
 
     Parameters

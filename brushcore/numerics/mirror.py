@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brushcore.numerics.convolution import HAVE_PYFFTW, planning
+from brushcore.numerics.convolution import HAVE_PYFFTW, HostBuffers, planning
 from brushcore.numerics.kernel import wrapped_kernel
 
 if HAVE_PYFFTW:
@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from brushcore.numerics.pulloff import PullOffCurve
 
 
-class MirrorConvolver:
+class MirrorConvolver(HostBuffers):
     """u = K * sigma on the quadrant of a field symmetric about both mid-lines.
 
     Same interface as `brushcore.numerics.convolution.Convolver`, with

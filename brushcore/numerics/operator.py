@@ -15,7 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import Any
+
 from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.device_blocks import DeviceBlocks
 from brushcore.numerics.precondition import BlockInverse
 from brushcore.numerics.tiles import TileCoarse
 from brushcore.numerics.kernel import self_compliance
@@ -35,7 +38,9 @@ class BrushOperator:
 
     Notes
     -----
-    Vectors are compressed to the attached elements in the order of
+    Arrays live where the convolver's (``convolver.array_backend``): NumPy
+    on the CPU, CuPy on a GPU; `elements` (the geometry) is always a NumPy
+    array.  Vectors are compressed to the attached elements in the order of
     `elements[attached]`.  `detach` shrinks the set; it never grows during
     a pull-off.  `attach` grows it again (approach and re-attachment, see
     `brushcore.numerics.protocol`).
@@ -44,45 +49,54 @@ class BrushOperator:
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
                  h: float, e_star: float, use_block: bool = True, coarse: bool = True) -> None:
         self.conv = convolver
+        self.backend = be = convolver.array_backend
+        xp = be.xp
         flat = labels.ravel()
         self.elements = np.flatnonzero(flat >= 0)  # flat n x n indices of pillar elements
-        self.pillar_of = flat[self.elements].astype(np.intp)
+        pillar_of = flat[self.elements].astype(np.intp)
         self.n_pillars = int(labels.max()) + 1
-        self.compliance = np.asarray(compliance, dtype=float)
+        compliance = np.asarray(compliance, dtype=float)
+        self._springs = bool(compliance.any())
+        self.pillar_of = be.asarray(pillar_of)
+        self.compliance = be.asarray(compliance)
         self.diag = self_compliance(e_star, h)
-        self._padded = convolver.padded_index(self.elements)
-        self.conv.buffer[...] = 0.0
-        self.attached = np.ones(self.elements.size, dtype=bool)
-        self.block = (BlockInverse(self.elements, self.pillar_of, convolver.n,
-                                   self.compliance, h, e_star, coarse,
-                                   getattr(convolver, "mirrored", False))
-                      if use_block and BlockInverse.fits(self.pillar_of) else None)
-        # Pillars too large for dense blocks: the two-level tile preconditioner.
-        self.tiles = (TileCoarse(self.elements, self.pillar_of, convolver.n,
-                                 self.compliance, h, e_star)
-                      if use_block and self.block is None
-                      and TileCoarse.fits(self.elements, self.pillar_of, convolver.n)
-                      else None)
+        self._padded = be.asarray(convolver.padded_index(self.elements))
+        self.conv.flat_buffer[...] = 0.0
+        self.attached = xp.ones(self.elements.size, dtype=xp.bool)
+        self.block: BlockInverse | None = None
+        if use_block and be.on_host and BlockInverse.fits(pillar_of):
+            self.block = BlockInverse(self.elements, pillar_of, convolver.n, compliance, h,
+                                      e_star, coarse, getattr(convolver, "mirrored", False))
+        elif use_block and not be.on_host and DeviceBlocks.fits_device(pillar_of, be):
+            self.block = DeviceBlocks(self.elements, pillar_of, convolver.n, compliance, h,
+                                      e_star, coarse, backend=be)
+        # Pillars too large for dense blocks: the two-level tile preconditioner
+        # (host only; a device falls back to Sherman-Morrison).
+        self.tiles: TileCoarse | None = None
+        if (use_block and be.on_host and self.block is None
+                and TileCoarse.fits(self.elements, pillar_of, convolver.n)):
+            self.tiles = TileCoarse(self.elements, pillar_of, convolver.n, compliance, h, e_star)
         self._update()
 
     def _update(self) -> None:
+        xp = self.backend.xp
         self.idx = self._padded[self.attached]
         if self.block is not None:
             self._bpos = self.block.pos[self.attached]
         if self.tiles is not None:
             self._tpos = self.tiles.tile_of[self.attached]
         self.pl = self.pillar_of[self.attached]
-        self.counts = np.bincount(self.pl, minlength=self.n_pillars)
+        self.counts = self.backend.bincount(self.pl, minlength=self.n_pillars)
         # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
         s = self.compliance
-        self._sm = (s / (self.diag + s * self.counts))[self.pl]
+        self._sm = (s / (self.diag + s * xp.astype(self.counts, xp.float64)))[self.pl]
 
     @property
     def size(self) -> int:
         """Number of attached elements."""
-        return int(self.idx.size)
+        return int(self.idx.shape[0])
 
-    def detach(self, which: np.ndarray, stress: np.ndarray | None = None) -> np.ndarray | None:
+    def detach(self, which: Any, stress: Any = None) -> Any:
         """Detach attached elements given by a boolean mask over the compressed vector.
 
         With ``stress`` (compressed, before detaching) and the block
@@ -90,56 +104,57 @@ class BrushOperator:
         each pillar's exact local response to the loss (other pillars'
         field held fixed); otherwise None.
         """
+        be = self.backend
         gone = self.idx[which]
-        self.conv.buffer.ravel()[gone] = 0.0
-        pos = np.flatnonzero(self.attached)[which]
+        be.put(self.conv.flat_buffer, gone, 0.0)
+        pos = be.flatnonzero(self.attached)[which]
         local = None
         if self.block is not None:
             local = self.block.detach(pos, stress, None if stress is None else self._bpos)
         if self.tiles is not None:
             self.tiles.detach(pos)
-        self.attached[pos] = False
+        be.put(self.attached, pos, False)
         self._update()
         return None if local is None else local[~which]
 
-    def attach(self, positions: np.ndarray) -> None:
+    def attach(self, positions: Any) -> None:
         """Attach detached elements given by operator-order indices (into `elements`).
 
         Their buffer entries are already zero (`detach` cleared them); the
         block preconditioner is bordered with the new elements.
         """
-        positions = np.asarray(positions, dtype=np.intp)
-        if positions.size == 0:
+        xp = self.backend.xp
+        positions = xp.asarray(positions, dtype=xp.int64)
+        if positions.shape[0] == 0:
             return
-        if self.attached[positions].any():
+        if bool(xp.any(self.attached[positions])):
             raise ValueError("attach: some elements are already attached")
         if self.block is not None:
             self.block.attach(positions)
         if self.tiles is not None:
             self.tiles.attach(positions)
-        self.attached[positions] = True
+        self.backend.put(self.attached, positions, True)
         self._update()
 
-    def field(self, x: np.ndarray) -> np.ndarray:
+    def field(self, x: Any) -> Any:
         """Half-space displacement K x [length] at every pillar element
         (operator order) from attached-element stresses x [stress]; one
         operator application."""
-        buf = self.conv.buffer.ravel()
-        buf[self.idx] = x
-        return self.conv.apply_buffer().ravel()[self._padded]
+        self.backend.put(self.conv.flat_buffer, self.idx, x)
+        return self.conv.apply_flat()[self._padded]
 
-    def spring(self, x: np.ndarray) -> np.ndarray:
+    def spring(self, x: Any) -> Any:
         """Spring part S x of A x (compressed) [length]."""
-        if self.compliance.any():
+        if self._springs:
             return (self.compliance * self.pillar_sums(x))[self.pl]
-        return np.zeros_like(x)
+        return self.backend.xp.zeros_like(x)
 
-    def apply_with_field(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def apply_with_field(self, x: Any) -> tuple[Any, Any]:
         """(A x, K x at every pillar element) from one operator application."""
         full = self.field(x)
         return full[self.attached] + self.spring(x), full
 
-    def far_field_uncertainty(self, pillar_change: np.ndarray) -> np.ndarray | None:
+    def far_field_uncertainty(self, pillar_change: Any) -> Any:
         """See `BlockInverse.far_field_uncertainty` (None without blocks)."""
         if self.block is None:
             return None
@@ -150,28 +165,28 @@ class BrushOperator:
         """Whether per-pillar exact inverses are available (see `detach`)."""
         return self.block is not None
 
-    def pillar_sums(self, x: np.ndarray) -> np.ndarray:
+    def pillar_sums(self, x: Any) -> Any:
         """Sum of a compressed vector over each pillar, shape (N,)."""
-        return np.bincount(self.pl, weights=x, minlength=self.n_pillars)
+        return self.backend.bincount(self.pl, weights=x, minlength=self.n_pillars)
 
-    def apply(self, x: np.ndarray) -> np.ndarray:
+    def apply(self, x: Any) -> Any:
         """A x: displacement [length] from attached-element stresses x [stress]."""
-        buf = self.conv.buffer.ravel()
-        buf[self.idx] = x
-        y = self.conv.apply_buffer().ravel()[self.idx]
-        if self.compliance.any():
+        self.backend.put(self.conv.flat_buffer, self.idx, x)
+        y = self.conv.apply_flat()[self.idx]
+        if self._springs:
             y += (self.compliance * self.pillar_sums(x))[self.pl]
         return y
 
-    def precondition(self, r: np.ndarray) -> np.ndarray:
+    def precondition(self, r: Any) -> Any:
         """Per-pillar block inverse.
 
-        With the dense blocks (`BlockInverse`) each pillar's own elastic and
-        spring coupling is inverted exactly.  Pillars too large for dense
-        blocks take the two-level tile preconditioner (`TileCoarse`), and
-        where even that does not fit, (c I + s_p 1 1^T)^-1 with c = K_ii,
-        applied by Sherman-Morrison: exact on the spring part, so the
-        iteration count stays flat even for very soft springs where S
+        With the dense blocks (`BlockInverse`, `DeviceBlocks` on a device)
+        each pillar's own elastic and spring coupling is inverted exactly.
+        Pillars too large for dense blocks take the two-level tile
+        preconditioner (`TileCoarse`, host only), and where even that does
+        not fit (or on a device without room for blocks), (c I + s_p 1 1^T)^-1
+        with c = K_ii, applied by Sherman-Morrison: exact on the spring part,
+        so the iteration count stays flat even for very soft springs where S
         dominates.
         """
         if self.block is not None:

@@ -56,41 +56,9 @@ class BlockInverse:
                  compliance: np.ndarray, h: float, e_star: float,
                  coarse: bool = True, mirrored: bool = False) -> None:
         n_pillars = compliance.size
-        order = np.argsort(pillar_of, kind="stable")
-        counts = np.bincount(pillar_of, minlength=n_pillars)
-        self.m = int(counts.max())
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        slot = np.empty(elements.size, dtype=np.intp)
-        slot[order] = np.arange(elements.size) - np.repeat(starts, counts)
-        self.pos = pillar_of * self.m + slot  # element -> position in the (N, m) stack
-        iy, ix = np.divmod(elements, n)
-        yy = np.zeros((n_pillars, self.m))
-        xx = np.zeros((n_pillars, self.m))
-        yy.ravel()[self.pos] = iy * h
-        xx.ravel()[self.pos] = ix * h
+        counts = self._layout(elements, pillar_of, n, compliance, h, e_star, mirrored)
         self.inv = np.zeros((n_pillars, self.m, self.m))
-        # Kept for `attach`, which borders a block with elements it lost.
-        self._yy, self._xx, self._h, self._e_star = yy, xx, h, e_star
-        self._mirrored = mirrored
-        self._iyy = np.zeros((n_pillars, self.m), dtype=np.intp)
-        self._ixx = np.zeros((n_pillars, self.m), dtype=np.intp)
-        self._iyy.ravel()[self.pos] = iy
-        self._ixx.ravel()[self.pos] = ix
-        # Blocks look their coefficients up at integer offsets: evaluating Love's
-        # formula for m^2 pairs per pillar costs more than inverting at m ~ 2000.
-        off = np.arange(2 * n if mirrored else n) * h
-        self._table = love_coefficient(off[:, None], off[None, :], h, e_star)
-        self._compliance = np.asarray(compliance, dtype=float)
-        self._live = np.arange(self.m)[None, :] < counts[:, None]  # attached slots
-        # Pillars with the same footprint up to translation share one inverse.
-        shapes: dict[bytes, list[int]] = {}
-        for p in range(n_pillars):
-            k = counts[p]
-            key = np.stack([yy[p, :k] - yy[p, 0], xx[p, :k] - xx[p, 0]]).tobytes()
-            if mirrored:  # the images make the distance to the mirror lines matter
-                key += np.array([yy[p, 0], xx[p, 0]]).tobytes()
-            shapes.setdefault(key + compliance[p].tobytes(), []).append(p)
-        for group in shapes.values():
+        for group in self._shape_groups(counts):
             p = group[0]
             self.inv[group, :counts[p], :counts[p]] = np.linalg.inv(
                 self._block(p, np.arange(counts[p])))
@@ -110,24 +78,7 @@ class BlockInverse:
         self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and self.interacting and n_pillars <= self.MAX_COARSE
         if self.interacting:
-            cy = yy.sum(axis=1) / counts
-            cx = xx.sum(axis=1) / counts
-            # Diagonals are zero: a pillar's own images are in its block.
-            self._r = self._influence(cy[:, None], cx[:, None], cy[None], cx[None])
-            np.fill_diagonal(self._r, 0.0)
-            # For the uncertainty bound: the influence at the closest approach
-            # of two footprints, not at their centroids (close random pillars).
-            reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)
-                            * (np.arange(self.m)[None, :] < counts[:, None])).max(axis=1)
-            self._r_near = np.zeros_like(self._r)
-            images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if mirrored else [(1, 1)]
-            for sy, sx in images:  # image of y is -h - y
-                iy = cy if sy > 0 else -h - cy
-                ix = cx if sx > 0 else -h - cx
-                dist = np.hypot(cy[:, None] - iy[None], cx[:, None] - ix[None])
-                gap = np.maximum(dist - reach[:, None] - reach[None, :], h)
-                self._r_near += love_coefficient(gap, 0.0, h, e_star)
-            np.fill_diagonal(self._r_near, 0.0)
+            self._r, self._r_near = self._interaction(counts)
             self._z = self.inv.sum(axis=2)
             # max_p sum_q R_pq c_q: the far-field displacement of a pillar
             # when all pillars carry their own unit-displacement load.
@@ -135,6 +86,76 @@ class BlockInverse:
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
         if self.coarse:
             self._factorise()
+
+    def _layout(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
+                compliance: np.ndarray, h: float, e_star: float, mirrored: bool) -> np.ndarray:
+        """Host-side geometry: each element's slot in the (N, m) stack (`pos`),
+        coordinates, the coefficient table and the attached slots; returns
+        the element count per pillar."""
+        n_pillars = compliance.size
+        order = np.argsort(pillar_of, kind="stable")
+        counts = np.bincount(pillar_of, minlength=n_pillars)
+        self.m = int(counts.max())
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        slot = np.empty(elements.size, dtype=np.intp)
+        slot[order] = np.arange(elements.size) - np.repeat(starts, counts)
+        self.pos = pillar_of * self.m + slot  # element -> position in the (N, m) stack
+        iy, ix = np.divmod(elements, n)
+        yy = np.zeros((n_pillars, self.m))
+        xx = np.zeros((n_pillars, self.m))
+        yy.ravel()[self.pos] = iy * h
+        xx.ravel()[self.pos] = ix * h
+        # Kept for `attach`, which borders a block with elements it lost.
+        self._yy, self._xx, self._h, self._e_star = yy, xx, h, e_star
+        self._mirrored = mirrored
+        self._iyy = np.zeros((n_pillars, self.m), dtype=np.intp)
+        self._ixx = np.zeros((n_pillars, self.m), dtype=np.intp)
+        self._iyy.ravel()[self.pos] = iy
+        self._ixx.ravel()[self.pos] = ix
+        # Blocks look their coefficients up at integer offsets: evaluating Love's
+        # formula for m^2 pairs per pillar costs more than inverting at m ~ 2000.
+        off = np.arange(2 * n if mirrored else n) * h
+        self._table = love_coefficient(off[:, None], off[None, :], h, e_star)
+        self._compliance = np.asarray(compliance, dtype=float)
+        self._live = np.arange(self.m)[None, :] < counts[:, None]  # attached slots
+        return counts
+
+    def _shape_groups(self, counts: np.ndarray) -> list[list[int]]:
+        """Pillars with the same footprint up to translation (and the same
+        spring) share one inverse: groups of pillar indices."""
+        yy, xx, compliance = self._yy, self._xx, self._compliance
+        shapes: dict[bytes, list[int]] = {}
+        for p in range(compliance.size):
+            k = counts[p]
+            key = np.stack([yy[p, :k] - yy[p, 0], xx[p, :k] - xx[p, 0]]).tobytes()
+            if self._mirrored:  # the images make the distance to the mirror lines matter
+                key += np.array([yy[p, 0], xx[p, 0]]).tobytes()
+            shapes.setdefault(key + compliance[p].tobytes(), []).append(p)
+        return list(shapes.values())
+
+    def _interaction(self, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Monopole influence between pillar centroids, and at the closest
+        approach of two footprints (for the uncertainty bound), shape (N, N)."""
+        yy, xx, h, e_star = self._yy, self._xx, self._h, self._e_star
+        cy = yy.sum(axis=1) / counts
+        cx = xx.sum(axis=1) / counts
+        # Diagonals are zero: a pillar's own images are in its block.
+        r = self._influence(cy[:, None], cx[:, None], cy[None], cx[None])
+        np.fill_diagonal(r, 0.0)
+        # For the uncertainty bound: the influence at the closest approach
+        # of two footprints, not at their centroids (close random pillars).
+        reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)
+                        * (np.arange(self.m)[None, :] < counts[:, None])).max(axis=1)
+        r_near = np.zeros_like(r)
+        images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if self._mirrored else [(1, 1)]
+        for sy, sx in images:  # image of y is -h - y
+            iy = cy if sy > 0 else -h - cy
+            ix = cx if sx > 0 else -h - cx
+            dist = np.hypot(cy[:, None] - iy[None], cx[:, None] - ix[None])
+            gap = np.maximum(dist - reach[:, None] - reach[None, :], h)
+            r_near += love_coefficient(gap, 0.0, h, e_star)
+        np.fill_diagonal(r_near, 0.0)
+        return r, r_near
 
     #: Largest pillar count with a coarse space (its dense N x N factor).
     MAX_COARSE = 2000

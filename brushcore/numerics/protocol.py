@@ -30,11 +30,12 @@ its approach a straight line, and it costs exactly what today's does.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from brushcore.numerics.cg import ConvergenceError, pcg_image
+from brushcore.numerics.cg import ConvergenceError, namespace, pcg_image
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.validation import is_real, require
@@ -154,8 +155,9 @@ def loop_energy(displacement: np.ndarray, force: np.ndarray) -> float:
 
 
 def is_flat(offsets: np.ndarray) -> bool:
-    """Whether every element sits at the same height (today's brush)."""
-    return bool(offsets.size == 0 or np.all(offsets == offsets.flat[0]))
+    """Whether every element sits at the same height (today's brush); 1-D offsets."""
+    xp = namespace(offsets)
+    return bool(offsets.shape[0] == 0 or xp.all(offsets == offsets[0]))
 
 
 def _standard_preload(protocol: tuple[Waypoint, ...]) -> float | None:
@@ -193,15 +195,16 @@ def run_protocol(op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: floa
     -------
     ProtocolCurve
     """
-    offsets = np.asarray(offsets, dtype=float)
-    if offsets.shape != (op.size,) or not op.attached.all():
+    xp = op.backend.xp
+    offsets = op.backend.asarray(offsets, dtype=float)
+    if offsets.shape != (op.size,) or not bool(xp.all(op.attached)):
         raise ValueError("run_protocol needs a fully attached operator and one offset per "
                          "pillar element")
-    if not np.all(np.isfinite(offsets)):
+    if not bool(xp.all(xp.isfinite(offsets))):
         raise ValueError("offsets must be finite")
     preload = _standard_preload(protocol)
     if dispatch and preload is not None and is_flat(offsets):
-        return _flat(op, float(offsets.flat[0]) if offsets.size else 0.0, preload,
+        return _flat(op, float(offsets[0]) if offsets.shape[0] else 0.0, preload,
                      sigma_c, h, options, progress)
     return _Engine(op, offsets, sigma_c, h, options, progress).run(protocol)
 
@@ -236,7 +239,7 @@ def _flat(op: BrushOperator, z0: float, preload: float, sigma_c: float, h: float
     detach_step = curve.detach_step + head
     peak = int(np.argmax(f))
     last = np.zeros(op.n_pillars, dtype=np.int64)
-    np.maximum.at(last, op.pillar_of, detach_step)
+    np.maximum.at(last, op.backend.to_host(op.pillar_of), detach_step)
     return ProtocolCurve(
         displacement=disp, force=f, attached_elements=n_el, attached_pillars=n_pil,
         branch=branch, direction=direction, waypoint_step=np.array([head // 2, steps - 1]),
@@ -261,6 +264,8 @@ class _Engine:
     def __init__(self, op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: float,
                  options: SolverOptions, progress: Progress | None) -> None:
         self.op, self.z, self.sigma_c, self.h = op, offsets, sigma_c, h
+        self.be = be = op.backend
+        self.xp = xp = be.xp
         self.options, self.progress = options, progress
         self.total = op.size
         self.cp = op.compliance[op.pillar_of]  # spring compliance per element
@@ -271,20 +276,27 @@ class _Engine:
         self.cg_iters = 0
         self.events = 0
         n = self.total
-        self.sig = np.zeros(n)
-        self.sig1 = np.zeros(n)
-        self.u = np.zeros(n)
-        self.u1 = np.zeros(n)
-        self.attach_step = np.full(n, -1, dtype=np.int64)
-        self.detach_step = np.full(n, -1, dtype=np.int64)
-        self.let_go = np.full(op.n_pillars, np.nan)
+        f64 = xp.float64
+        self.sig = xp.zeros(n, dtype=f64)
+        self.sig1 = xp.zeros(n, dtype=f64)
+        self.u = xp.zeros(n, dtype=f64)
+        self.u1 = xp.zeros(n, dtype=f64)
+        self.attach_step = xp.full(n, -1, dtype=xp.int64)
+        self.detach_step = xp.full(n, -1, dtype=xp.int64)
+        self.let_go = xp.full(op.n_pillars, math.nan, dtype=f64)
         self.rec: dict[str, list] = {k: [] for k in ("d", "f", "el", "pil", "br", "dir")}
         self.leg, self.dir = -1, START
-        self.peak = (-np.inf, -1, np.zeros(op.n_pillars), np.zeros(n, dtype=bool))
-        self.d = float(offsets.max()) if n else 0.0
+        self.peak = self._no_peak()
+        self.d = float(xp.max(offsets)) if n else 0.0
         # Whether u, u1 are no longer K sig, K sig1 (after detachments, which
         # zero entries and update sig locally); attaching keeps them exact.
         self._stale_u = self._stale_u1 = False
+
+    def _no_peak(self) -> tuple:
+        """(force, step, pillar forces, attached mask) before any tensile step."""
+        xp = self.xp
+        return (-np.inf, -1, xp.zeros(self.op.n_pillars, dtype=xp.float64),
+                xp.zeros(self.total, dtype=xp.bool))
 
     # --- linear algebra -------------------------------------------------
     def _solve(self, rhs: np.ndarray, x: np.ndarray, y: np.ndarray | None
@@ -294,8 +306,9 @@ class _Engine:
         unknown (one application).  Returns x and its field, full length."""
         op = self.op
         att = op.attached
+        xp = self.xp
         if op.size == 0:
-            return np.zeros(self.total), np.zeros(self.total)
+            return xp.zeros(self.total, dtype=xp.float64), xp.zeros(self.total, dtype=xp.float64)
         x0 = x[att]
         if y is None:
             y = op.field(x0)
@@ -307,7 +320,7 @@ class _Engine:
             raise ConvergenceError(f"{exc} at event {self.events}, d = {self.d:.6g}, "
                                    f"{op.size} of {self.total} elements attached") from None
         self.cg_iters += it
-        out = np.zeros(self.total)
+        out = xp.zeros(self.total, dtype=xp.float64)
         out[att] = xs
         return out, y
 
@@ -320,18 +333,19 @@ class _Engine:
 
     def _solve_unit(self) -> None:
         """sigma_1 (unit displacement response) on the current set, and its field."""
-        self.sig1, self.u1 = self._solve(np.ones(self.op.size), self.sig1,
+        self.sig1, self.u1 = self._solve(self.xp.ones(self.op.size, dtype=self.xp.float64),
+                                         self.sig1,
                                          None if self._stale_u1 else self.u1)
         self._stale_u1 = False
 
     # --- bookkeeping ------------------------------------------------------
     def _pillar_force(self) -> np.ndarray:
         att = self.op.attached
-        return self.h**2 * np.bincount(self.op.pillar_of[att], weights=self.sig[att],
-                                       minlength=self.op.n_pillars)
+        return self.h**2 * self.be.bincount(self.op.pillar_of[att], weights=self.sig[att],
+                                            minlength=self.op.n_pillars)
 
     def _force(self) -> float:
-        return self.h**2 * float(self.sig.sum())
+        return self.h**2 * float(self.xp.sum(self.sig))
 
     def _record(self) -> None:
         r, op = self.rec, self.op
@@ -339,17 +353,18 @@ class _Engine:
         r["d"].append(self.d)
         r["f"].append(f)
         r["el"].append(op.size)
-        r["pil"].append(int(np.count_nonzero(op.counts)))
+        r["pil"].append(int(self.xp.count_nonzero(op.counts)))
         r["br"].append(self.leg)
         r["dir"].append(self.dir)
         if self.dir == RETRACT and f > self.peak[0]:
-            self.peak = (f, len(r["d"]) - 1, self._pillar_force(), op.attached.copy())
+            self.peak = (f, len(r["d"]) - 1, self._pillar_force(),
+                          self.xp.asarray(op.attached, copy=True))
 
     def _gaps(self) -> tuple[np.ndarray, np.ndarray]:
         """Gap and its rate d g / d d of every element (meaningful where detached)."""
         op = self.op
-        s = np.bincount(op.pillar_of, weights=self.sig, minlength=op.n_pillars)
-        s1 = np.bincount(op.pillar_of, weights=self.sig1, minlength=op.n_pillars)
+        s = self.be.bincount(op.pillar_of, weights=self.sig, minlength=op.n_pillars)
+        s1 = self.be.bincount(op.pillar_of, weights=self.sig1, minlength=op.n_pillars)
         g = self.d - self.z - self.cp * s[op.pillar_of] - self.u
         g1 = 1.0 - self.cp * s1[op.pillar_of] - self.u1
         return g, g1
@@ -358,10 +373,10 @@ class _Engine:
     def _attach(self, which: np.ndarray) -> None:
         """Attach elements (full-length mask) whose gap is closed: they carry
         no stress yet, so sigma at this d is unchanged."""
-        pos = np.flatnonzero(which)
+        pos = self.be.flatnonzero(which)
         self.op.attach(pos)
-        self.attach_step[pos] = len(self.rec["d"])  # the next record holds them
-        self.detach_step[pos] = -1
+        self.be.put(self.attach_step, pos, len(self.rec["d"]))  # the next record holds them
+        self.be.put(self.detach_step, pos, -1)
 
     def _detach(self, which: np.ndarray) -> None:
         """Detach elements (full-length mask), warm-starting sigma with each
@@ -389,6 +404,7 @@ class _Engine:
         (1 - lookahead) sigma_c: fewer events, approximate (default 0: exact).
         """
         tie, ahead = self.options.tie_rtol, self.options.lookahead
+        xp = self.xp
         recorded = False
         for _ in range(self.MAX_CASCADE):
             att = self.op.attached
@@ -397,14 +413,14 @@ class _Engine:
             jump = close & (g > self.gap_tol)  # attached early: sigma jumps
             over = att & (self.sig >= self.sigma_c * (1.0 - tie - ahead))
             ahead = 0.0  # only the event itself is batched
-            if close.any():
+            if bool(xp.any(close)):
                 self._attach(close)
             if not recorded:  # the event point, after attaching, before detaching
                 self._record()
                 recorded = True
-            if not (over.any() or jump.any()):
+            if not (bool(xp.any(over)) or bool(xp.any(jump))):
                 break
-            if over.any():
+            if bool(xp.any(over)):
                 self._detach(over)
             self._solve_state()
             self._record()
@@ -416,24 +432,24 @@ class _Engine:
     def _next(self, s: int, wp: Waypoint) -> tuple[float, bool]:
         """Distance t >= 0 along direction s to the next event or the target,
         and whether the target is what comes first."""
-        op = self.op
+        op, xp = self.op, self.xp
         att = op.attached
         t_event = np.inf
         rate = s * self.sig1[att]
         up = rate > 0
-        if up.any():
+        if bool(xp.any(up)):
             t = (self.sigma_c - self.sig[att][up]) / rate[up]
-            t_event = min(t_event, float(np.maximum(t, 0.0).min()))
-        if not att.all():
+            t_event = min(t_event, float(xp.min(xp.maximum(t, 0.0))))
+        if not bool(xp.all(att)):
             g, g1 = self._gaps()
             rate_g = s * g1[~att]
             closing = rate_g < 0
-            if closing.any():
+            if bool(xp.any(closing)):
                 t = g[~att][closing] / -rate_g[closing]
-                t_event = min(t_event, float(np.maximum(t, 0.0).min()))
+                t_event = min(t_event, float(xp.min(xp.maximum(t, 0.0))))
         t_target = np.inf
         if wp.kind == "force":
-            f1 = self.h**2 * float(self.sig1.sum())
+            f1 = self.h**2 * float(xp.sum(self.sig1))
             t = (wp.value - self._force()) / (s * f1) if f1 != 0 else -1.0
             if t >= 0:  # otherwise the force moves away from the target
                 t_target = t
@@ -462,11 +478,11 @@ class _Engine:
         self.u += s * t * self.u1
 
     def run(self, protocol: tuple[Waypoint, ...]) -> ProtocolCurve:
-        op = self.op
+        op, xp, be = self.op, self.xp, self.be
         touch = self.z >= self.d - self.gap_tol
-        if (~touch).any():
+        if bool(xp.any(~touch)):
             op.detach(~touch)
-        self.u1[:] = 0.0  # of sig1 = 0, the warm start
+        self.u1[...] = 0.0  # of sig1 = 0, the warm start
         self.attach_step[touch] = 0
         self._solve_unit()
         self._record()  # first touch: no force
@@ -477,7 +493,7 @@ class _Engine:
             s = self._direction(wp)
             if s == RETRACT:
                 retraction_start = len(self.rec["d"]) - 1
-                self.peak = (-np.inf, -1, np.zeros(op.n_pillars), np.zeros(self.total, bool))
+                self.peak = self._no_peak()
             while s != 0:
                 self.dir = s
                 t, reached = self._next(s, wp)
@@ -499,17 +515,19 @@ class _Engine:
                 if wp.kind == "separation" and op.size == 0:
                     break
             waypoint_step.append(len(self.rec["d"]) - 1)
-            at_waypoint.append(op.attached.copy())
+            at_waypoint.append(xp.asarray(op.attached, copy=True))
         r = self.rec
         retraction = np.zeros(len(r["d"]), dtype=bool)
         retraction[retraction_start:] = True
         f_peak, i_peak, pillar_force, attached_peak = self.peak
+        host = be.to_host  # the curve comes back to the host at the end
         return ProtocolCurve(
             displacement=np.asarray(r["d"]), force=np.asarray(r["f"]),
             attached_elements=np.asarray(r["el"]), attached_pillars=np.asarray(r["pil"]),
             branch=np.asarray(r["br"]), direction=np.asarray(r["dir"]),
-            waypoint_step=np.asarray(waypoint_step), attach_step=self.attach_step,
-            detach_step=self.detach_step, pillar_force_at_peak=pillar_force,
-            peak_step=i_peak, let_go=self.let_go, attached_at_waypoint=tuple(at_waypoint),
-            attached_at_peak=attached_peak, events=self.events, cg_iterations=self.cg_iters,
+            waypoint_step=np.asarray(waypoint_step), attach_step=host(self.attach_step),
+            detach_step=host(self.detach_step), pillar_force_at_peak=host(pillar_force),
+            peak_step=i_peak, let_go=host(self.let_go),
+            attached_at_waypoint=tuple(host(a) for a in at_waypoint),
+            attached_at_peak=host(attached_peak), events=self.events, cg_iterations=self.cg_iters,
             retraction=retraction)

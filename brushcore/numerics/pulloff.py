@@ -83,7 +83,7 @@ def _certain_detachments(op: BrushOperator, sigma1: np.ndarray, threshold: float
     bound = FAR_FIELD_SAFETY * bound + noise
     over = sigma1 - bound >= threshold
     unsure = (sigma1 + bound >= threshold) & ~over
-    return None if unsure.any() else over
+    return None if bool(op.backend.xp.any(unsure)) else over
 
 
 def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions,
@@ -102,17 +102,19 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     -------
     PullOffCurve
     """
+    be = op.backend
+    xp = be.xp
     total = op.size
-    detach_step = np.full(total, -1, dtype=np.int64)
-    disp, force, n_el, n_pil = [0.0], [0.0], [total], [int(np.count_nonzero(op.counts))]
+    detach_step = xp.full(total, -1, dtype=xp.int64)
+    disp, force, n_el, n_pil = [0.0], [0.0], [total], [int(xp.count_nonzero(op.counts))]
     cg_iters = 0
     events = 0
-    sigma1 = np.zeros(total)  # unit-displacement stresses, warm start
+    sigma1 = xp.zeros(total, dtype=xp.float64)  # unit-displacement stresses, warm start
     d = 0.0
 
     def solve(x0: np.ndarray) -> np.ndarray:
         nonlocal cg_iters
-        b = np.ones(op.size)
+        b = xp.ones(op.size, dtype=xp.float64)
         try:
             x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter)
         except ConvergenceError as exc:
@@ -121,15 +123,15 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         cg_iters += it
         return x
 
-    best = [-np.inf, np.zeros(op.n_pillars)]  # largest force and its pillar forces
+    best = [-np.inf, xp.zeros(op.n_pillars, dtype=xp.float64)]  # largest force and its pillar forces
 
     def record(x: np.ndarray) -> None:
         disp.append(d)
-        force.append(d * h * h * float(x.sum()))
+        force.append(d * h * h * float(xp.sum(x)))
         if force[-1] > best[0]:  # one bincount per event: free next to a solve
             best[0], best[1] = force[-1], d * h * h * op.pillar_sums(x)
         n_el.append(op.size)
-        n_pil.append(int(np.count_nonzero(op.counts)))
+        n_pil.append(int(xp.count_nonzero(op.counts)))
 
     local = options.cascade == "local" and op.has_local_solver
 
@@ -141,14 +143,14 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         (it saves ~15 % of CG iterations) or the local cascade's state.
         """
         step = len(disp)  # the next recorded step is the first without them
-        positions = np.flatnonzero(op.attached)[mask]
-        detach_step[positions] = step
+        positions = be.flatnonzero(op.attached)[mask]
+        be.put(detach_step, positions, step)
         updated = op.detach(mask, stress)
         return stress[~mask] if updated is None else updated
 
     sigma1 = solve(sigma1)
     while op.size:
-        peak = float(sigma1.max())
+        peak = float(xp.max(sigma1))
         if not np.isfinite(peak) or peak <= 0.0:
             raise SolverError(f"no tensile stress at event {events} (max sigma_1 = {peak!r}) "
                               f"with {op.size} elements attached")
@@ -169,14 +171,14 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
                 break
             if local:
                 mask = _certain_detachments(op, sigma1, threshold, reference_sums,
-                                            options.rtol * float(sigma1.max()))
-                if mask is not None and mask.any():
+                                            options.rtol * float(xp.max(sigma1)))
+                if mask is not None and bool(xp.any(mask)):
                     continue  # decided without a global solve
             sigma1 = solve(sigma1)
             reference_sums = op.pillar_sums(sigma1)
             record(sigma1)
             mask = sigma1 >= threshold
-            if not mask.any():
+            if not bool(xp.any(mask)):
                 break
         if progress is not None:
             progress(events, op.size, total)
@@ -185,5 +187,7 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     force.append(0.0)
     n_el.append(0)
     n_pil.append(0)
+    # The curve comes back to the host: the only per-element data to cross.
     return PullOffCurve(np.asarray(disp), np.asarray(force), np.asarray(n_el),
-                        np.asarray(n_pil), detach_step, events, cg_iters, best[1])
+                        np.asarray(n_pil), be.to_host(detach_step), events, cg_iters,
+                        be.to_host(best[1]))

@@ -220,6 +220,22 @@ def simulate_mem_mb(wildcards, attempt):
     return int(400 + 800 * (grid / 512) ** 2 + blocks) * attempt
 
 
+def simulate_gpus(config):
+    """Cards one simulate job holds: 1 with backend gpu (Snakemake resource
+    `gpu`, limited locally by `--resources gpu=N`), else 0."""
+    return 1 if config.get("backend", "cpu") == "gpu" else 0
+
+
+def simulate_gres(config):
+    """Slurm generic resource of one simulate job: "gpu:1" with backend gpu.
+
+    The Slurm profile zeroes the `gpu` resource for simulate (the plugin
+    would add --gpus, which Slurm treats as a second GPU request), so that
+    Slurm sees this --gres=gpu:1 alone.
+    """
+    return "gpu:1" if simulate_gpus(config) else ""
+
+
 def simulate_runtime(wildcards, attempt):
     """Wall-time limit of one simulation [min], doubled on a retry.
 

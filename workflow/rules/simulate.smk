@@ -19,10 +19,13 @@ rule simulate:
     resources:
         mem_mb=simulate_mem_mb,
         runtime=simulate_runtime,
+        gpu=simulate_gpus(config),
+        gres=simulate_gres(config),
     params:
         solver=config["solver"],
         rough=lambda wildcards: parse_rough_tag(wildcards.rough),
         shape=lambda wildcards: parse_shape_tag(wildcards.shape),
         allow_coarse=config["allow_coarse"],
+        backend=config["backend"],
     script:
         "../scripts/simulate.py"

@@ -26,10 +26,11 @@ def main(smk) -> None:
         phi=float(w.phi),
         seed=int(w.seed),
         allow_coarse=bool(smk.params.allow_coarse),
+        backend=smk.params.backend,
         **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
-    print(f"{params} on {smk.threads} thread(s)", flush=True)
+    print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
     curve = simulate(params, SolverOptions(**smk.params.solver))
     write_curve(curve, smk.output[0])
     print(

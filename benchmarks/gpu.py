@@ -1,0 +1,109 @@
+"""GPU figures of issue 15. Prints a table; asserts nothing.
+
+    python benchmarks/gpu.py                       # the issue's cases on the card (< 5 min)
+    python benchmarks/gpu.py --with-4096           # also 16 x 16 at 4096^2
+    python benchmarks/gpu.py --backend cpu --grid 256   # CPU smoke check of this script
+
+Cases: 16 x 16 pillars, kbar = 0.455 at 512^2, 1024^2, 2048^2, and the
+rigid 8 x 8 brush at 1024^2, 2048^2 (``--grid`` replaces the grids).  Per
+case: operator applications of the whole pull-off, ms of one application
+(the brush operator, timed alone), its ratio to a bare r2c + c2r pair of
+the padded 2n x 2n grid (cuFFT on the card, pyfftw on the CPU), wall time
+of the curve, F_ad / F_K and W / W_K.  Every curve is solved on the whole
+grid (the device has no symmetry fold), so CPU and GPU rows compare.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import numpy as np
+
+from brushcore import BrushParams, ParameterError, SolverOptions, simulate
+from brushcore.model.curve import grid_convolver, spring_compliance
+from brushcore.model.layout import build_labels
+from brushcore.numerics.backend import Backend, resolve_backend
+from brushcore.numerics.operator import BrushOperator
+
+sys.path.insert(0, __file__.rsplit("/", 1)[0])
+from bench_pulloff import bare_fft_pair_ms  # noqa: E402
+
+#: (label, pillars, kbar, grids) of the issue.
+CASES = (("16x16 kbar 0.455", 256, 0.455, (512, 1024, 2048)),
+         ("rigid 8x8", 64, math.inf, (1024, 2048)))
+
+
+def _timed(backend: Backend, call, repeats: int) -> float:
+    """Mean ms of ``call()`` on the device (synchronised), after one warm-up."""
+    call()
+    backend.synchronize()
+    t = time.perf_counter()
+    for _ in range(repeats):
+        call()
+    backend.synchronize()
+    return (time.perf_counter() - t) / repeats * 1e3
+
+
+def fft_pair_ms(backend: Backend, n: int, repeats: int = 20) -> float:
+    """One r2c + c2r pair of the padded 2n x 2n grid [ms]."""
+    if backend.on_host:
+        return bare_fft_pair_ms(n, repeats)
+    xp = backend.xp
+    field = backend.asarray(np.random.default_rng(0).random((2 * n, 2 * n)))
+    return _timed(backend, lambda: xp.fft.irfftn(xp.fft.rfftn(field), s=field.shape),
+                  repeats)
+
+
+def application_ms(params: BrushParams, backend: Backend, repeats: int = 20) -> float:
+    """One application of the brush operator, all elements attached [ms]."""
+    labels = build_labels(params)
+    op = BrushOperator(grid_convolver(params, backend), labels,
+                       spring_compliance(params, params.n_pillars), params.h, params.e_star,
+                       use_block=False)
+    x = backend.xp.ones(op.size, dtype=backend.xp.float64)
+    return _timed(backend, lambda: op.apply(x), repeats)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False,
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("--backend", choices=("gpu", "cpu"), default="gpu")
+    parser.add_argument("--grid", type=int, action="append",
+                        help="grid(s) for every case instead of the issue's")
+    parser.add_argument("--with-4096", action="store_true",
+                        help="also 16 x 16, kbar 0.455 at 4096^2 (memory and time)")
+    args = parser.parse_args(argv)
+    try:
+        backend = resolve_backend(args.backend)
+    except ParameterError as exc:
+        print(f"benchmarks/gpu.py: {exc}", file=sys.stderr)
+        return 2
+    memory = backend.device_memory_bytes / 2**30
+    print(f"device: {backend.device_name}" + (f", {memory:.0f} GiB" if memory else ""))
+    cases = [(label, n, kbar, tuple(args.grid) if args.grid else grids)
+             for label, n, kbar, grids in CASES]
+    if args.with_4096:
+        cases.append(("16x16 kbar 0.455", 256, 0.455, (4096,)))
+    print(f"{'case':>18} {'grid':>5} {'apps':>6} {'ms/app':>7} {'pair ms':>8} {'ratio':>6} "
+          f"{'wall s':>7} {'F_ad/F_K':>9} {'W/W_K':>8}", flush=True)
+    for label, n_pillars, kbar, grids in cases:
+        for grid in grids:
+            params = BrushParams("regular", n_pillars, kbar, grid, backend=args.backend)
+            app = application_ms(params, backend)
+            pair = fft_pair_ms(backend, grid)
+            t = time.perf_counter()
+            ds = simulate(params, SolverOptions(symmetry=False))
+            backend.synchronize()
+            wall = time.perf_counter() - t
+            print(f"{label:>18} {grid:5d} {ds.attrs['operator_applications']:6d} {app:7.2f} "
+                  f"{pair:8.2f} {app / pair:6.2f} {wall:7.1f} "
+                  f"{float(ds.adhesive_force_normalized):9.5f} "
+                  f"{float(ds.work_of_separation_normalized):8.5f}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
