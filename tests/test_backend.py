@@ -29,6 +29,7 @@ from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.device_blocks import DeviceBlocks
 from brushcore.numerics.device_convolution import DeviceConvolver
 from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.tiles import TileCoarse
 
 pytest.importorskip("array_api_strict")
 
@@ -150,8 +151,10 @@ def test_strict_namespace_runs_the_pull_off_like_numpy(name):
 
 
 def test_strict_matrix_free_path_when_blocks_do_not_fit(monkeypatch):
-    """Without room for blocks the device takes the Sherman-Morrison diagonal, as the CPU does."""
+    """Without room for blocks the device takes the Sherman-Morrison diagonal,
+    as the CPU does without room for blocks or tiles."""
     monkeypatch.setattr(BlockInverse, "fits", classmethod(lambda cls, *a, **k: False))
+    monkeypatch.setattr(TileCoarse, "fits", classmethod(lambda cls, *a, **k: False))
     monkeypatch.setattr(DeviceBlocks, "fits_device", classmethod(lambda cls, *a, **k: False))
     params = BrushParams("regular", 16, 0.455, 64)
     want = simulate(params, WHOLE_GRID)

@@ -64,7 +64,8 @@ def test_coarse_blocks_stay_exact_through_detach_and_attach(seed):
 
 
 def test_preconditioner_is_symmetric_positive_definite_with_a_stale_inverse():
-    """Between refreshes M^-1 uses an older K_c; it must stay SPD for CG."""
+    """Between refreshes M^-1 uses an older K_c; it must stay SPD for CG, also
+    when a tile that was empty at the last inversion regains an element."""
     rng = np.random.default_rng(3)
     n = 16
     labels = -np.ones((n, n), dtype=int)
@@ -78,10 +79,18 @@ def test_preconditioner_is_symmetric_positive_definite_with_a_stale_inverse():
     tiles.detach(gone)
     assert tiles.refreshes == 2, "the inverse should still be the first one"
     attached = np.setdiff1d(np.arange(elements.size), gone)
-    pos = tiles.tile_of[attached]
-    m = np.column_stack([tiles.apply(e, pos, op.diag) for e in np.eye(attached.size)])
-    assert np.allclose(m, m.T, rtol=1e-12, atol=1e-12 * np.abs(m).max())
-    assert np.linalg.eigvalsh(m).min() > 0.0
+    for _ in range(2):
+        pos = tiles.tile_of[attached]
+        m = np.column_stack([tiles.apply(e, pos, op.diag) for e in np.eye(attached.size)])
+        assert np.allclose(m, m.T, rtol=1e-12, atol=1e-12 * np.abs(m).max())
+        assert np.linalg.eigvalsh(m).min() > 0.0
+        # Empty one tile, then give it back one element (as a contact grows
+        # on the approach): a lone element must still see a coarse row.
+        tile = tiles.tile_of[attached[0]]
+        emptied = attached[tiles.tile_of[attached] == tile]
+        tiles.detach(emptied)
+        tiles.attach(emptied[:1])
+        attached = np.union1d(np.setdiff1d(attached, emptied), emptied[:1])
 
 
 def test_tile_size_bounds_the_tiles_per_pillar(monkeypatch):

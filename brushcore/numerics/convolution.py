@@ -116,6 +116,23 @@ class HostBuffers:
         """`apply_buffer` as a flat view."""
         return self.apply_buffer().ravel()
 
+    def _pruned(self, work: np.ndarray) -> np.ndarray:
+        """The planned pyfftw transforms: rows of the n data rows only, columns
+        of the zero-padded ``work``, the kernel product, and back."""
+        work[self.n:] = 0.0  # zero padding, overwritten by the in-place columns
+        self._rows_fwd.execute()
+        self._cols_fwd.execute()
+        np.multiply(work, self._scaled, out=work)
+        self._cols_bwd.execute()
+        self._rows_bwd.execute()
+        return self._real_out
+
+    def __call__(self, stress: np.ndarray) -> np.ndarray:
+        """Displacement [length] from an n x n stress field [stress] (a new array)."""
+        n = self.n
+        self._real_in[:, :n] = stress
+        return self.apply_buffer()[:, :n].copy()
+
 
 class Convolver(HostBuffers):
     """u = K * sigma on an n x n grid (non-periodic), with reusable FFT plans.
@@ -193,25 +210,13 @@ class Convolver(HostBuffers):
         self.applications += 1
         n = self.n
         if self.backend == "pyfftw":
-            self._half[n:] = 0.0  # zero padding, overwritten by the in-place columns
-            self._rows_fwd.execute()
-            self._cols_fwd.execute()
-            np.multiply(self._half, self._scaled, out=self._half)
-            self._cols_bwd.execute()
-            self._rows_bwd.execute()
-            return self._real_out
+            return self._pruned(self._half)
         import scipy.fft as sfft
 
         spec = sfft.rfft2(self._real_in, s=(2 * n, 2 * n), workers=self.threads)
         spec *= self.spectrum
         self._real_out[...] = sfft.irfft2(spec, s=(2 * n, 2 * n), workers=self.threads)[:n]
         return self._real_out
-
-    def __call__(self, stress: np.ndarray) -> np.ndarray:
-        """Displacement [length] from an n x n stress field [stress] (a new array)."""
-        n = self.n
-        self._real_in[:, :n] = stress
-        return self.apply_buffer()[:, :n].copy()
 
 
 @lru_cache(maxsize=4)

@@ -109,13 +109,7 @@ class MirrorConvolver(HostBuffers):
         self.applications += 1
         m = self.n
         if self.backend == "pyfftw":
-            self._work[m:] = 0.0  # zero padding, overwritten by the in-place columns
-            self._rows_fwd.execute()
-            self._cols_fwd.execute()
-            np.multiply(self._work, self._scaled, out=self._work)
-            self._cols_bwd.execute()
-            self._rows_bwd.execute()
-            return self._real_out
+            return self._pruned(self._work)
         import scipy.fft as sfft
 
         padded = np.zeros((self.full, self.full))
@@ -124,12 +118,6 @@ class MirrorConvolver(HostBuffers):
         spec *= self.spectrum
         self._real_out[...] = sfft.idctn(spec, type=2, workers=self.threads)[:m]
         return self._real_out
-
-    def __call__(self, stress: np.ndarray) -> np.ndarray:
-        """Quadrant displacement [length] from the quadrant's stress [stress] (a new array)."""
-        m = self.n
-        self._real_in[:, :m] = stress
-        return self.apply_buffer()[:, :m].copy()
 
 
 @lru_cache(maxsize=2)

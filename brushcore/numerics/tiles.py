@@ -27,7 +27,8 @@ bounds memory by N MAX_TILES^2 whatever the pillar size.
 K_c is kept exact as elements detach or attach (one row of K per changed
 element, aggregated by tile: m^2 over a whole curve), and its inverse is
 refreshed when a pillar's attached count moved by REFRESH since the last
-inversion; between refreshes the stale inverse still gives an SPD M.
+inversion, or a tile empty then has elements again; between refreshes the
+stale inverse still gives an SPD M.
 Images of the mirrored quadrant are left out of K_c: they are neighbour
 coupling, which block preconditioners leave to CG anyway, and leaving them
 out lets equal pillars share one assembly.
@@ -45,11 +46,8 @@ class TileCoarse:
 
     Parameters
     ----------
-    elements : flat n x n indices of the pillar elements (operator order)
-    pillar_of : pillar index of each element
-    n : grid size
-    compliance : h^2 / k_p per pillar [length / stress]
-    h, e_star : element size [length] and modulus [stress]
+    elements, pillar_of, n, compliance, h, e_star : as for
+        `brushcore.numerics.precondition.BlockInverse`
     tile : tile side a in elements (default: `tile_size`)
     """
 
@@ -95,6 +93,7 @@ class TileCoarse:
             self.kc[group] = self._coarse_rows(e, e)
         self.inv = np.zeros_like(self.kc)
         self._factor_count = np.zeros(n_pillars)
+        self._inverted = np.zeros((n_pillars, self.mc), dtype=bool)  # tiles with a coarse row
         self.refreshes = 0
         self._refresh(np.arange(n_pillars))
 
@@ -135,8 +134,8 @@ class TileCoarse:
         inv = np.linalg.inv(block)
         inv[dead[:, :, None] | dead[:, None, :]] = 0.0
         self.inv[pillars] = inv
-        counts = self.counts.reshape(-1, self.mc)
-        self._factor_count[pillars] = counts[pillars].sum(axis=1)
+        self._factor_count[pillars] = c.sum(axis=1)
+        self._inverted[pillars] = ~dead
         self.refreshes += pillars.size
 
     def _change(self, positions: np.ndarray, sign: float) -> None:
@@ -155,9 +154,13 @@ class TileCoarse:
             if sign > 0:
                 self._live[d] = True
         np.add.at(self.counts, self.tile_of[positions], sign)
-        counts = self.counts.reshape(-1, self.mc)[touched].sum(axis=1)
-        moved = np.abs(counts - self._factor_count[touched]) > self.REFRESH * np.maximum(
-            self._factor_count[touched], 1.0)
+        counts = self.counts.reshape(-1, self.mc)[touched]
+        moved = np.abs(counts.sum(axis=1) - self._factor_count[touched]) > self.REFRESH * (
+            np.maximum(self._factor_count[touched], 1.0))
+        # A tile that was empty at the last inversion has no coarse row: its
+        # elements would see only (r - mean) / K_ii, which is zero for a lone
+        # element, and M^-1 would be singular there.
+        moved |= ((counts > 0) & ~self._inverted[touched]).any(axis=1)
         if moved.any():
             self._refresh(touched[moved])
 
