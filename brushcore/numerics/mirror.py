@@ -44,10 +44,7 @@ class MirrorConvolver(HostBuffers):
     Parameters
     ----------
     grid : size of the full grid (even, elements per side)
-    h : element size [length]
-    e_star : effective modulus E* [stress]
-    threads : FFTW threads
-    use_pyfftw : use pyfftw when available (False forces scipy.fft)
+    h, e_star, threads, use_pyfftw : as for `Convolver`
     """
 
     #: The operator's images: see `brushcore.numerics.kernel.folded_coefficient`.
