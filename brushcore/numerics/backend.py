@@ -168,6 +168,19 @@ def _import_cupy() -> tuple[ModuleType, ModuleType]:
     return compat, cupy
 
 
+def namespace(x: Any) -> Any:
+    """The array-API namespace of ``x``: numpy for NumPy arrays (the CPU path
+    as it always was), else array_api_compat's view when installed (CuPy's
+    own namespace lacks some standard names), else the array's own."""
+    if isinstance(x, np.ndarray):
+        return np
+    try:
+        from array_api_compat import array_namespace
+    except ImportError:
+        return x.__array_namespace__()
+    return array_namespace(x)
+
+
 @lru_cache(maxsize=None)
 def resolve_backend(name: str = "cpu") -> Backend:
     """The backend called ``name``, checked before any work.

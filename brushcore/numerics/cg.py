@@ -4,26 +4,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
+
+from brushcore.numerics.backend import namespace
 
 
 class ConvergenceError(RuntimeError):
     """CG did not reach its tolerance, or produced non-finite numbers."""
-
-
-def namespace(x: Any) -> Any:
-    """The array-API namespace of ``x``: numpy for NumPy arrays (the CPU path
-    as it always was), else array_api_compat's view when installed (CuPy's
-    own namespace lacks some standard names), else the array's own."""
-    if isinstance(x, np.ndarray):
-        return np
-    try:
-        from array_api_compat import array_namespace
-    except ImportError:
-        return x.__array_namespace__()
-    return array_namespace(x)
 
 
 def pcg(apply: Callable[[np.ndarray], np.ndarray],

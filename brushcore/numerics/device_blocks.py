@@ -80,10 +80,8 @@ class DeviceBlocks(BlockInverse):
         Unlike the CPU's fixed budget this one reads the card: a GPU run's
         path may depend on the card, its results agree within CG tolerance.
         """
-        counts = np.bincount(pillar_of)
-        m = int(counts.max())
-        need = counts.size * m * m * 8.0
-        return m <= max_block and need <= DEVICE_MEMORY_FRACTION * backend.free_memory()
+        m, stack_bytes = cls.stack_size(pillar_of)
+        return m <= max_block and stack_bytes <= DEVICE_MEMORY_FRACTION * backend.free_memory()
 
     def _factorise(self) -> None:
         xp = self.backend.xp

@@ -213,16 +213,22 @@ class BlockInverse:
         """Whether the stacked inverses (and their packed copy) fit the memory
         budget and the block size limit.
 
-        4 GB keeps a 2048^2 curve within 8 GB.  Without blocks the
-        Sherman-Morrison diagonal takes over, at 10-100x the applications
-        (soft 8 x 8 brush at 1024^2: 11,396 against 87 at 768^2 with blocks),
-        so the budget is fixed, not read from the machine: the same problem
+        4 GB keeps a 2048^2 curve within 8 GB.  Without blocks the tile
+        preconditioner (`brushcore.numerics.tiles`) takes over, at 4-6x the
+        applications (8 x 8 rigid brush at 1024^2: 6,145 against 1,113), so
+        the budget is fixed, not read from the machine: the same problem
         takes the same path everywhere.
         """
+        m, stack_bytes = cls.stack_size(pillar_of)
+        copies = 1.5 if m >= cls.PACKED_MIN_BLOCK else 1.0
+        return m <= max_block and stack_bytes * copies <= budget_bytes
+
+    @staticmethod
+    def stack_size(pillar_of: np.ndarray) -> tuple[int, float]:
+        """The largest block m and the bytes of the (N, m, m) stack of inverses."""
         counts = np.bincount(pillar_of)
         m = int(counts.max())
-        copies = 1.5 if m >= cls.PACKED_MIN_BLOCK else 1.0
-        return m <= max_block and counts.size * m * m * 8.0 * copies <= budget_bytes
+        return m, counts.size * m * m * 8.0
 
     def detach(self, elements: np.ndarray, stress: np.ndarray | None = None,
                attached_pos: np.ndarray | None = None) -> np.ndarray | None:

@@ -35,7 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brushcore.numerics.cg import ConvergenceError, namespace, pcg_image
+from brushcore.numerics.backend import namespace
+from brushcore.numerics.cg import ConvergenceError, pcg_image
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.validation import is_real, require
