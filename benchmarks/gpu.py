@@ -60,7 +60,7 @@ def fft_pair_ms(backend: Backend, n: int, repeats: int = 20) -> float:
 def application_ms(params: BrushParams, backend: Backend, repeats: int = 20) -> float:
     """One application of the brush operator, all elements attached [ms]."""
     labels = build_labels(params)
-    op = BrushOperator(grid_convolver(params, backend), labels,
+    op = BrushOperator(grid_convolver(params, backend, SolverOptions()), labels,
                        spring_compliance(params, params.n_pillars), params.h, params.e_star,
                        use_block=False)
     x = backend.xp.ones(op.size, dtype=backend.xp.float64)

@@ -32,6 +32,7 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "seed": "--seed", "min_gap": "--min-gap", "e_star": "--e-star",
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
          "lookahead": "--lookahead", "cascade": "--cascade", "symmetry": "--no-symmetry", "threads": "--threads",
+         "precision": "--precision", "early_decisions": "--no-early-decisions",
          "out": "--out", "allow_coarse": "--allow-coarse", "shape": "--shape",
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
@@ -156,6 +157,13 @@ def build_parser() -> argparse.ArgumentParser:
                           "the result; global: re-solve after every round (reference)")
     sim.add_argument("--no-symmetry", dest="symmetry", action="store_false",
                      help="solve mirror-symmetric brushes on the whole grid, not one quadrant")
+    sim.add_argument("--precision", choices=("auto", "mixed", "double"),
+                     default=SolverOptions.precision,
+                     help="FFT precision on the CPU: mixed = single-precision transforms, "
+                          "the rest double (needs --rtol >= 1e-6); auto = mixed unless "
+                          "--rtol < 1e-6")
+    sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
+                     help="run every cascade round's CG to the tolerance")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
     sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
@@ -258,7 +266,8 @@ def _simulate(args: argparse.Namespace) -> int:
             arrays["gap_map"] = read_gap_map(args.gap_map, base.grid)
         params = dataclasses.replace(base, **arrays) if arrays else base
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
-                                symmetry=args.symmetry)
+                                symmetry=args.symmetry, precision=args.precision,
+                                early_decisions=args.early_decisions)
         if args.threads < 1:
             raise ParameterError("threads", args.threads, "an integer >= 1")
         check_output_path(args.out)

@@ -158,7 +158,8 @@ def _ellipse_brush(**kw) -> BrushParams:
 
 
 def _fad_and_work(params: BrushParams, labels=None) -> tuple[float, float]:
-    _, curve, _ = run(params, SolverOptions(), labels=labels)
+    # Double precision: invariance up to round-off (SolverOptions.precision).
+    _, curve, _ = run(params, SolverOptions(precision="double"), labels=labels)
     return float(curve.force.max()), float(np.trapezoid(curve.force, curve.displacement))
 
 

@@ -115,10 +115,11 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     fold = options.symmetry and backend.on_host
     quadrant = mirror_quadrant(labels, compliance) if fold else None
     if quadrant is None:
-        conv = grid_convolver(params, backend)
+        conv = grid_convolver(params, backend, options)
         grid_labels = labels
     else:  # a quarter of the unknowns, quarter-size transforms
-        conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads())
+        conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
+                                       options.single_transforms)
         grid_labels, compliance = quadrant.labels, compliance[quadrant.images[:, 0]]
         if progress is not None:
             progress = _scaled_progress(progress, 4)
@@ -139,10 +140,12 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     return detach, curve, conv.applications - before
 
 
-def grid_convolver(params: BrushParams, backend: Backend):
-    """The whole-grid convolver for ``backend`` (cached per process)."""
+def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
+    """The whole-grid convolver for ``backend`` (cached per process); a device
+    always transforms in double precision."""
     if backend.on_host:
-        return cached_convolver(params.grid, params.h, params.e_star, fft_threads())
+        return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
+                                options.single_transforms)
     return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 
@@ -182,7 +185,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     backend = resolve_backend(params.backend)
     labels = build_labels(params) if labels is None else labels
     n_pillars = int(labels.max()) + 1
-    conv = grid_convolver(params, backend)
+    conv = grid_convolver(params, backend, options)
     before = conv.applications
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)

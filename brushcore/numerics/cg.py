@@ -16,7 +16,8 @@ class ConvergenceError(RuntimeError):
 
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
         precondition: Callable[[np.ndarray], np.ndarray],
-        b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int) -> tuple[np.ndarray, int]:
+        b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int,
+        decided: Callable[[np.ndarray, float], bool] | None = None) -> tuple[np.ndarray, int]:
     """Solve A x = b for symmetric positive definite A.
 
     Parameters
@@ -31,6 +32,10 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         not do: with very soft springs x is ~1e-8 of b/diag(A), so a small
         residual can still leave x wrong in every digit that matters.
     max_iter : iterations allowed
+    decided : optional early exit: decided(x, zmax) is asked after each
+        iteration whose correction is still above the tolerance, with zmax
+        = max|z| the error estimate; True stops there (a caller that needs
+        only what x decides, not x itself)
 
     Returns
     -------
@@ -46,14 +51,16 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
     xp = namespace(b)
     empty = xp.empty(0, dtype=xp.float64)
     x, _, iterations = pcg_image(lambda p: (apply(p), empty), precondition, b, x0,
-                                 apply(x0), empty, rtol, max_iter)
+                                 apply(x0), empty, rtol, max_iter, decided)
     return x, iterations
 
 
 def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               precondition: Callable[[np.ndarray], np.ndarray],
               b: np.ndarray, x0: np.ndarray, ax0: np.ndarray, y0: np.ndarray,
-              rtol: float, max_iter: int) -> tuple[np.ndarray, np.ndarray, int]:
+              rtol: float, max_iter: int,
+              decided: Callable[[np.ndarray, float], bool] | None = None
+              ) -> tuple[np.ndarray, np.ndarray, int]:
     """`pcg` that also carries a linear image y = Y x of the iterate.
 
     The brush operator's application computes the half-space field on the
@@ -65,7 +72,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     Parameters
     ----------
     apply : p -> (A p, Y p)
-    precondition, b, x0, rtol, max_iter : as in `pcg`
+    precondition, b, x0, rtol, max_iter, decided : as in `pcg`
     ax0, y0 : A x0 and Y x0
 
     Returns
@@ -86,7 +93,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
                                    f"{len(history)} iterations")
         if xmax > 0:
             history.append(zmax / xmax)
-        return zmax <= rtol * xmax
+        return zmax <= rtol * xmax or (decided is not None and decided(x, zmax))
 
     if converged():
         return x, y, 0

@@ -44,25 +44,26 @@ class MirrorConvolver(HostBuffers):
     Parameters
     ----------
     grid : size of the full grid (even, elements per side)
-    h, e_star, threads, use_pyfftw : as for `Convolver`
+    h, e_star, threads, use_pyfftw, single : as for `Convolver`
     """
 
     #: The operator's images: see `brushcore.numerics.kernel.folded_coefficient`.
     mirrored = True
 
     def __init__(self, grid: int, h: float = 1.0, e_star: float = 1.0, threads: int = 1,
-                 use_pyfftw: bool = True) -> None:
+                 use_pyfftw: bool = True, single: bool = False) -> None:
         if grid % 2:
             raise ValueError(f"mirror symmetry needs an even grid, got {grid}")
         self.full = grid
         self.n = grid // 2
         self.threads = threads
+        self.single = single
         self.applications = 0
         spectrum = np.fft.rfft2(wrapped_kernel(grid, h, e_star)).real[:grid, :grid]
         self.spectrum = np.ascontiguousarray(spectrum)
         self.backend = "pyfftw" if (use_pyfftw and HAVE_PYFFTW) else "scipy"
         # Both transform libraries leave the factor (2 grid)^2 of the pair to us.
-        self._scaled = self.spectrum / float(4 * grid * grid)
+        self._scaled = (self.spectrum / float(4 * grid * grid)).astype(self.real_dtype)
         if self.backend == "pyfftw":
             self._plan()
         else:
@@ -72,9 +73,10 @@ class MirrorConvolver(HostBuffers):
     def _plan(self) -> None:
         m, g = self.n, self.full
         empty = pyfftw.empty_aligned
-        self._real_in = empty((m, g), dtype="float64")
-        self._work = empty((g, g), dtype="float64")
-        self._real_out = empty((m, g), dtype="float64")
+        real = self.real_dtype
+        self._real_in = empty((m, g), dtype=real)
+        self._work = empty((g, g), dtype=real)
+        self._real_out = empty((m, g), dtype=real)
         flags = ("FFTW_MEASURE",)
         dct2, dct3 = ["FFTW_REDFT10"], ["FFTW_REDFT01"]
         with planning():
@@ -118,10 +120,11 @@ class MirrorConvolver(HostBuffers):
 
 
 @lru_cache(maxsize=2)
-def cached_mirror_convolver(grid: int, h: float, e_star: float,
-                            threads: int) -> MirrorConvolver:
-    """One MirrorConvolver per (grid, h, E*, threads) in a process: plans are costly."""
-    return MirrorConvolver(grid, h, e_star, threads)
+def cached_mirror_convolver(grid: int, h: float, e_star: float, threads: int,
+                            single: bool = False) -> MirrorConvolver:
+    """One MirrorConvolver per (grid, h, E*, threads, precision) in a process:
+    plans are costly."""
+    return MirrorConvolver(grid, h, e_star, threads, single=single)
 
 
 @dataclass(frozen=True)

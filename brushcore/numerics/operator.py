@@ -136,12 +136,18 @@ class BrushOperator:
         self.backend.put(self.attached, positions, True)
         self._update()
 
+    def _gather(self, where: Any) -> Any:
+        """The convolved buffer at ``where``, in double precision whatever
+        the transforms' (single-precision transforms: `SolverOptions.precision`)."""
+        xp = self.backend.xp
+        return xp.astype(self.conv.apply_flat()[where], xp.float64, copy=False)
+
     def field(self, x: Any) -> Any:
         """Half-space displacement K x [length] at every pillar element
         (operator order) from attached-element stresses x [stress]; one
         operator application."""
         self.backend.put(self.conv.flat_buffer, self.idx, x)
-        return self.conv.apply_flat()[self._padded]
+        return self._gather(self._padded)
 
     def spring(self, x: Any) -> Any:
         """Spring part S x of A x (compressed) [length]."""
@@ -172,7 +178,7 @@ class BrushOperator:
     def apply(self, x: Any) -> Any:
         """A x: displacement [length] from attached-element stresses x [stress]."""
         self.backend.put(self.conv.flat_buffer, self.idx, x)
-        y = self.conv.apply_flat()[self.idx]
+        y = self._gather(self.idx)
         if self._springs:
             y += (self.compliance * self.pillar_sums(x))[self.pl]
         return y

@@ -86,6 +86,29 @@ def _certain_detachments(op: BrushOperator, sigma1: np.ndarray, threshold: float
     return None if bool(op.backend.xp.any(unsure)) else over
 
 
+#: Margin, in CG error estimates, by which every element must clear the
+#: threshold before a cascade round stops short of the tolerance.
+DECISION_SAFETY = 10.0
+
+
+def _decides(threshold: float, xp):
+    """CG early exit for a cascade round: stop once the iterate detaches at
+    least one element and no element lies within DECISION_SAFETY error
+    estimates of the threshold.
+
+    Such a round only decides which elements go next; its stresses are
+    re-solved before anything is recorded that enters F_ad or W (the
+    cascade's last round, where nothing exceeds the threshold, always runs
+    to the tolerance, and forces recorded inside a cascade lie on a vertical
+    drop).
+    """
+    def decided(x, zmax: float) -> bool:
+        margin = DECISION_SAFETY * zmax
+        return (bool(xp.any(x >= threshold + margin))
+                and not bool(xp.any(xp.abs(x - threshold) < margin)))
+    return decided
+
+
 def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions,
              progress: Progress | None = None) -> PullOffCurve:
     """Pull the brush off from full contact until every element has detached.
@@ -112,11 +135,13 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     sigma1 = xp.zeros(total, dtype=xp.float64)  # unit-displacement stresses, warm start
     d = 0.0
 
-    def solve(x0: np.ndarray) -> np.ndarray:
+    def solve(x0: np.ndarray, threshold: float | None = None) -> np.ndarray:
         nonlocal cg_iters
         b = xp.ones(op.size, dtype=xp.float64)
+        decided = None if threshold is None else _decides(threshold, xp)
         try:
-            x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter)
+            x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter,
+                        decided)
         except ConvergenceError as exc:
             raise ConvergenceError(f"{exc} at event {events}, d = {d:.6g}, "
                                    f"{op.size} of {total} elements attached") from None
@@ -174,7 +199,7 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
                                             options.rtol * float(xp.max(sigma1)))
                 if mask is not None and bool(xp.any(mask)):
                     continue  # decided without a global solve
-            sigma1 = solve(sigma1)
+            sigma1 = solve(sigma1, threshold if options.early_decisions else None)
             reference_sums = op.pillar_sums(sigma1)
             record(sigma1)
             mask = sigma1 >= threshold
