@@ -5,8 +5,10 @@
     python benchmarks/bench_speed.py fine --grid 2048 --threads 2 regular:2304:0.455 ...
 
 ``ratio``: ms of one operator application on the whole grid (pruned DC-FFT)
-and on the quadrant of a mirror-symmetric brush (DCT-II/III), beside a bare
-pyfftw r2c + c2r pair of the padded 2n x 2n grid; one thread.
+and on the quadrant of a mirror-symmetric brush (DCT-II/III), in double and
+in single precision (the default, ``SolverOptions.precision``), beside a
+bare double-precision pyfftw r2c + c2r pair of the padded 2n x 2n grid; one
+thread.
 
 ``target``: the issue's case on one thread, three ways in one run: the whole
 grid (``symmetry=False``: today's algorithm before mirror symmetry), the
@@ -50,14 +52,16 @@ def _ms(conv, fill: int, repeats: int = 20) -> float:
 
 
 def ratio(grids: list[int]) -> None:
-    print(f"{'grid':>6} {'pair ms':>8} {'whole ms':>9} {'ratio':>6} {'quadrant ms':>12} {'ratio':>6}")
+    print("ratio = ms / bare double FFT pair; 64 = double, 32 = single-precision transforms")
+    print(f"{'grid':>6} {'pair ms':>8} {'whole 64':>9} {'whole 32':>9} {'quad 64':>8} "
+          f"{'quad 32':>8}")
     with threadpool_limits(1):
         for n in grids:
             pair = bare_fft_pair_ms(n, 10)
-            whole = _ms(Convolver(n), n)
-            quad = _ms(MirrorConvolver(n), n // 2)
-            print(f"{n:6d} {pair:8.2f} {whole:9.2f} {whole / pair:6.2f} {quad:12.2f} "
-                  f"{quad / pair:6.2f}", flush=True)
+            cells = [_ms(Convolver(n, single=single), n) for single in (False, True)]
+            cells += [_ms(MirrorConvolver(n, single=single), n // 2) for single in (False, True)]
+            print(f"{n:6d} {pair:8.2f} " + " ".join(f"{c / pair:8.2f}" for c in cells)
+                  + "   (ms: " + ", ".join(f"{c:.2f}" for c in cells) + ")", flush=True)
 
 
 def _row(label: str, ds, wall: float, ref=None) -> str:
@@ -73,7 +77,9 @@ def _row(label: str, ds, wall: float, ref=None) -> str:
 
 def target(grid: int) -> None:
     params = BrushParams("regular", 256, 0.455, grid)
-    runs = {"whole grid (before)": SolverOptions(symmetry=False),
+    runs = {"whole grid (before)": SolverOptions(symmetry=False, precision="double",
+                                                 early_decisions=False),
+            "quadrant, all double": SolverOptions(precision="double", early_decisions=False),
             "default (quadrant)": SolverOptions(),
             "exact reference": SolverOptions.exact()}
     out = {}

@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from brushcore.model import theory
 from brushcore.numerics.cg import ConvergenceError, pcg
-from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.convolution import HAVE_PYFFTW, Convolver
+from brushcore.numerics.mirror import MirrorConvolver
 from brushcore.numerics.kernel import dense_influence_matrix, love_coefficient
 from brushcore.numerics.operator import BrushOperator
 
@@ -37,6 +38,28 @@ def test_convolution_equals_dense_boussinesq(n, use_pyfftw):
         u = conv(stress)
         err = np.abs(u - ref).max() / np.abs(ref).max()
         assert err < 1e-12, f"{conv.backend}: relative error {err:.2e}"
+
+
+@pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_single_precision_transforms_round_at_float32(mirrored):
+    """Mixed precision (SolverOptions.precision): the field of a random stress
+    agrees with the dense Boussinesq sum to float32 round-off, not better
+    (so the option is really in use) and not worse."""
+    n = 24
+    rng = np.random.default_rng(5)
+    quadrant = rng.standard_normal((n // 2, n // 2))
+    # the mirror convolver sees a doubly symmetric field through its quadrant
+    full = np.block([[quadrant[::-1, ::-1], quadrant[::-1]], [quadrant[:, ::-1], quadrant]])
+    ref = (dense_influence_matrix(n, 0.7, 2.0) @ full.ravel()).reshape(n, n)
+    if mirrored:
+        conv, stress, ref = MirrorConvolver(n, 0.7, 2.0, single=True), quadrant, ref[n // 2:, n // 2:]
+    else:
+        conv, stress = Convolver(n, 0.7, 2.0, single=True), full
+    u = conv(stress)
+    assert u.dtype == np.float64
+    err = np.abs(u - ref).max() / np.abs(ref).max()
+    assert 1e-9 < err < 1e-6, f"relative error {err:.2e}"
 
 
 def _dense_operator(labels, compliance, attached):

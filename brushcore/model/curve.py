@@ -15,7 +15,7 @@ from threadpoolctl import threadpool_limits
 
 from brushcore.model import theory
 from brushcore.numerics.backend import Backend, resolve_backend
-from brushcore.numerics.convolution import cached_convolver
+from brushcore.numerics.convolution import HAVE_PYFFTW, cached_convolver
 from brushcore.numerics.device_convolution import cached_device_convolver
 from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
@@ -239,6 +239,9 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "cg_iterations": cg_iterations,
         "wall_time_s": wall,
         "backend": backend.name,
+        # what "auto" resolved to: a device and the scipy fallback are double
+        "fft_precision": ("single" if options.single_transforms and backend.on_host
+                          and HAVE_PYFFTW else "double"),
         "device_name": backend.device_name,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),

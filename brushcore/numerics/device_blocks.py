@@ -67,6 +67,7 @@ class DeviceBlocks(BlockInverse):
             r, r_near = self._interaction(counts)
             self._r, self._r_near = be.asarray(r), be.asarray(r_near)
             self._z = xp.sum(self.inv, axis=2)
+            self._reach = xp.sum(xp.abs(self.inv), axis=2)
             self.coupling = float(xp.max(self._r @ xp.sum(self._z, axis=1)))
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
         if self.coarse:
@@ -164,6 +165,7 @@ class DeviceBlocks(BlockInverse):
         if self.interacting:
             for p in touched:
                 self._z[int(p), :] = xp.sum(self.inv[int(p), :, :], axis=1)
+                self._reach[int(p), :] = xp.sum(xp.abs(self.inv[int(p), :, :]), axis=1)
         if self.coarse:
             idx = self.backend.asarray(touched.astype(np.int64))
             c = self.backend.to_host(xp.sum(xp.take(self._z, idx, axis=0), axis=1))
@@ -182,7 +184,7 @@ class DeviceBlocks(BlockInverse):
                 return None
             return xp.zeros(attached_pos.shape[0], dtype=xp.float64)
         shift = self._r_near @ xp.abs(pillar_change)
-        return xp.reshape(xp.abs(self._z) * shift[:, None], (-1,))[attached_pos]
+        return xp.reshape(self._reach * shift[:, None], (-1,))[attached_pos]
 
     def apply(self, r: Any, attached_pos: Any) -> Any:
         """See `BlockInverse.apply`: one batched product over all pillars."""

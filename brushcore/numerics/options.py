@@ -31,10 +31,12 @@ class SolverOptions:
         after every round.  "local" updates each pillar exactly with its own
         block inverse, holding the other pillars' field, and continues
         without a global solve only while a bound on that field's change
-        (monopole at closest approach, x30) cannot flip any decision; it
-        always re-solves globally before the next event.  Measured against
-        "global": F_ad and W within 2e-4 on regular and random brushes, with
-        2-4x fewer operator applications for soft brushes.
+        (first order, rigorous, x3; see `BlockInverse.far_field_uncertainty`)
+        cannot flip any decision; it always re-solves globally before the
+        next event.  Measured against "global": the same contact sets (F_ad
+        and W equal to round-off) from kbar 1e-6 to rigid, with 0-3 % fewer
+        operator applications.  (Before this bound a monopole estimate saved
+        2-4x on soft brushes by deciding wrongly: W up to 0.7 % off.)
     symmetry : solve a brush that is symmetric about both mid-lines (every
         regular flat brush with equal springs) on one quadrant, with
         quarter-size transforms (`brushcore.numerics.mirror`); True by
