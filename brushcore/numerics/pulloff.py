@@ -109,7 +109,7 @@ def _certain_detachments(op: BrushOperator, sigma1: np.ndarray, threshold: float
 DECISION_SAFETY = 10.0
 
 
-def _decides(threshold: float, xp):
+def _decides(threshold: float, xp, stopped: list[float]):
     """CG early exit for a cascade round: stop once the iterate detaches at
     least one element and no element lies within DECISION_SAFETY error
     estimates of the threshold.
@@ -118,12 +118,15 @@ def _decides(threshold: float, xp):
     re-solved before anything is recorded that enters F_ad or W (the
     cascade's last round, where nothing exceeds the threshold, always runs
     to the tolerance, and forces recorded inside a cascade lie on a vertical
-    drop).
+    drop).  The error estimate it stopped at is appended to ``stopped``.
     """
     def decided(x, zmax: float) -> bool:
         margin = DECISION_SAFETY * zmax
-        return (bool(xp.any(x >= threshold + margin))
+        done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
+        if done:
+            stopped.append(zmax)
+        return done
     return decided
 
 
@@ -153,10 +156,13 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     sigma1 = xp.zeros(total, dtype=xp.float64)  # unit-displacement stresses, warm start
     d = 0.0
 
-    def solve(x0: np.ndarray, threshold: float | None = None) -> np.ndarray:
+    def solve(x0: np.ndarray, threshold: float | None = None) -> tuple[np.ndarray, float]:
+        """The stresses and their error estimate (CG's tolerance, or where an
+        early-decided cascade round stopped)."""
         nonlocal cg_iters
         b = xp.ones(op.size, dtype=xp.float64)
-        decided = None if threshold is None else _decides(threshold, xp)
+        stopped: list[float] = []
+        decided = None if threshold is None else _decides(threshold, xp, stopped)
         try:
             x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter,
                         decided)
@@ -164,7 +170,7 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
             raise ConvergenceError(f"{exc} at event {events}, d = {d:.6g}, "
                                    f"{op.size} of {total} elements attached") from None
         cg_iters += it
-        return x
+        return x, max(stopped + [options.rtol * float(xp.max(x))])
 
     best = [-np.inf, xp.zeros(op.n_pillars, dtype=xp.float64)]  # largest force and its pillar forces
 
@@ -191,7 +197,7 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         updated = op.detach(mask, stress)
         return stress[~mask] if updated is None else updated
 
-    sigma1 = solve(sigma1)
+    sigma1, error = solve(sigma1)
     while op.size:
         peak = float(xp.max(sigma1))
         if not np.isfinite(peak) or peak <= 0.0:
@@ -213,11 +219,10 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
             if not op.size:
                 break
             if local:
-                mask = _certain_detachments(op, sigma1, threshold, reference,
-                                            options.rtol * float(xp.max(sigma1)))
+                mask = _certain_detachments(op, sigma1, threshold, reference, error)
                 if mask is not None and bool(xp.any(mask)):
                     continue  # decided without a global solve
-            sigma1 = solve(sigma1, threshold if options.early_decisions else None)
+            sigma1, error = solve(sigma1, threshold if options.early_decisions else None)
             reference = _spread(op, sigma1)
             record(sigma1)
             mask = sigma1 >= threshold
