@@ -60,21 +60,21 @@ def test_mixed_precision_and_early_decisions_change_no_result(case):
         ds = simulate(params, SolverOptions(**option))
         for name in ("adhesive_force", "work_of_separation"):
             assert float(ds[name]) == pytest.approx(float(before[name]), rel=2e-4), (option, name)
-        want = "double" if option.get("precision") == "double" else "single"
-        assert ds.attrs["fft_precision"] == want
+        single = case[0] == "random" and option.get("precision") != "double"
+        assert ds.attrs["fft_precision"] == ("single" if single else "double")
 
 
-def test_precision_follows_the_tolerance():
-    assert SolverOptions().single_transforms
-    assert not SolverOptions(rtol=1e-8).single_transforms  # auto: double below 1e-6
-    assert not SolverOptions.exact().single_transforms
-    assert not SolverOptions(precision="double").single_transforms
-    with pytest.raises(ParameterError, match=r"rtol=1e-08 .*precision 'mixed'"):
-        SolverOptions(rtol=1e-8, precision="mixed")
-    with pytest.raises(ParameterError, match="precision"):
-        SolverOptions(precision="half")
-    with pytest.raises(ParameterError, match="early_decisions"):
-        SolverOptions(early_decisions="yes")
+def test_auto_precision_keeps_a_soft_symmetric_brush_on_its_path():
+    """Single-precision transforms break mirror-image ties, and a soft regular
+    brush then detaches its near-equal pillars in another order: for 16 x 16
+    pillars at kbar 1e-6 on 256^2, W moved 4.5e-3 (measured; the size depends
+    on the FFT plan's round-off, so it is not asserted).  "auto" keeps
+    symmetric layouts in double precision (measured: 5.5e-8)."""
+    params = BrushParams("regular", 256, 1e-6, 256, allow_coarse=True)
+    double = float(simulate(params, ALL_DOUBLE).work_of_separation)
+    auto = simulate(params)
+    assert auto.attrs["fft_precision"] == "double"
+    assert float(auto.work_of_separation) == pytest.approx(double, rel=1e-6)
 
 
 @pytest.mark.parametrize("option", [dict(lookahead=1e-3), dict(lookahead=1e-2)])

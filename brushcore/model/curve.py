@@ -119,7 +119,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
         grid_labels = labels
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
-                                       options.single_transforms)
+                                       options.single_transforms(True))
         grid_labels, compliance = quadrant.labels, compliance[quadrant.images[:, 0]]
         if progress is not None:
             progress = _scaled_progress(progress, 4)
@@ -140,12 +140,19 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     return detach, curve, conv.applications - before
 
 
+def may_tie(params: BrushParams) -> bool:
+    """Whether the layout may hold exact mirror images, whose stresses must tie
+    (all but random ones): they keep double-precision transforms under
+    ``precision="auto"``."""
+    return params.layout != "random"
+
+
 def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
     """The whole-grid convolver for ``backend`` (cached per process); a device
     always transforms in double precision."""
     if backend.on_host:
         return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
-                                options.single_transforms)
+                                options.single_transforms(may_tie(params)))
     return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 
@@ -240,7 +247,8 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "wall_time_s": wall,
         "backend": backend.name,
         # what "auto" resolved to: a device and the scipy fallback are double
-        "fft_precision": ("single" if options.single_transforms and backend.on_host
+        "fft_precision": ("single" if options.single_transforms(may_tie(params))
+                          and backend.on_host
                           and HAVE_PYFFTW else "double"),
         "device_name": backend.device_name,
         "device_memory_bytes": backend.device_memory_bytes,

@@ -48,9 +48,13 @@ class SolverOptions:
         host's FFTs in single precision (1.6-1.8x faster) and everything
         else, CG's vectors and dot products, springs and block inverses, in
         double.  The transforms' relative error, ~1e-7, lies three orders
-        below the default CG tolerance, so it moves nothing that rtol does
-        not already move.  It needs rtol >= 1e-6.  "auto" is "mixed" for
-        rtol >= 1e-6 and "double" below; GPU runs are always double.
+        below the default CG tolerance, but it is not symmetric: mirror
+        images no longer tie (tie_rtol), and soft symmetric brushes, whose
+        cascades depend on the order of near-equal pillars, then take
+        another path (regular 576 at kbar 1e-6: W 0.8 % off).  "auto" is
+        therefore "mixed" only for layouts without exact symmetries (random
+        ones) at rtol >= 1e-6, and "double" otherwise; "mixed" needs rtol
+        >= 1e-6.  GPU runs are always double.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
         `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
@@ -96,8 +100,8 @@ class SolverOptions:
                 self.rtol, f"a number >= {self.MIXED_MIN_RTOL:g} with precision 'mixed' "
                 "(use precision 'double' for tighter tolerances)")
 
-    @property
-    def single_transforms(self) -> bool:
-        """Whether host FFTs run in single precision (see ``precision``)."""
-        return self.precision == "mixed" or (self.precision == "auto"
+    def single_transforms(self, symmetric: bool) -> bool:
+        """Whether host FFTs run in single precision (see ``precision``) for a
+        layout that may (``symmetric``) or cannot hold exact mirror images."""
+        return self.precision == "mixed" or (self.precision == "auto" and not symmetric
                                              and self.rtol >= self.MIXED_MIN_RTOL)
