@@ -153,15 +153,16 @@ def build_parser() -> argparse.ArgumentParser:
                      help="approximate: detach (rough brushes: also attach) within this relative "
                           "window of the next event (0 = exact)")
     sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
-                     help="local: per-pillar cascades where they provably do not change "
-                          "the result; global: re-solve after every round (reference)")
+                     help="local: per-pillar cascades where a rigorous bound shows they "
+                          "do not change the result; global: re-solve after every round "
+                          "(reference)")
     sim.add_argument("--no-symmetry", dest="symmetry", action="store_false",
                      help="solve mirror-symmetric brushes on the whole grid, not one quadrant")
     sim.add_argument("--precision", choices=("auto", "mixed", "double"),
                      default=SolverOptions.precision,
                      help="FFT precision on the CPU: mixed = single-precision transforms, "
-                          "the rest double (needs --rtol >= 1e-6); auto = mixed unless "
-                          "--rtol < 1e-6")
+                          "the rest double (needs --rtol >= 1e-6); auto = mixed for random "
+                          "layouts at --rtol >= 1e-6, else double")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
