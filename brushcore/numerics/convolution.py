@@ -149,7 +149,7 @@ class Convolver(HostBuffers):
     e_star : effective modulus E* [stress]
     threads : FFTW threads
     use_pyfftw : use pyfftw when available (False forces scipy.fft)
-    single : single-precision transforms (pyfftw only; 1.6-1.8x faster,
+    single : single-precision transforms (pyfftw only; 1.4-1.8x faster,
         relative error ~1e-7, see `SolverOptions.precision`); the scipy
         fallback stays in double precision
     """

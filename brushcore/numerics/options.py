@@ -45,7 +45,7 @@ class SolverOptions:
         False solves the whole grid (a check, or a reference).  Protocol
         runs (preload, rough or graded brushes) always solve the whole grid.
     precision : "auto" (default), "mixed" or "double".  "mixed" runs the
-        host's FFTs in single precision (1.6-1.8x faster) and everything
+        host's FFTs in single precision (1.4-1.8x faster) and everything
         else, CG's vectors and dot products, springs and block inverses, in
         double.  The transforms' relative error, ~1e-7, lies three orders
         below the default CG tolerance, but it is not symmetric: mirror
