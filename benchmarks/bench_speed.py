@@ -10,10 +10,11 @@ in single precision (the default, ``SolverOptions.precision``), beside a
 bare double-precision pyfftw r2c + c2r pair of the padded 2n x 2n grid; one
 thread.
 
-``target``: the issue's case on one thread, three ways in one run: the whole
-grid (``symmetry=False``: today's algorithm before mirror symmetry), the
-default (quadrant), and the exact reference; applications, wall, F_ad, W and
-their deviation from the reference.
+``target``: the issue's case on one thread, four ways in one run: the whole
+grid all in double (the algorithm before mirror symmetry), the quadrant all
+in double (before early-decided rounds), the default, and the exact
+reference; applications, wall, F_ad, W and their deviation from the
+reference.
 
 ``fine``: each case in its own process (so the peak memory is its own):
 applications, wall, peak resident memory, F_ad, W; a curve still running

@@ -119,7 +119,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
         grid_labels = labels
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
-                                       options.single_transforms(True))
+                                       single_transforms(params, options, folded=True))
         grid_labels, compliance = quadrant.labels, compliance[quadrant.images[:, 0]]
         if progress is not None:
             progress = _scaled_progress(progress, 4)
@@ -140,11 +140,16 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     return detach, curve, conv.applications - before
 
 
-def may_tie(params: BrushParams) -> bool:
-    """Whether the layout may hold exact mirror images, whose stresses must tie
-    (all but random ones): they keep double-precision transforms under
-    ``precision="auto"``."""
-    return params.layout != "random"
+def single_transforms(params: BrushParams, options: SolverOptions, folded: bool) -> bool:
+    """Whether the host transforms of this run are single precision.
+
+    Layouts that may hold exact mirror images (all but random ones, and any
+    brush solved on a mirror quadrant: ``folded``) need their stresses to
+    tie, so they keep double precision under ``precision="auto"``.  The
+    scipy fallback is always double.
+    """
+    symmetric = folded or params.layout != "random"
+    return HAVE_PYFFTW and options.single_transforms(symmetric)
 
 
 def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
@@ -152,7 +157,7 @@ def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions
     always transforms in double precision."""
     if backend.on_host:
         return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
-                                options.single_transforms(may_tie(params)))
+                                single_transforms(params, options, folded=False))
     return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 
@@ -246,10 +251,9 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "cg_iterations": cg_iterations,
         "wall_time_s": wall,
         "backend": backend.name,
-        # what "auto" resolved to: a device and the scipy fallback are double
-        "fft_precision": ("single" if options.single_transforms(may_tie(params))
-                          and backend.on_host
-                          and HAVE_PYFFTW else "double"),
+        # what "auto" resolved to; a device is always double
+        "fft_precision": ("single" if backend.on_host and single_transforms(
+            params, options, folded=symmetry_fold > 1) else "double"),
         "device_name": backend.device_name,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),
