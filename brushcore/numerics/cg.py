@@ -17,8 +17,7 @@ class ConvergenceError(RuntimeError):
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
         precondition: Callable[[np.ndarray], np.ndarray],
         b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int,
-        decided: Callable[[np.ndarray, np.ndarray, float], bool] | None = None
-        ) -> tuple[np.ndarray, int]:
+        decided: Callable[[np.ndarray, float], bool] | None = None) -> tuple[np.ndarray, int]:
     """Solve A x = b for symmetric positive definite A.
 
     Parameters
@@ -33,10 +32,10 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         not do: with very soft springs x is ~1e-8 of b/diag(A), so a small
         residual can still leave x wrong in every digit that matters.
     max_iter : iterations allowed
-    decided : optional early exit: decided(x, z, zmax) is asked after each
-        iteration whose correction is still above the tolerance, with z the
-        per-element error estimate and zmax = max|z|; True stops there (a
-        caller that needs only what x decides, not x itself)
+    decided : optional early exit: decided(x, zmax) is asked after each
+        iteration whose correction is still above the tolerance, with zmax
+        = max|z| the error estimate; True stops there (a caller that needs
+        only what x decides, not x itself)
 
     Returns
     -------
@@ -60,7 +59,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               precondition: Callable[[np.ndarray], np.ndarray],
               b: np.ndarray, x0: np.ndarray, ax0: np.ndarray, y0: np.ndarray,
               rtol: float, max_iter: int,
-              decided: Callable[[np.ndarray, np.ndarray, float], bool] | None = None
+              decided: Callable[[np.ndarray, float], bool] | None = None
               ) -> tuple[np.ndarray, np.ndarray, int]:
     """`pcg` that also carries a linear image y = Y x of the iterate.
 
@@ -94,7 +93,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
                                    f"{len(history)} iterations")
         if xmax > 0:
             history.append(zmax / xmax)
-        return zmax <= rtol * xmax or (decided is not None and decided(x, z, zmax))
+        return zmax <= rtol * xmax or (decided is not None and decided(x, zmax))
 
     if converged():
         return x, y, 0

@@ -57,7 +57,7 @@ class SolverOptions:
         >= 1e-6.  GPU runs are always double.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
-        `brushcore.numerics.pulloff._decides`); rounds whose stresses
+        `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
         enter F_ad or W always run to the tolerance.  True by default, off
         in `exact()`.
     """

@@ -107,34 +107,21 @@ def _certain_detachments(op: BrushOperator, sigma1: np.ndarray, threshold: float
 #: Margin, in CG error estimates, by which every element must clear the
 #: threshold before a cascade round stops short of the tolerance.
 DECISION_SAFETY = 10.0
-#: Share of the largest error estimate added to each element's own (the
-#: coupling term of `_decides`).
-DECISION_COUPLING = 0.1
 
 
 def _decides(threshold: float, xp, stopped: list[float]):
     """CG early exit for a cascade round: stop once the iterate detaches at
-    least one element and every element clears the threshold by
-    DECISION_SAFETY times its error estimate.
-
-    An element's estimate is its own preconditioned residual plus a share
-    of the largest: with the pillar-block preconditioner M the error
-    e = A^-1 r obeys e = z - M^-1 (A - M) e, its own z_i plus its pillar's
-    response to the far field of the errors elsewhere, which the
-    DECISION_COUPLING share of max|z| stands for.  Per element rather than
-    max|z| for all: a cascade's error sits at the pillars next to the one
-    that let go, while the elements nearest the threshold are often far
-    from them.
+    least one element and no element lies within DECISION_SAFETY error
+    estimates of the threshold.
 
     Such a round only decides which elements go next; its stresses are
     re-solved before anything is recorded that enters F_ad or W (the
     cascade's last round, where nothing exceeds the threshold, always runs
     to the tolerance, and forces recorded inside a cascade lie on a vertical
-    drop).  The largest error estimate it stopped at is appended to
-    ``stopped``.
+    drop).  The error estimate it stopped at is appended to ``stopped``.
     """
-    def decided(x, z, zmax: float) -> bool:
-        margin = DECISION_SAFETY * (xp.abs(z) + DECISION_COUPLING * zmax)
+    def decided(x, zmax: float) -> bool:
+        margin = DECISION_SAFETY * zmax
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
