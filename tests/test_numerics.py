@@ -181,3 +181,40 @@ def test_cg_failure_is_loud():
         pcg(lambda v: a @ v, lambda r: r, b, np.zeros(49), 1e-10, 2)
     with pytest.raises(ConvergenceError, match="non-finite|broke down"):
         pcg(lambda v: a @ v * np.nan, lambda r: r, b, np.zeros(49), 1e-10, 5)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_detach_warm_start_is_the_local_solve_and_its_neighbours_first_order(seed):
+    """The stresses `detach` returns: the pillar that lost elements solved
+    exactly with the others held (B_p' y_p = (B_p x_p) on its remaining
+    elements), and each other pillar's first-order answer to that change,
+    y_q = x_q - B_q^-1 K_qp (y_p - x_p)."""
+    from brushcore.numerics.precondition import BlockInverse
+
+    rng, labels, compliance = _random_problem(seed)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(BlockInverse, "NEIGHBOUR_PAIRS_PER_ELEMENT", 1e9)  # all pillars
+        op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
+    assert all(len(near) == 2 for near in op.block._neighbours)
+    x = rng.uniform(0.5, 1.5, op.size)
+    p = op.pl[0]
+    drop = (op.pl == p) & (rng.random(op.size) < 0.5)
+    drop[0] = True  # pillar p loses at least one element and keeps one
+    drop[np.flatnonzero(op.pl == p)[-1]] = np.flatnonzero(op.pl == p).size == 1
+    dense = _dense_operator(labels, compliance, op.attached)
+    pl = op.pl.copy()
+    got = op.detach(drop, x)
+
+    keep = ~drop
+    mine, rest = pl == p, keep & (pl == p)
+    y = x.copy()
+    y[drop] = 0.0
+    y[rest] = np.linalg.solve(dense[np.ix_(rest, rest)], (dense[np.ix_(mine, mine)]
+                                                         @ x[mine])[rest[mine]])
+    change = y - x
+    for q in set(pl.tolist()) - {p}:
+        on_q = pl == q
+        y[on_q] -= np.linalg.solve(dense[np.ix_(on_q, on_q)], dense[np.ix_(on_q, mine)]
+                                   @ change[mine])
+    assert np.allclose(got, y[keep], rtol=1e-9, atol=1e-9 * np.abs(y).max())

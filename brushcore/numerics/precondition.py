@@ -85,6 +85,7 @@ class BlockInverse:
             # when all pillars carry their own unit-displacement load.
             self.coupling = float((self._r @ self._z.sum(axis=1)).max())
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
+        self._neighbours = self._near_pillars(counts, n) if self.interacting else None
         if self.coarse:
             self._factorise()
 
@@ -182,13 +183,41 @@ class BlockInverse:
 
     def _block(self, p: int, slots: np.ndarray) -> np.ndarray:
         """Pillar p's block of the operator over the given slots [length / stress]."""
-        iy, ix, t = self._iyy[p, slots], self._ixx[p, slots], self._table
-        dy, dx = np.abs(iy[:, None] - iy[None]), np.abs(ix[:, None] - ix[None])
+        return self._coefficients(p, slots, p, slots) + self._compliance[p]
+
+    def _coefficients(self, q: int, rows: np.ndarray, p: int, cols: np.ndarray) -> np.ndarray:
+        """Half-space influence of pillar p's slots ``cols`` on pillar q's
+        slots ``rows`` [length / stress], images included on a mirror grid."""
+        t = self._table
+        iy, ix = self._iyy[q, rows][:, None], self._ixx[q, rows][:, None]
+        jy, jx = self._iyy[p, cols][None], self._ixx[p, cols][None]
+        dy, dx = np.abs(iy - jy), np.abs(ix - jx)
         block = t[dy, dx]
         if self._mirrored:  # the images: see `folded_coefficient`
-            sy, sx = iy[:, None] + iy[None] + 1, ix[:, None] + ix[None] + 1
+            sy, sx = iy + jy + 1, ix + jx + 1
             block = block + t[sy, dx] + t[dy, sx] + t[sy, sx]
-        return block + self._compliance[p]
+        return block
+
+    #: Most neighbours whose first-order response follows a pillar's change.
+    NEIGHBOURS = 12
+    #: Coefficient pairs per changed pillar for that response, per element of
+    #: the grid: it must cost well under one application (~n^2 log n).
+    NEIGHBOUR_PAIRS_PER_ELEMENT = 0.25
+
+    def _near_pillars(self, counts: np.ndarray, n: int) -> list[np.ndarray]:
+        """Per pillar, the nearest pillars (by centroid) whose response to its
+        change `detach` adds, as many as NEIGHBOURS and the pair budget allow."""
+        cy = self._yy.sum(axis=1) / np.maximum(counts, 1)
+        cx = self._xx.sum(axis=1) / np.maximum(counts, 1)
+        budget = self.NEIGHBOUR_PAIRS_PER_ELEMENT * n * n
+        near = []
+        for p in range(counts.size):
+            dist = np.hypot(cy - cy[p], cx - cx[p])
+            dist[p] = np.inf
+            order = np.argsort(dist)[: min(self.NEIGHBOURS, counts.size - 1)]
+            pairs = counts[p] * np.cumsum(counts[order])
+            near.append(order[pairs <= budget])
+        return near
 
     def _factorise(self) -> None:
         c = self._z.sum(axis=1)
@@ -250,6 +279,7 @@ class BlockInverse:
         touched = np.unique(pil)
         self._remaining -= np.bincount(pil, minlength=self._remaining.size)
         self._live[pil, slot] = False
+        before = None if w is None else w[touched].copy()
         for p in touched:
             d = slot[pil == p]
             g = self.inv[p]
@@ -270,9 +300,36 @@ class BlockInverse:
         self._refresh(touched)
         if w is None:
             return None
+        if self._neighbours is not None:
+            self._neighbour_response(touched, w[touched] - before, w)
         out = w.ravel()[attached_pos].copy()
         w.ravel()[attached_pos] = 0.0
         return out
+
+    def _neighbour_response(self, touched: np.ndarray, change: np.ndarray,
+                            w: np.ndarray) -> None:
+        """Add to ``w`` (stacked stresses) the first-order response of each
+        changed pillar's near neighbours: sigma_q -= G_q K_qp d sigma_p.
+
+        A warm start only: the global solve that follows corrects what it
+        misses (the changed pillar's own answer to its neighbours, farther
+        pillars).  A soft pillar's cascade shifts load across its face with
+        its total nearly fixed, a field that falls off fast, so the nearest
+        pillars take most of the response: CG's first iteration would
+        otherwise spend an application finding it.
+        """
+        skip = set(touched.tolist())
+        for p, dp in zip(touched, change):
+            cols = np.flatnonzero(dp)
+            near = [q for q in self._neighbours[p] if q not in skip and self._remaining[q]]
+            if cols.size == 0 or not near:
+                continue
+            u = np.zeros(self.m)
+            for q in near:
+                rows = np.flatnonzero(self._live[q])
+                u[rows] = self._coefficients(q, rows, p, cols) @ dp[cols]
+                w[q] -= self.inv[q] @ u  # G_q is zero off the live slots
+                u[rows] = 0.0
 
     def attach(self, elements: np.ndarray) -> None:
         """Rebuild the inverses of pillars that regain elements (operator-order indices).
