@@ -33,6 +33,7 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
          "lookahead": "--lookahead", "cascade": "--cascade", "symmetry": "--no-symmetry", "threads": "--threads",
          "precision": "--precision", "early_decisions": "--no-early-decisions",
+         "settle_decisions": "--no-settle-decisions",
          "out": "--out", "allow_coarse": "--allow-coarse", "shape": "--shape",
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
@@ -165,6 +166,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "layouts at --rtol >= 1e-6, else double")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
+    sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",
+                     help="stop CG at the tolerance even where an element lies within its "
+                          "error of sigma_c or of the next event's cut")
     sim.add_argument("--threads", type=int, default=1, help="FFT/BLAS threads")
     sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
@@ -268,7 +272,8 @@ def _simulate(args: argparse.Namespace) -> int:
         params = dataclasses.replace(base, **arrays) if arrays else base
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,
-                                early_decisions=args.early_decisions)
+                                early_decisions=args.early_decisions,
+                                settle_decisions=args.settle_decisions)
         if args.threads < 1:
             raise ParameterError("threads", args.threads, "an integer >= 1")
         check_output_path(args.out)

@@ -218,3 +218,40 @@ def test_detach_warm_start_is_the_local_solve_and_its_neighbours_first_order(see
         y[on_q] -= np.linalg.solve(dense[np.ix_(on_q, on_q)], dense[np.ix_(on_q, mine)]
                                    @ change[mine])
     assert np.allclose(got, y[keep], rtol=1e-9, atol=1e-9 * np.abs(y).max())
+
+
+def test_settled_needs_every_decision_clear_of_the_error():
+    from brushcore.numerics.pulloff import SETTLE_SAFETY, _settles
+
+    verdicts: list[bool] = []
+    x = np.array([1.0, 0.9, 0.5])
+    err = 0.01 / SETTLE_SAFETY  # a margin of 0.01
+    # a cascade round: 1.0 and 0.9 go, 0.5 stays, all clear of the threshold 0.8
+    assert _settles(0.8, 1e-7, np, verdicts)(x, err)
+    assert not _settles(0.895, 1e-7, np, verdicts)(x, err)  # 0.9 within 0.01
+    # no element over the threshold: the next event takes 1.0 alone ...
+    assert _settles(1.2, 1e-7, np, verdicts)(x, err)
+    # ... unless the runner-up lies within the error of it
+    assert not _settles(1.2, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), err)
+    assert not _settles(None, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), err)
+    # exact ties go together: settled
+    assert _settles(None, 1e-7, np, verdicts)(np.array([1.0, 1.0, 0.5]), err)
+    assert verdicts == [True, False, True, False, False, True]
+
+
+@pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")
+def test_refined_applies_in_double_and_counts_its_applications():
+    rng, labels, compliance = _random_problem(5, n=12)
+    single = Convolver(12, single=True)
+    double = Convolver(12)
+    op = BrushOperator(single, labels, compliance, 1.0, 1.0, precise=lambda: double)
+    x = rng.standard_normal(op.size)
+    want = _dense_operator(labels, compliance, op.attached) @ x
+    coarse = op.apply(x)
+    with op.refined():
+        fine = op.apply(x)
+        fine_again = op.apply(x)
+    assert op.conv is single and op.refined_applications == 2
+    scale = np.abs(want).max()
+    assert np.abs(fine - want).max() < 1e-12 * scale and np.array_equal(fine, fine_again)
+    assert 1e-10 * scale < np.abs(coarse - want).max() < 1e-5 * scale

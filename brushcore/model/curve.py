@@ -7,6 +7,7 @@ import hashlib
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -117,14 +118,20 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     if quadrant is None:
         conv = grid_convolver(params, backend, options)
         grid_labels = labels
+        double = partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
+                         False)
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                        single_transforms(params, options, folded=True))
         grid_labels, compliance = quadrant.labels, compliance[quadrant.images[:, 0]]
+        double = partial(cached_mirror_convolver, params.grid, params.h, params.e_star,
+                         fft_threads(), False)
         if progress is not None:
             progress = _scaled_progress(progress, 4)
+    single = getattr(conv, "real_dtype", "float64") == "float32"
     before = conv.applications
-    op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star)
+    op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star,
+                       precise=double if single else None)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
@@ -137,7 +144,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     detach = detach.reshape(grid_labels.shape)
     if quadrant is not None:
         detach, curve = quadrant.unfold_field(detach), quadrant.unfold_curve(curve)
-    return detach, curve, conv.applications - before
+    return detach, curve, conv.applications - before + op.refined_applications
 
 
 def single_transforms(params: BrushParams, options: SolverOptions, folded: bool) -> bool:

@@ -17,7 +17,9 @@ class ConvergenceError(RuntimeError):
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
         precondition: Callable[[np.ndarray], np.ndarray],
         b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int,
-        decided: Callable[[np.ndarray, float], bool] | None = None) -> tuple[np.ndarray, int]:
+        decided: Callable[[np.ndarray, float], bool] | None = None,
+        settled: Callable[[np.ndarray, float], bool] | None = None,
+        floor: float = 0.0) -> tuple[np.ndarray, int]:
     """Solve A x = b for symmetric positive definite A.
 
     Parameters
@@ -36,6 +38,11 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         iteration whose correction is still above the tolerance, with zmax
         = max|z| the error estimate; True stops there (a caller that needs
         only what x decides, not x itself)
+    settled : optional condition on the tolerance: settled(x, zmax) must
+        also hold before CG stops at rtol, unless max|z| <= floor max|x|
+        (a caller whose next step depends on comparisons that the error
+        could still flip)
+    floor : the relative error at which CG stops whether settled or not
 
     Returns
     -------
@@ -51,7 +58,7 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
     xp = namespace(b)
     empty = xp.empty(0, dtype=xp.float64)
     x, _, iterations = pcg_image(lambda p: (apply(p), empty), precondition, b, x0,
-                                 apply(x0), empty, rtol, max_iter, decided)
+                                 apply(x0), empty, rtol, max_iter, decided, settled, floor)
     return x, iterations
 
 
@@ -59,8 +66,9 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               precondition: Callable[[np.ndarray], np.ndarray],
               b: np.ndarray, x0: np.ndarray, ax0: np.ndarray, y0: np.ndarray,
               rtol: float, max_iter: int,
-              decided: Callable[[np.ndarray, float], bool] | None = None
-              ) -> tuple[np.ndarray, np.ndarray, int]:
+              decided: Callable[[np.ndarray, float], bool] | None = None,
+              settled: Callable[[np.ndarray, float], bool] | None = None,
+              floor: float = 0.0) -> tuple[np.ndarray, np.ndarray, int]:
     """`pcg` that also carries a linear image y = Y x of the iterate.
 
     The brush operator's application computes the half-space field on the
@@ -72,7 +80,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     Parameters
     ----------
     apply : p -> (A p, Y p)
-    precondition, b, x0, rtol, max_iter, decided : as in `pcg`
+    precondition, b, x0, rtol, max_iter, decided, settled, floor : as in `pcg`
     ax0, y0 : A x0 and Y x0
 
     Returns
@@ -93,7 +101,9 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
                                    f"{len(history)} iterations")
         if xmax > 0:
             history.append(zmax / xmax)
-        return zmax <= rtol * xmax or (decided is not None and decided(x, zmax))
+        if zmax <= rtol * xmax:
+            return settled is None or settled(x, zmax) or zmax <= floor * xmax
+        return decided is not None and decided(x, zmax)
 
     if converged():
         return x, y, 0

@@ -13,9 +13,11 @@ limits on pillar size and gap, and allows a different k per pillar.
 
 from __future__ import annotations
 
-import numpy as np
-
+import contextlib
+from collections.abc import Callable, Iterator
 from typing import Any
+
+import numpy as np
 
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.device_blocks import DeviceBlocks
@@ -35,6 +37,10 @@ class BrushOperator:
         [length / stress]; 0 for rigid pillars
     h : element size [length]
     e_star : effective modulus [stress]
+    precise : makes a double-precision twin of a single-precision
+        ``convolver`` (same grid), for the solves that need more digits
+        than float32 transforms give (`refined`); None where the
+        transforms are double already
 
     Notes
     -----
@@ -47,8 +53,11 @@ class BrushOperator:
     """
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
-                 h: float, e_star: float, use_block: bool = True, coarse: bool = True) -> None:
+                 h: float, e_star: float, use_block: bool = True, coarse: bool = True,
+                 precise: Callable[[], Convolver] | None = None) -> None:
         self.conv = convolver
+        self._precise = precise
+        self.refined_applications = 0  # applications made by the twin (`refined`)
         self.backend = be = convolver.array_backend
         xp = be.xp
         flat = labels.ravel()
@@ -135,6 +144,23 @@ class BrushOperator:
             self.tiles.attach(positions)
         self.backend.put(self.attached, positions, True)
         self._update()
+
+    @property
+    def can_refine(self) -> bool:
+        """Whether `refined` has more precise transforms to switch to."""
+        return self._precise is not None
+
+    @contextlib.contextmanager
+    def refined(self) -> Iterator[None]:
+        """Apply with the double-precision twin of the convolver inside the block."""
+        single, self.conv = self.conv, self._precise()
+        self.conv.flat_buffer[...] = 0.0  # entries left from an earlier use
+        start = self.conv.applications
+        try:
+            yield
+        finally:
+            self.refined_applications += self.conv.applications - start
+            self.conv = single
 
     def _gather(self, where: Any) -> Any:
         """The convolved buffer at ``where``, in double precision whatever

@@ -278,8 +278,9 @@ class BlockInverse:
             w.ravel()[attached_pos] = stress
         touched = np.unique(pil)
         self._remaining -= np.bincount(pil, minlength=self._remaining.size)
+        live_before = self._live[touched].copy()
         self._live[pil, slot] = False
-        before = None if w is None else w[touched].copy()
+        before = None if w is None else list(w[touched].copy())
         for p in touched:
             d = slot[pil == p]
             g = self.inv[p]
@@ -301,35 +302,56 @@ class BlockInverse:
         if w is None:
             return None
         if self._neighbours is not None:
-            self._neighbour_response(touched, w[touched] - before, w)
+            self._neighbour_response(touched, live_before, before)
         out = w.ravel()[attached_pos].copy()
         w.ravel()[attached_pos] = 0.0
         return out
 
-    def _neighbour_response(self, touched: np.ndarray, change: np.ndarray,
-                            w: np.ndarray) -> None:
-        """Add to ``w`` (stacked stresses) the first-order response of each
-        changed pillar's near neighbours: sigma_q -= G_q K_qp d sigma_p.
+    def _neighbour_response(self, touched: np.ndarray, live_before: np.ndarray,
+                            before: list) -> None:
+        """Add to the stacked stresses (`_row`) the first-order response of
+        each changed pillar's near neighbours: sigma_q -= G_q K_qp d sigma_p.
 
-        A warm start only: the global solve that follows corrects what it
-        misses (the changed pillar's own answer to its neighbours, farther
-        pillars).  A soft pillar's cascade shifts load across its face with
-        its total nearly fixed, a field that falls off fast, so the nearest
-        pillars take most of the response: CG's first iteration would
-        otherwise spend an application finding it.
+        ``live_before`` and ``before`` hold the touched pillars' attached
+        slots and stresses before the detachment.  A warm start only: the
+        global solve that follows corrects what it misses (the changed
+        pillar's own answer to its neighbours, farther pillars).  A soft
+        pillar's cascade shifts load across its face with its total nearly
+        fixed, a field that falls off fast, so the nearest pillars take most
+        of the response, which CG's first iteration would otherwise spend an
+        application finding (random 220 at kbar 1e-4: 24 % fewer).
+        Coefficients come from host geometry; on a device they cross as
+        small blocks, never as fields.
         """
+        xp, asarray = self._namespace()
         skip = set(touched.tolist())
-        for p, dp in zip(touched, change):
-            cols = np.flatnonzero(dp)
+        for p, live, old in zip(touched, live_before, before):
             near = [q for q in self._neighbours[p] if q not in skip and self._remaining[q]]
-            if cols.size == 0 or not near:
+            if not near:
                 continue
-            u = np.zeros(self.m)
+            cols = np.flatnonzero(live)
+            change = xp.take(self._row(p) - old, asarray(cols))
             for q in near:
                 rows = np.flatnonzero(self._live[q])
-                u[rows] = self._coefficients(q, rows, p, cols) @ dp[cols]
-                w[q] -= self.inv[q] @ u  # G_q is zero off the live slots
-                u[rows] = 0.0
+                u = xp.zeros(self.m, dtype=xp.float64)
+                shift = asarray(self._coefficients(q, rows, p, cols)) @ change
+                self._put(u, asarray(rows), shift)
+                self._set_row(q, self._row(q) - self.inv[q, :, :] @ u)  # G_q: 0 off live
+
+    def _namespace(self):
+        """Array namespace of the stacks and a host-to-stack conversion."""
+        return np, np.asarray
+
+    def _row(self, p: int) -> np.ndarray:
+        """Pillar p's slots of the work vector (a view)."""
+        return self._work[p]
+
+    def _set_row(self, p: int, values: np.ndarray) -> None:
+        self._work[p] = values
+
+    @staticmethod
+    def _put(target: np.ndarray, index: np.ndarray, values: np.ndarray) -> None:
+        target[index] = values
 
     def attach(self, elements: np.ndarray) -> None:
         """Rebuild the inverses of pillars that regain elements (operator-order indices).
