@@ -346,12 +346,12 @@ def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:
     real_pcg = pulloff.pcg
     calls = []
 
-    def poisoned(apply, precondition, b, x0, rtol, max_iter, decided=None):
+    def poisoned(apply, precondition, b, x0, rtol, max_iter, *args):
         calls.append(1)
         if len(calls) < 3:
-            return real_pcg(apply, precondition, b, x0, rtol, max_iter, decided)
+            return real_pcg(apply, precondition, b, x0, rtol, max_iter, *args)
         return real_pcg(lambda x: apply(x) * np.nan, precondition, b, x0, rtol, max_iter,
-                        decided)
+                        *args)
 
     monkeypatch.setattr(pulloff, "pcg", poisoned)
     with pytest.raises(ConvergenceError, match="non-finite") as info:

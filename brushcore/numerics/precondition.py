@@ -23,6 +23,11 @@ solution; E is refactorised only when the pillars' c have drifted.  The same
 monopole model bounds how much the far field of other pillars can move an
 element's stress (`far_field_uncertainty`), which lets cascades run pillar
 by pillar without changing their outcome.
+
+A detachment's warm start uses the same blocks: the pillar that lost
+elements is solved exactly with the others held (the downdate's Schur
+complement), and its nearest pillars add their first-order response to
+that change from direct sums (`_neighbour_response`).
 """
 
 from __future__ import annotations

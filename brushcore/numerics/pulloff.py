@@ -234,8 +234,9 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         """Detach, returning the stresses of the rest.
 
         Where the per-pillar inverses exist the stresses are updated by each
-        pillar's exact local response: the next global solve's warm start
-        (it saves ~15 % of CG iterations) or the local cascade's state.
+        pillar's exact local response and its neighbours' first-order one
+        (`BlockInverse.detach`): the next global solve's warm start or the
+        local cascade's state.
         """
         step = len(disp)  # the next recorded step is the first without them
         positions = be.flatnonzero(op.attached)[mask]
