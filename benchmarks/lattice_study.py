@@ -15,7 +15,8 @@ Measured (N = 64, phi = 0.12, grid 256, pillar radius 3.9 elements; copy in
 docs/lattice_study.png and .csv): rigid F_ad/F_K 1.726 regular, 1.592
 hexagonal (= (phi / 0.767)^-1/4 = 1.591: its 8 x 8 lattice covers 77 % of
 the square), 1.524-1.574 random; soft plateau (kbar 1e-4) 2.475, 2.313,
-2.04-2.18.  Part of the soft-plateau gap is the grid, not the lattice: soft
+2.02-2.18 (re-run after the rigorous cascade bound and settled decisions;
+random seed 1 was 2.037 before).  Part of the soft-plateau gap is the grid, not the lattice: soft
 pillars let go weakest first at equal load, and pillars at different
 sub-element offsets (hexagonal, random) differ by up to 7 % in their
 single-pillar force at this resolution, while the regular lattice's are
