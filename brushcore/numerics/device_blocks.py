@@ -74,17 +74,11 @@ class DeviceBlocks(BlockInverse):
             self._factorise()
         self._neighbours = self._near_pillars(counts, n) if self.interacting else None
 
-    def _namespace(self):
-        return self.backend.xp, self.backend.asarray
-
     def _row(self, p: int) -> Any:
         return self._work[p * self.m:(p + 1) * self.m]
 
     def _set_row(self, p: int, values: Any) -> None:
         self._work[p * self.m:(p + 1) * self.m] = values
-
-    def _put(self, target: Any, index: Any, values: Any) -> None:
-        self.backend.put(target, index, values)
 
     @classmethod
     def fits_device(cls, pillar_of: np.ndarray, backend: Backend,
@@ -131,10 +125,10 @@ class DeviceBlocks(BlockInverse):
             be.put(work, attached_pos, stress)
         touched = np.unique(pil)
         self._remaining -= np.bincount(pil, minlength=self._remaining.size)
-        live_before = self._live[touched].copy()
+        respond = stress is not None and self._neighbours is not None
+        live_before = self._live[touched].copy() if respond else None
         self._live[pil, slot] = False
-        before = [] if stress is None else [xp.asarray(self._row(int(p)), copy=True)
-                                            for p in touched]
+        before = [xp.asarray(self._row(int(p)), copy=True) for p in touched] if respond else None
         for p in touched:
             p = int(p)
             if self._remaining[p] == 0:  # the whole pillar lets go
@@ -157,7 +151,7 @@ class DeviceBlocks(BlockInverse):
         self._refresh(touched)
         if stress is None:
             return None
-        if self._neighbours is not None:
+        if respond:
             self._neighbour_response(touched, live_before, before)
         out = work[attached_pos]
         work[...] = 0.0

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.linalg import blas
 
+from brushcore.numerics.backend import CPU
 from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 
 
@@ -56,6 +57,9 @@ class BlockInverse:
         the three images, and each block is the exact diagonal block of the
         folded operator (a pillar near a mirror line feels its own images)
     """
+
+    #: Where the stacks live (`DeviceBlocks` sets its device's backend).
+    backend = CPU
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
@@ -146,6 +150,7 @@ class BlockInverse:
         yy, xx, h, e_star = self._yy, self._xx, self._h, self._e_star
         cy = yy.sum(axis=1) / counts
         cx = xx.sum(axis=1) / counts
+        self._centroids = cy, cx  # also for `_near_pillars`
         # Diagonals are zero: a pillar's own images are in its block.
         r = self._influence(cy[:, None], cx[:, None], cy[None], cx[None])
         np.fill_diagonal(r, 0.0)
@@ -210,10 +215,10 @@ class BlockInverse:
     NEIGHBOUR_PAIRS_PER_ELEMENT = 0.25
 
     def _near_pillars(self, counts: np.ndarray, n: int) -> list[np.ndarray]:
-        """Per pillar, the nearest pillars (by centroid) whose response to its
-        change `detach` adds, as many as NEIGHBOURS and the pair budget allow."""
-        cy = self._yy.sum(axis=1) / np.maximum(counts, 1)
-        cx = self._xx.sum(axis=1) / np.maximum(counts, 1)
+        """Per pillar, the nearest pillars (by centroid, from `_interaction`)
+        whose response to its change `detach` adds, as many as NEIGHBOURS and
+        the pair budget allow."""
+        cy, cx = self._centroids
         budget = self.NEIGHBOUR_PAIRS_PER_ELEMENT * n * n
         near = []
         for p in range(counts.size):
@@ -283,9 +288,10 @@ class BlockInverse:
             w.ravel()[attached_pos] = stress
         touched = np.unique(pil)
         self._remaining -= np.bincount(pil, minlength=self._remaining.size)
-        live_before = self._live[touched].copy()
+        respond = w is not None and self._neighbours is not None
+        live_before = self._live[touched].copy() if respond else None
         self._live[pil, slot] = False
-        before = None if w is None else list(w[touched].copy())
+        before = list(w[touched].copy()) if respond else None
         for p in touched:
             d = slot[pil == p]
             g = self.inv[p]
@@ -306,7 +312,7 @@ class BlockInverse:
         self._refresh(touched)
         if w is None:
             return None
-        if self._neighbours is not None:
+        if respond:
             self._neighbour_response(touched, live_before, before)
         out = w.ravel()[attached_pos].copy()
         w.ravel()[attached_pos] = 0.0
@@ -328,24 +334,21 @@ class BlockInverse:
         Coefficients come from host geometry; on a device they cross as
         small blocks, never as fields.
         """
-        xp, asarray = self._namespace()
+        be = self.backend
+        xp = be.xp
         skip = set(touched.tolist())
         for p, live, old in zip(touched, live_before, before):
             near = [q for q in self._neighbours[p] if q not in skip and self._remaining[q]]
             if not near:
                 continue
             cols = np.flatnonzero(live)
-            change = xp.take(self._row(p) - old, asarray(cols))
+            change = xp.take(self._row(p) - old, be.asarray(cols))
             for q in near:
                 rows = np.flatnonzero(self._live[q])
                 u = xp.zeros(self.m, dtype=xp.float64)
-                shift = asarray(self._coefficients(q, rows, p, cols)) @ change
-                self._put(u, asarray(rows), shift)
+                shift = be.asarray(self._coefficients(q, rows, p, cols)) @ change
+                be.put(u, be.asarray(rows), shift)
                 self._set_row(q, self._row(q) - self.inv[q, :, :] @ u)  # G_q: 0 off live
-
-    def _namespace(self):
-        """Array namespace of the stacks and a host-to-stack conversion."""
-        return np, np.asarray
 
     def _row(self, p: int) -> np.ndarray:
         """Pillar p's slots of the work vector (a view)."""
@@ -353,10 +356,6 @@ class BlockInverse:
 
     def _set_row(self, p: int, values: np.ndarray) -> None:
         self._work[p] = values
-
-    @staticmethod
-    def _put(target: np.ndarray, index: np.ndarray, values: np.ndarray) -> None:
-        target[index] = values
 
     def attach(self, elements: np.ndarray) -> None:
         """Rebuild the inverses of pillars that regain elements (operator-order indices).
