@@ -73,12 +73,18 @@ class DeviceBlocks(BlockInverse):
         if self.coarse:
             self._factorise()
         self._neighbours = self._near_pillars(counts, n) if self.interacting else None
+        self._far = self.interacting and self.coupling < self.FAR_RESPONSE_MAX_COUPLING
+        if self._far:
+            self._tilt_basis, self._tilt = self._tilts(counts)
 
     def _row(self, p: int) -> Any:
         return self._work[p * self.m:(p + 1) * self.m]
 
     def _set_row(self, p: int, values: Any) -> None:
         self._work[p * self.m:(p + 1) * self.m] = values
+
+    def _subtract_all(self, values: Any) -> None:
+        self._work -= self.backend.xp.reshape(values, (-1,))
 
     @classmethod
     def fits_device(cls, pillar_of: np.ndarray, backend: Backend,
@@ -152,7 +158,9 @@ class DeviceBlocks(BlockInverse):
         if stress is None:
             return None
         if respond:
-            self._neighbour_response(touched, live_before, before)
+            sources = self._neighbour_response(touched, live_before, before)
+            if self._far:
+                self._far_response(sources)
         out = work[attached_pos]
         work[...] = 0.0
         return out
@@ -178,6 +186,8 @@ class DeviceBlocks(BlockInverse):
             for p in touched:
                 self._z[int(p), :] = xp.sum(self.inv[int(p), :, :], axis=1)
                 self._reach[int(p), :] = xp.sum(xp.abs(self.inv[int(p), :, :]), axis=1)
+                if self._far:
+                    self._tilt[int(p), :, :] = self.inv[int(p), :, :] @ self._tilt_basis[int(p), :, :]
         if self.coarse:
             idx = self.backend.asarray(touched.astype(np.int64))
             c = self.backend.to_host(xp.sum(xp.take(self._z, idx, axis=0), axis=1))

@@ -26,8 +26,10 @@ by pillar without changing their outcome.
 
 A detachment's warm start uses the same blocks: the pillar that lost
 elements is solved exactly with the others held (the downdate's Schur
-complement), and its nearest pillars add their first-order response to
-that change from direct sums (`_neighbour_response`).
+complement), its nearest pillars add their first-order response to
+that change from direct sums (`_neighbour_response`), and, where the
+pillars couple weakly, every other pillar adds its response to the
+multipole expansion of the changes' field (`_far_response`).
 """
 
 from __future__ import annotations
@@ -88,6 +90,7 @@ class BlockInverse:
         self.coarse = coarse and self.interacting and n_pillars <= self.MAX_COARSE
         if self.interacting:
             self._r, self._r_near = self._interaction(counts)
+            self._r_near_max = self._r_near.max(axis=1)
             self._z = self.inv.sum(axis=2)
             self._reach = np.abs(self.inv).sum(axis=2)  # see far_field_uncertainty
             # max_p sum_q R_pq c_q: the far-field displacement of a pillar
@@ -95,6 +98,9 @@ class BlockInverse:
             self.coupling = float((self._r @ self._z.sum(axis=1)).max())
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
         self._neighbours = self._near_pillars(counts, n) if self.interacting else None
+        self._far = self.interacting and self.coupling < self.FAR_RESPONSE_MAX_COUPLING
+        if self._far:
+            self._tilt_basis, self._tilt = self._tilts(counts)
         if self.coarse:
             self._factorise()
 
@@ -208,6 +214,20 @@ class BlockInverse:
             block = block + t[sy, dx] + t[dy, sx] + t[sy, sx]
         return block
 
+    #: Largest `coupling` with the far-field warm start (`_far_response`).
+    #: The first-order answer misses the pillars' collective one, by a
+    #: smooth error of one sign that the preconditioned residual underrates,
+    #: so CG may stop with it: measured, F_ad 4e-4 from exact mode for 24 x
+    #: 24 at kbar 1e-2 (coupling 3.6), 4.1e-5 for the rigid 4 x 4 brush on
+    #: 128^2 (0.75), W 2.2e-5 for random 30 at kbar 1e-2 on 96^2 (0.25),
+    #: and more applications, not fewer, for 16 x 16 at kbar 0.455 (5.4).
+    #: The soft brushes that take the time have coupling 1e-4 to 0.05.
+    FAR_RESPONSE_MAX_COUPLING = 0.1
+
+    #: Pillars that answer the field of a neighbour's first-order response
+    #: (`_far_response`): a second-order change, felt near it only.
+    LOCAL = 32
+
     #: Most neighbours whose first-order response follows a pillar's change.
     NEIGHBOURS = 12
     #: Coefficient pairs per changed pillar for that response, per element of
@@ -221,13 +241,28 @@ class BlockInverse:
         cy, cx = self._centroids
         budget = self.NEIGHBOUR_PAIRS_PER_ELEMENT * n * n
         near = []
+        self._local = []  # for `_far_response`
         for p in range(counts.size):
             dist = np.hypot(cy - cy[p], cx - cx[p])
             dist[p] = np.inf
-            order = np.argsort(dist)[: min(self.NEIGHBOURS, counts.size - 1)]
+            order = np.argsort(dist)[: min(self.LOCAL, counts.size - 1)]
+            self._local.append(order)
+            order = order[: self.NEIGHBOURS]
             pairs = counts[p] * np.cumsum(counts[order])
             near.append(order[pairs <= budget])
         return near
+
+    def _tilts(self, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each element's offset (y, x) from its pillar's centroid, and the
+        basis of fields to second order over a pillar, shape (N, m, 5):
+        y, x, y^2, y x, x^2 [length, length^2]; with each pillar's response
+        to them, G_p basis (`_far_response`), in the stacks' namespace."""
+        cy, cx = self._centroids
+        valid = np.arange(self.m)[None, :] < counts[:, None]
+        dy, dx = (self._yy - cy[:, None]) * valid, (self._xx - cx[:, None]) * valid
+        self._offsets_host = np.stack([dy, dx], axis=2)
+        basis = self.backend.asarray(np.stack([dy, dx, dy * dy, dy * dx, dx * dx], axis=2))
+        return basis, self.backend.xp.matmul(self.inv, basis)
 
     def _factorise(self) -> None:
         c = self._z.sum(axis=1)
@@ -313,42 +348,132 @@ class BlockInverse:
         if w is None:
             return None
         if respond:
-            self._neighbour_response(touched, live_before, before)
+            sources = self._neighbour_response(touched, live_before, before)
+            if self._far:
+                self._far_response(sources)
         out = w.ravel()[attached_pos].copy()
         w.ravel()[attached_pos] = 0.0
         return out
 
     def _neighbour_response(self, touched: np.ndarray, live_before: np.ndarray,
-                            before: list) -> None:
+                            before: list) -> list[tuple]:
         """Add to the stacked stresses (`_row`) the first-order response of
         each changed pillar's near neighbours: sigma_q -= G_q K_qp d sigma_p.
 
         ``live_before`` and ``before`` hold the touched pillars' attached
         slots and stresses before the detachment.  A warm start only: the
-        global solve that follows corrects what it misses (the changed
-        pillar's own answer to its neighbours, farther pillars).  A soft
-        pillar's cascade shifts load across its face with its total nearly
-        fixed, a field that falls off fast, so the nearest pillars take most
-        of the response, which CG's first iteration would otherwise spend an
+        global solve that follows corrects what it misses.  A soft pillar's
+        cascade shifts load across its face with its total nearly fixed, a
+        field that falls off fast, so the nearest pillars take most of the
+        response, which CG's first iteration would otherwise spend an
         application finding (random 220 at kbar 1e-4: 24 % fewer).
         Coefficients come from host geometry; on a device they cross as
         small blocks, never as fields.
+
+        Returns the changes whose field no pillar has answered yet, for
+        `_far_response`: (pillar, slots, change on them, pillars that
+        already answered, pillars to answer or None for all), each touched
+        pillar's and each neighbour's.
         """
         be = self.backend
         xp = be.xp
         skip = set(touched.tolist())
+        sources = []
         for p, live, old in zip(touched, live_before, before):
             near = [q for q in self._neighbours[p] if q not in skip and self._remaining[q]]
-            if not near:
-                continue
             cols = np.flatnonzero(live)
             change = xp.take(self._row(p) - old, be.asarray(cols))
+            sources.append((int(p), cols, change, [int(p)] + near, None))
             for q in near:
                 rows = np.flatnonzero(self._live[q])
                 u = xp.zeros(self.m, dtype=xp.float64)
                 shift = be.asarray(self._coefficients(q, rows, p, cols)) @ change
                 be.put(u, be.asarray(rows), shift)
-                self._set_row(q, self._row(q) - self.inv[q, :, :] @ u)  # G_q: 0 off live
+                response = self.inv[q, :, :] @ u  # G_q: 0 off live
+                self._set_row(q, self._row(q) - response)
+                # second order: its field matters near it only
+                sources.append((q, rows, -xp.take(response, be.asarray(rows)), [q],
+                                self._local[q]))
+        return sources
+
+    def _far_response(self, sources: list[tuple]) -> None:
+        """Add every pillar's response to the far field of ``sources`` (see
+        `_neighbour_response`): sigma_f -= G_f phi_f, phi_f expanded about
+        f's centroid to second order,
+
+            G_f phi_f = phi z_f + grad phi . (G_f d_f) + 1/2 H : (G_f d_f d_f),
+
+        from the vectors `_tilts` keeps per pillar (d_f: offsets from c_f).
+        A change dsigma on pillar p of moments M0 = C sum dsigma and M1 = C
+        sum dsigma (x - c_p), C = h^2 / (pi E*) (Boussinesq's point load),
+        displaces the surface at R from c_p by M0 / R + M1 . R / R^3 to
+        dipole order; phi, its gradient and Hessian follow in closed form
+        (images included on a quadrant).  What is left out is of relative
+        order (a / R)^2.  A soft pillar answers a uniform field with its
+        spring alone, so its gradient and Hessian terms carry the answer.
+
+        A warm start, not a bound: the next global solve corrects the rest.
+        Work is O(N) per touched pillar plus `LOCAL` per neighbour, no
+        application.
+        """
+        be = self.backend
+        xp = be.xp
+        if not sources:
+            return
+        cy, cx = self._centroids
+        scale = self._h ** 2 / (np.pi * self._e_star)
+        sizes = np.array([slots.size for _, slots, _, _, _ in sources])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        change = xp.concat([c for _, _, c, _, _ in sources]) if len(sources) > 1 else sources[0][2]
+        offsets = np.concatenate([self._offsets_host[p, slots] for p, slots, _, _, _ in sources])
+        weighted = be.to_host(xp.stack([change, change * be.asarray(offsets[:, 0]),
+                                        change * be.asarray(offsets[:, 1])]))
+        moments = scale * np.add.reduceat(weighted, starts, axis=1)  # (3, sources)
+        # (source, target) pairs: a touched pillar's change reaches every
+        # pillar, a neighbour's (second order) only its `_local` ones.
+        everyone = np.arange(cy.size)
+        targets = [everyone if to is None else to for _, _, _, _, to in sources]
+        which = np.repeat(np.arange(len(sources)), [t.size for t in targets])
+        target = np.concatenate(targets)
+        keep = np.ones(target.size, dtype=bool)
+        first = np.concatenate([[0], np.cumsum([t.size for t in targets])[:-1]])
+        for i, (_, _, _, done, _) in enumerate(sources):
+            keep[first[i]:first[i] + targets[i].size] = ~np.isin(targets[i], done)
+        which, target = which[keep], target[keep]
+        source = np.array([p for p, _, _, _, _ in sources])[which]
+        a, my, mx = moments[:, which]
+        # The field at each centroid, its gradient and its Hessian: what
+        # G_f answers with phi z_f + g . (G_f offsets) + 1/2 H : (G_f offsets^2).
+        terms = np.zeros((6, cy.size))  # phi, g_y, g_x, H_yy, H_yx, H_xx
+        images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if self._mirrored else [(1, 1)]
+        for sy, sx in images:  # the image of y is -h - y, and its moment flips
+            dy = cy[target] - (cy[source] if sy > 0 else -self._h - cy[source])
+            dx = cx[target] - (cx[source] if sx > 0 else -self._h - cx[source])
+            r2 = dy * dy + dx * dx
+            inv_r = 1.0 / np.sqrt(np.where(r2 > 0.0, r2, np.inf))
+            i2 = inv_r * inv_r
+            i3 = inv_r * i2
+            i5 = i3 * i2
+            py, px = sy * my, sx * mx
+            dot = py * dy + px * dx
+            i7 = 15.0 * dot * i5 * i2
+            values = [a * inv_r + dot * i3,
+                      (py - a * dy) * i3 - 3.0 * dy * dot * i5,
+                      (px - a * dx) * i3 - 3.0 * dx * dot * i5]
+            for u, v, mu, mv, same in [(dy, dy, py, py, 1.0), (dy, dx, py, px, 0.0),
+                                       (dx, dx, px, px, 1.0)]:
+                values.append((3.0 * a * u * v - same * a * r2 - 3.0 * (mu * v + mv * u + same * dot))
+                              * i5 + i7 * u * v)
+            for k, value in enumerate(values):
+                terms[k] += np.bincount(target, weights=value, minlength=cy.size)
+        terms[3:] *= np.array([0.5, 1.0, 0.5])[:, None]  # 1/2 H : offsets^2, H symmetric
+        corr = be.asarray(terms[0])[:, None] * self._z + xp.sum(
+            self._tilt * be.asarray(terms[1:].T)[:, None, :], axis=2)
+        self._subtract_all(corr)
+
+    def _subtract_all(self, values: np.ndarray) -> None:
+        """Subtract an (N, m) stack from the work vector."""
+        self._work -= values
 
     def _row(self, p: int) -> np.ndarray:
         """Pillar p's slots of the work vector (a view)."""
@@ -389,6 +514,8 @@ class BlockInverse:
         if self.interacting:
             self._z[touched] = self.inv[touched].sum(axis=2)
             self._reach[touched] = np.abs(self.inv[touched]).sum(axis=2)
+            if self._far:
+                self._tilt[touched] = np.matmul(self.inv[touched], self._tilt_basis[touched])
         if self.coarse:
             c = self._z[touched].sum(axis=1)
             drift = np.abs(c - self._c_factor[touched]) > 0.25 * self._c_factor[touched]
@@ -417,9 +544,26 @@ class BlockInverse:
         """
         if not self.interacting:
             return None if self.inv.shape[0] > 1 else np.zeros(attached_pos.size)
-        changed = np.flatnonzero(pillar_change)  # few pillars between global solves
-        shift = self._r_near[:, changed] @ np.abs(pillar_change[changed])
+        shift = self._far_shift(np.abs(pillar_change))
         return (self._reach * shift[:, None]).ravel()[attached_pos]
+
+    #: Pillars whose change `far_field_uncertainty` weighs pair by pair.
+    FEW_CHANGED = 32
+
+    def _far_shift(self, change: np.ndarray) -> np.ndarray:
+        """sum_q R_near[p, q] change_q, bounded above in O(N) per few pillars.
+
+        Between global solves a few pillars change much (the detaching ones
+        and their neighbours) and every other one a little (`_far_response`);
+        those are bounded by each pillar's largest R_near, not summed pair
+        by pair (an N x N product per cascade round: 3 ms at N = 1620).
+        """
+        changed = np.flatnonzero(change)
+        if changed.size <= self.FEW_CHANGED:
+            return self._r_near[:, changed] @ change[changed]
+        big = changed[np.argpartition(change[changed], -self.FEW_CHANGED)[-self.FEW_CHANGED:]]
+        rest = max(float(change.sum() - change[big].sum()), 0.0)
+        return self._r_near[:, big] @ change[big] + self._r_near_max * rest
 
     def _blocks_times(self, w: np.ndarray) -> np.ndarray:
         """blockdiag(G_p) w for the stacked (N, m) vector w."""
