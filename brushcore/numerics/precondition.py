@@ -82,7 +82,7 @@ class BlockInverse:
         if self.m >= self.PACKED_MIN_BLOCK:
             rows, cols = np.triu_indices(self.m)
             order = np.lexsort((rows, cols))  # column-major upper packing
-            self._pack_index = (rows[order], cols[order])
+            self._pack_index = rows[order] * self.m + cols[order]  # into a flat block
             self._packed = np.ascontiguousarray(self.inv[:, rows[order], cols[order]])
         self._drifted: set[int] = set()  # pillars whose c moved since the last factorisation
         self.factorisations = 0
@@ -467,8 +467,8 @@ class BlockInverse:
             for k, value in enumerate(values):
                 terms[k] += np.bincount(target, weights=value, minlength=cy.size)
         terms[3:] *= np.array([0.5, 1.0, 0.5])[:, None]  # 1/2 H : offsets^2, H symmetric
-        corr = be.asarray(terms[0])[:, None] * self._z + xp.sum(
-            self._tilt * be.asarray(terms[1:].T)[:, None, :], axis=2)
+        corr = (be.asarray(terms[0])[:, None] * self._z
+                + xp.matmul(self._tilt, be.asarray(terms[1:].T)[:, :, None])[:, :, 0])
         self._subtract_all(corr)
 
     def _subtract_all(self, values: np.ndarray) -> None:
@@ -509,13 +509,15 @@ class BlockInverse:
         """Packed copies, coarse vectors and (when drifted) the coarse factor
         of the pillars whose blocks changed."""
         if self._packed is not None:
-            rows, cols = self._pack_index
-            self._packed[touched] = self.inv[touched[:, None], rows[None, :], cols[None, :]]
+            for p in touched:
+                np.take(self.inv[p].ravel(), self._pack_index, out=self._packed[p])
         if self.interacting:
-            self._z[touched] = self.inv[touched].sum(axis=2)
-            self._reach[touched] = np.abs(self.inv[touched]).sum(axis=2)
-            if self._far:
-                self._tilt[touched] = np.matmul(self.inv[touched], self._tilt_basis[touched])
+            for p in touched:  # views: a fancy-indexed copy of large blocks costs more
+                g = self.inv[p]
+                self._z[p] = g.sum(axis=1)
+                self._reach[p] = np.abs(g).sum(axis=1)
+                if self._far:
+                    self._tilt[p] = g @ self._tilt_basis[p]
         if self.coarse:
             c = self._z[touched].sum(axis=1)
             drift = np.abs(c - self._c_factor[touched]) > 0.25 * self._c_factor[touched]
