@@ -73,9 +73,7 @@ class DeviceBlocks(BlockInverse):
         if self.coarse:
             self._factorise()
         self._neighbours = self._near_pillars(counts, n) if self.interacting else None
-        self._far = self.interacting and self.coupling < self.FAR_RESPONSE_MAX_COUPLING
-        if self._far:
-            self._tilt_basis, self._tilt = self._tilts(counts)
+        self._setup_far(counts)
 
     def _row(self, p: int) -> Any:
         return self._work[p * self.m:(p + 1) * self.m]
