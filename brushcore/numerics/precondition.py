@@ -40,6 +40,7 @@ from scipy.linalg import blas
 
 from brushcore.numerics.backend import CPU
 from brushcore.numerics.kernel import folded_coefficient, love_coefficient
+from brushcore.numerics.multipole import field_terms
 
 
 class BlockInverse:
@@ -448,32 +449,9 @@ class BlockInverse:
             # a neighbour answered only itself, which its `_local` list leaves out
         which, target = which[keep], target[keep]
         source = np.array([p for p, _, _, _, _ in sources])[which]
-        a, my, mx = moments[:, which]
-        # The field at each centroid, its gradient and its Hessian: what
-        # G_f answers with phi z_f + g . (G_f offsets) + 1/2 H : (G_f offsets^2).
-        terms = np.zeros((6, cy.size))  # phi, g_y, g_x, H_yy, H_yx, H_xx
-        images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if self._mirrored else [(1, 1)]
-        for sy, sx in images:  # the image of y is -h - y, and its moment flips
-            dy = cy[target] - (cy[source] if sy > 0 else -self._h - cy[source])
-            dx = cx[target] - (cx[source] if sx > 0 else -self._h - cx[source])
-            r2 = dy * dy + dx * dx
-            inv_r = 1.0 / np.sqrt(np.where(r2 > 0.0, r2, np.inf))
-            i2 = inv_r * inv_r
-            i3 = inv_r * i2
-            i5 = i3 * i2
-            py, px = sy * my, sx * mx
-            dot = py * dy + px * dx
-            i7 = 15.0 * dot * i5 * i2
-            values = [a * inv_r + dot * i3,
-                      (py - a * dy) * i3 - 3.0 * dy * dot * i5,
-                      (px - a * dx) * i3 - 3.0 * dx * dot * i5]
-            for u, v, mu, mv, same in [(dy, dy, py, py, 1.0), (dy, dx, py, px, 0.0),
-                                       (dx, dx, px, px, 1.0)]:
-                values.append((3.0 * a * u * v - same * a * r2 - 3.0 * (mu * v + mv * u + same * dot))
-                              * i5 + i7 * u * v)
-            for k, value in enumerate(values):
-                terms[k] += np.bincount(target, weights=value, minlength=cy.size)
-        terms[3:] *= np.array([0.5, 1.0, 0.5])[:, None]  # 1/2 H : offsets^2, H symmetric
+        # What G_f answers with phi z_f + g . (G_f d) + 1/2 H : (G_f d d).
+        terms = field_terms(moments[:, which], source, target, (cy, cx), self._h,
+                            self._mirrored)
         corr = (be.asarray(terms[0])[:, None] * self._z
                 + xp.matmul(self._tilt, be.asarray(terms[1:].T)[:, :, None])[:, :, 0])
         self._subtract_all(corr)
