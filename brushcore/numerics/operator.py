@@ -22,6 +22,7 @@ import numpy as np
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.device_blocks import DeviceBlocks
 from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.pillar_solve import PillarSolver
 from brushcore.numerics.tiles import TileCoarse
 from brushcore.numerics.kernel import self_compliance
 
@@ -85,6 +86,11 @@ class BrushOperator:
         if (use_block and be.on_host and self.block is None
                 and TileCoarse.fits(self.elements, pillar_of, convolver.n)):
             self.tiles = TileCoarse(self.elements, pillar_of, convolver.n, compliance, h, e_star)
+        # ... and their exact local responses on small FFT grids (local cascades).
+        self.local: PillarSolver | None = None
+        if self.tiles is not None:
+            self.local = PillarSolver(self.elements, pillar_of, convolver.n, compliance, h,
+                                      e_star, getattr(convolver, "mirrored", False), self.tiles)
         self._update()
 
     def _update(self) -> None:
@@ -108,10 +114,11 @@ class BrushOperator:
     def detach(self, which: Any, stress: Any = None) -> Any:
         """Detach attached elements given by a boolean mask over the compressed vector.
 
-        With ``stress`` (compressed, before detaching) and the block
-        preconditioner, returns the stresses of the remaining elements after
-        each pillar's exact local response to the loss (other pillars'
-        field held fixed); otherwise None.
+        With ``stress`` (compressed, before detaching) and a local solver
+        (the block preconditioner, or `PillarSolver` with the tiles), returns
+        the stresses of the remaining elements after each pillar's exact
+        local response to the loss (other pillars' field held fixed);
+        otherwise None.
         """
         be = self.backend
         gone = self.idx[which]
@@ -124,6 +131,10 @@ class BrushOperator:
             self.tiles.detach(pos)
         be.put(self.attached, pos, False)
         self._update()
+        if self.local is not None and stress is not None:
+            full = _spread_host(self.attached.size, pos, which, stress, self.attached)
+            self.local.respond(full, self.attached, pos)
+            return full[self.attached]
         return None if local is None else local[~which]
 
     def attach(self, positions: Any) -> None:
@@ -187,15 +198,17 @@ class BrushOperator:
         return full[self.attached] + self.spring(x), full
 
     def far_field_uncertainty(self, pillar_change: Any) -> Any:
-        """See `BlockInverse.far_field_uncertainty` (None without blocks)."""
+        """See `BlockInverse.far_field_uncertainty` (None without a local solver)."""
+        if self.local is not None:
+            return self.local.far_field_uncertainty(pillar_change, self.pl)
         if self.block is None:
             return None
         return self.block.far_field_uncertainty(pillar_change, self._bpos)
 
     @property
     def has_local_solver(self) -> bool:
-        """Whether per-pillar exact inverses are available (see `detach`)."""
-        return self.block is not None
+        """Whether per-pillar exact responses are available (see `detach`)."""
+        return self.block is not None or self.local is not None
 
     def pillar_sums(self, x: Any) -> Any:
         """Sum of a compressed vector over each pillar, shape (N,)."""
@@ -226,3 +239,14 @@ class BrushOperator:
         if self.tiles is not None:
             return self.tiles.apply(r, self._tpos, self.diag)
         return (r - self._sm * self.pillar_sums(r)[self.pl]) / self.diag
+
+
+def _spread_host(total: int, gone: np.ndarray, which: np.ndarray, stress: np.ndarray,
+                 attached: np.ndarray) -> np.ndarray:
+    """Compressed stresses from before a detachment (``which`` over them)
+    as a vector over all ``total`` elements: the attached ones after it,
+    and the ``gone`` ones (operator order), zero elsewhere."""
+    full = np.zeros(total)
+    full[attached] = stress[~which]
+    full[gone] = stress[which]
+    return full

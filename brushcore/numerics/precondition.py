@@ -39,6 +39,7 @@ import scipy.linalg as sla
 from scipy.linalg import blas
 
 from brushcore.numerics.backend import CPU
+from brushcore.numerics.farfield import FarFieldBound, near_influence
 from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 from brushcore.numerics.multipole import field_terms
 
@@ -90,8 +91,8 @@ class BlockInverse:
         self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and self.interacting and n_pillars <= self.MAX_COARSE
         if self.interacting:
-            self._r, self._r_near = self._interaction(counts)
-            self._r_near_max = self._r_near.max(axis=1)
+            self._r, r_near = self._interaction(counts)
+            self._bound = FarFieldBound(r_near)
             self._z = self.inv.sum(axis=2)
             self._reach = np.abs(self.inv).sum(axis=2)  # see far_field_uncertainty
             # max_p sum_q R_pq c_q: the far-field displacement of a pillar
@@ -163,16 +164,7 @@ class BlockInverse:
         # of two footprints, not at their centroids (close random pillars).
         reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)
                         * (np.arange(self.m)[None, :] < counts[:, None])).max(axis=1)
-        r_near = np.zeros_like(r)
-        images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if self._mirrored else [(1, 1)]
-        for sy, sx in images:  # image of y is -h - y
-            iy = cy if sy > 0 else -h - cy
-            ix = cx if sx > 0 else -h - cx
-            dist = np.hypot(cy[:, None] - iy[None], cx[:, None] - ix[None])
-            gap = np.maximum(dist - reach[:, None] - reach[None, :], h)
-            r_near += love_coefficient(gap, 0.0, h, e_star)
-        np.fill_diagonal(r_near, 0.0)
-        return r, r_near
+        return r, near_influence(cy, cx, reach, h, e_star, self._mirrored)
 
     #: Largest pillar count with a coarse space (its dense N x N factor).
     MAX_COARSE = 2000
@@ -531,26 +523,8 @@ class BlockInverse:
         """
         if not self.interacting:
             return None if self.inv.shape[0] > 1 else np.zeros(attached_pos.size)
-        shift = self._far_shift(np.abs(pillar_change))
+        shift = self._bound.shift(np.abs(pillar_change))
         return (self._reach * shift[:, None]).ravel()[attached_pos]
-
-    #: Pillars whose change `far_field_uncertainty` weighs pair by pair.
-    FEW_CHANGED = 32
-
-    def _far_shift(self, change: np.ndarray) -> np.ndarray:
-        """sum_q R_near[p, q] change_q, bounded above in O(N) per few pillars.
-
-        Between global solves a few pillars change much (the detaching ones
-        and their neighbours) and every other one a little (`_far_response`);
-        those are bounded by each pillar's largest R_near, not summed pair
-        by pair (an N x N product per cascade round: 3 ms at N = 1620).
-        """
-        changed = np.flatnonzero(change)
-        if changed.size <= self.FEW_CHANGED:
-            return self._r_near[:, changed] @ change[changed]
-        big = changed[np.argpartition(change[changed], -self.FEW_CHANGED)[-self.FEW_CHANGED:]]
-        rest = max(float(change.sum() - change[big].sum()), 0.0)
-        return self._r_near[:, big] @ change[big] + self._r_near_max * rest
 
     def _blocks_times(self, w: np.ndarray) -> np.ndarray:
         """blockdiag(G_p) w for the stacked (N, m) vector w."""

@@ -83,6 +83,7 @@ class TileCoarse:
         self._table = love_coefficient(np.arange(n)[:, None] * h, np.arange(n)[None, :] * h,
                                        h, e_star)
         self._compliance = np.asarray(compliance, dtype=float)
+        self._diag = float(self._table[0, 0])  # K_ii
         self.kc = np.zeros((n_pillars, self.mc, self.mc))
         shapes: dict[bytes, list[int]] = {}
         for p in range(n_pillars):
@@ -182,6 +183,16 @@ class TileCoarse:
         mean = np.divide(sums, self.counts, out=np.zeros_like(sums), where=self.counts > 0)
         coarse = np.matmul(self.inv, sums.reshape(-1, self.mc, 1)).ravel()
         return coarse[tile_pos] + (r - mean[tile_pos]) / diag
+
+    def apply_pillar(self, p: int, r: np.ndarray, members: np.ndarray) -> np.ndarray:
+        """M^-1 r on pillar p alone, for a residual over its attached
+        ``members`` (operator-order indices): the local solves of
+        `brushcore.numerics.pillar_solve`."""
+        slot = self._slot[members]
+        sums = np.bincount(slot, weights=r, minlength=self.mc)
+        counts = self.counts[p * self.mc:(p + 1) * self.mc]
+        mean = np.divide(sums, counts, out=np.zeros_like(sums), where=counts > 0)
+        return (self.inv[p] @ sums)[slot] + (r - mean[slot]) / self._diag
 
 
 def _from_corner(iy: np.ndarray, ix: np.ndarray, pillar_of: np.ndarray,
