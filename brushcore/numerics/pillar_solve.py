@@ -36,12 +36,8 @@ class PillarSolver:
 
     Parameters
     ----------
-    elements : flat n x n indices of the pillar elements (operator order)
-    pillar_of : pillar index of each element
-    n : grid size
-    compliance : h^2 / k_p per pillar [length / stress]
-    h, e_star : element size [length] and modulus [stress]
-    mirrored : the grid is a mirror quadrant (`brushcore.numerics.mirror`)
+    elements, pillar_of, n, compliance, h, e_star, mirrored : as for
+        `brushcore.numerics.precondition.BlockInverse`
     tiles : the tile preconditioner, whose per-pillar blocks precondition
         the local solves
     threads : FFT workers

@@ -282,15 +282,21 @@ class BlockInverse:
 
     @classmethod
     def fits(cls, pillar_of: np.ndarray, budget_bytes: float = 4e9,
-             max_block: int = 2500) -> bool:
+             max_block: int = 1500) -> bool:
         """Whether the stacked inverses (and their packed copy) fit the memory
         budget and the block size limit.
 
-        4 GB keeps a 2048^2 curve within 8 GB.  Without blocks the tile
-        preconditioner (`brushcore.numerics.tiles`) takes over, at 4-6x the
-        applications (8 x 8 rigid brush at 1024^2: 6,145 against 1,113), so
-        the budget is fixed, not read from the machine: the same problem
-        takes the same path everywhere.
+        4 GB keeps a 2048^2 curve within 8 GB.  Larger pillars take the tile
+        preconditioner (`brushcore.numerics.tiles`) with exact local
+        responses on small FFT grids (`brushcore.numerics.pillar_solve`):
+        2-3x the applications of the blocks, but each block application
+        and downdate streams N m^2 numbers, so from m ~ 1,500 up the tiles
+        are faster.  Measured, wall time tiles / blocks: 1.3 and 1.1 at m =
+        1,000 (16 pillars on 365^2, kbar 1e-4 and rigid; random 2.1 and
+        1.2), 0.5-0.8 at m = 1,960 (16 pillars on 512^2, 64 on 1024^2,
+        rigid to kbar 1e-4, regular and random).  The limits are fixed,
+        not read from the machine: the same problem takes the same path
+        everywhere.
         """
         m, stack_bytes = cls.stack_size(pillar_of)
         copies = 1.5 if m >= cls.PACKED_MIN_BLOCK else 1.0

@@ -4,8 +4,10 @@ A dense inverse of a pillar's block costs m^2 memory and m^3 time for a
 pillar of m elements: 0.5 GB and minutes for one pillar of the 8 x 8 brush
 at 2048^2 (m ~ 7,850).  The half-space operator K is of order -1 (its symbol
 falls as 1/|q|), so a point-Jacobi preconditioner fails on the smooth modes,
-where K is largest: CG needs ~ sqrt(radius / h) iterations, and the local
-cascade is lost with the blocks.
+where K is largest: CG needs ~ sqrt(radius / h) iterations.  (The exact
+local responses that the blocks give come from small per-pillar FFT solves
+on this path, `brushcore.numerics.pillar_solve`, preconditioned by
+`apply_pillar`.)
 
 Grouping each pillar's elements into a x a tiles splits the residual into
 its tile means, solved exactly on the coarse block K_c = R K R^T + s c c^T
