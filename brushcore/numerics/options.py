@@ -30,9 +30,12 @@ class SolverOptions:
         reference).  Both detach, at fixed d, every element above sigma_c
         and re-solve until none is.  "global" re-solves the whole system
         after every round.  "local" updates each pillar exactly with its own
-        block inverse, holding the other pillars' field, and continues
-        without a global solve only while a bound on that field's change
-        (first order, rigorous, x3; see `BlockInverse.far_field_uncertainty`)
+        block inverse (or, for pillars beyond the blocks, a solve of the
+        pillar alone on a small FFT grid, `PillarSolver`), holding the other
+        pillars' field, and continues without a global solve only while a
+        bound on that field's change (first order, rigorous, x3; see
+        `BlockInverse.far_field_uncertainty`; on the tile path with a
+        measured bound on the inverse's row sums, `PillarSolver.REACH`)
         cannot flip any decision; it always re-solves globally before the
         next event.  Measured against "global": the same contact sets (F_ad
         and W equal to round-off) from kbar 1e-6 to rigid, with 0-3 % fewer
