@@ -22,6 +22,7 @@ from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels
 from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.precondition import BlockInverse
 from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
 from brushcore.model.provenance import git_commit, parameter_hash, version
@@ -209,7 +210,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)
     op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
-                       params.e_star)
+                       params.e_star, max_block=BlockInverse.MAX_BLOCK_PROTOCOL)
     z = np.zeros(op.size)
     if heights is not None:
         z += np.asarray(heights, dtype=float)[backend.to_host(op.pillar_of)]

@@ -42,6 +42,8 @@ class BrushOperator:
         ``convolver`` (same grid), for the solves that need more digits
         than float32 transforms give (`refined`); None where the
         transforms are double already
+    max_block : largest pillar (elements) with a dense block inverse on
+        the host; larger ones take the tiles (`BlockInverse.fits`)
 
     Notes
     -----
@@ -55,7 +57,8 @@ class BrushOperator:
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
                  h: float, e_star: float, use_block: bool = True, coarse: bool = True,
-                 precise: Callable[[], Convolver] | None = None) -> None:
+                 precise: Callable[[], Convolver] | None = None,
+                 max_block: int = BlockInverse.MAX_BLOCK) -> None:
         self.conv = convolver
         self._precise = precise
         self.refined_applications = 0  # applications made by the twin (`refined`)
@@ -74,7 +77,7 @@ class BrushOperator:
         self.conv.flat_buffer[...] = 0.0
         self.attached = xp.ones(self.elements.size, dtype=xp.bool)
         self.block: BlockInverse | None = None
-        if use_block and be.on_host and BlockInverse.fits(pillar_of):
+        if use_block and be.on_host and BlockInverse.fits(pillar_of, max_block=max_block):
             self.block = BlockInverse(self.elements, pillar_of, convolver.n, compliance, h,
                                       e_star, coarse, getattr(convolver, "mirrored", False))
         elif use_block and not be.on_host and DeviceBlocks.fits_device(pillar_of, be):

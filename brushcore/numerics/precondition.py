@@ -166,6 +166,14 @@ class BlockInverse:
                         * (np.arange(self.m)[None, :] < counts[:, None])).max(axis=1)
         return r, near_influence(cy, cx, reach, h, e_star, self._mirrored)
 
+    #: Largest pillar (elements) with a dense inverse in a pull-off (`fits`).
+    MAX_BLOCK = 1500
+    #: ... and in a protocol run, whose cascades are all global solves, so
+    #: the tiles' extra applications are not won back by cheaper local
+    #: rounds (rough 4 x 4 brush, preload 0.5, at 256^2 with the tiles
+    #: forced on pillars of 491 elements: 93,619 applications and 158 s
+    #: against 7,428 and 63 s; not measured between 1,500 and 2,500).
+    MAX_BLOCK_PROTOCOL = 2500
     #: Largest pillar count with a coarse space (its dense N x N factor).
     MAX_COARSE = 2000
     #: A coarse space needs coupling >= this times N.  Its solve costs ~N^2 per
@@ -282,7 +290,7 @@ class BlockInverse:
 
     @classmethod
     def fits(cls, pillar_of: np.ndarray, budget_bytes: float = 4e9,
-             max_block: int = 1500) -> bool:
+             max_block: int | None = None) -> bool:
         """Whether the stacked inverses (and their packed copy) fit the memory
         budget and the block size limit.
 
@@ -296,8 +304,9 @@ class BlockInverse:
         1.2), 0.5-0.8 at m = 1,960 (16 pillars on 512^2, 64 on 1024^2,
         rigid to kbar 1e-4, regular and random).  The limits are fixed,
         not read from the machine: the same problem takes the same path
-        everywhere.
+        everywhere.  ``max_block`` defaults to MAX_BLOCK.
         """
+        max_block = cls.MAX_BLOCK if max_block is None else max_block
         m, stack_bytes = cls.stack_size(pillar_of)
         copies = 1.5 if m >= cls.PACKED_MIN_BLOCK else 1.0
         return m <= max_block and stack_bytes * copies <= budget_bytes
