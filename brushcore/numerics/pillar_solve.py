@@ -27,7 +27,7 @@ import scipy.fft as sfft
 
 from brushcore.numerics.cg import pcg
 from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import love_coefficient
+from brushcore.numerics.kernel import love_coefficient, self_compliance
 from brushcore.numerics.tiles import TileCoarse
 
 
@@ -40,7 +40,6 @@ class PillarSolver:
         `brushcore.numerics.precondition.BlockInverse`
     tiles : the tile preconditioner, whose per-pillar blocks precondition
         the local solves
-    threads : FFT workers
     """
 
     #: Bound on sum_j |G_p[i, j]| K_ii, the reach of a pillar's inverse.
@@ -59,16 +58,14 @@ class PillarSolver:
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float, mirrored: bool,
-                 tiles: TileCoarse, threads: int = 1) -> None:
+                 tiles: TileCoarse) -> None:
         n_pillars = compliance.size
         self._h, self._e_star, self._mirrored = h, e_star, mirrored
         self._compliance = np.asarray(compliance, dtype=float)
         self._tiles = tiles
-        self._threads = threads
         self._pillar_of = pillar_of
         iy, ix = np.divmod(elements, n)
-        self._members = np.split(np.argsort(pillar_of, kind="stable"),
-                                 np.cumsum(np.bincount(pillar_of, minlength=n_pillars))[:-1])
+        self._members = tiles.members
         y0 = np.array([iy[m].min() for m in self._members])
         x0 = np.array([ix[m].min() for m in self._members])
         self._corner = np.stack([y0, x0], axis=1)
@@ -79,7 +76,6 @@ class PillarSolver:
         for p, m in enumerate(self._members):
             self._in_box[m] = (iy[m] - y0[p]) * self._box[p, 1] + (ix[m] - x0[p])
         self._spectra: dict[int, np.ndarray] = {}
-        self.applications = 0
         counts = np.bincount(pillar_of, minlength=n_pillars)
         cy = np.bincount(pillar_of, weights=iy * h, minlength=n_pillars) / counts
         cx = np.bincount(pillar_of, weights=ix * h, minlength=n_pillars) / counts
@@ -87,7 +83,7 @@ class PillarSolver:
         np.maximum.at(radius, pillar_of, np.hypot(iy * h - cy[pillar_of], ix * h - cx[pillar_of]))
         self.bound = (FarFieldBound(near_influence(cy, cx, radius, h, e_star, mirrored))
                       if n_pillars > 1 else None)
-        self.diag = float(love_coefficient(0.0, 0.0, h, e_star))
+        self.diag = self_compliance(e_star, h)
 
     def _fft_shape(self, p: int) -> tuple[int, int]:
         by, bx = self._box[p]
@@ -109,7 +105,7 @@ class PillarSolver:
         dxs = [kx] + ([2 * x0 + bx + kx] if self._mirrored else [])
         kernels = [love_coefficient(dy[:, None] * self._h, dx[None, :] * self._h,
                                     self._h, self._e_star) for dy in dys for dx in dxs]
-        spectra = sfft.rfft2(np.stack(kernels), workers=self._threads)
+        spectra = sfft.rfft2(np.stack(kernels))
         self._spectra[p] = spectra
         return spectra
 
@@ -121,10 +117,8 @@ class PillarSolver:
         sources = [box]
         if self._mirrored:  # in the order of the kernels: (y, x) direct or flipped
             sources = [box, box[:, ::-1], box[::-1, :], box[::-1, ::-1]]
-        transformed = sfft.rfft2(np.stack(sources), s=shape, workers=self._threads)
-        field = sfft.irfft2((transformed * spectra).sum(axis=0), s=shape,
-                            workers=self._threads)
-        self.applications += 1
+        transformed = sfft.rfft2(np.stack(sources), s=shape)
+        field = sfft.irfft2((transformed * spectra).sum(axis=0), s=shape)
         by, bx = self._box[p]
         return field[:by, :bx]
 
@@ -157,7 +151,7 @@ class PillarSolver:
     def _solve(self, p: int, rest: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """B_p'p'^-1 rhs over the attached members ``rest`` of pillar p."""
         x, _ = pcg(lambda v: self._operator(p, rest, v, rest),
-                   lambda r: self._tiles.apply_pillar(p, r, rest),
+                   lambda r: self._tiles.apply_pillar(p, r, rest, self.diag),
                    rhs, np.zeros_like(rhs), self.RTOL, self.MAX_ITER)
         return x
 

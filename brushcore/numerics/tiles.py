@@ -78,21 +78,20 @@ class TileCoarse:
         self.tile_of = (pillar_of * self.mc + slot[tile_index]).astype(np.intp)
         self._slot = slot[tile_index]  # tile slot within its pillar, per element
         self._pillar_of = pillar_of
-        self._members = np.split(np.argsort(pillar_of, kind="stable"),
+        self.members = np.split(np.argsort(pillar_of, kind="stable"),
                                  np.cumsum(np.bincount(pillar_of, minlength=n_pillars))[:-1])
         self._live = np.ones(elements.size, dtype=bool)
         self.counts = np.bincount(self.tile_of, minlength=n_pillars * self.mc).astype(float)
         self._table = love_coefficient(np.arange(n)[:, None] * h, np.arange(n)[None, :] * h,
                                        h, e_star)
         self._compliance = np.asarray(compliance, dtype=float)
-        self._diag = float(self._table[0, 0])  # K_ii
         self.kc = np.zeros((n_pillars, self.mc, self.mc))
         shapes: dict[bytes, list[int]] = {}
         for p in range(n_pillars):
-            e = self._members[p]
+            e = self.members[p]
             shapes.setdefault(np.stack([dy[e], dx[e]]).tobytes(), []).append(p)
         for group in shapes.values():
-            e = self._members[group[0]]
+            e = self.members[group[0]]
             self.kc[group] = self._coarse_rows(e, e)
         self.inv = np.zeros_like(self.kc)
         self._factor_count = np.zeros(n_pillars)
@@ -149,7 +148,7 @@ class TileCoarse:
             d = positions[pillars == p]
             if sign < 0:
                 self._live[d] = False
-            rest = self._members[p][self._live[self._members[p]]]  # C' or, attaching, C
+            rest = self.members[p][self._live[self.members[p]]]  # C' or, attaching, C
             # sum over C x C minus over C' x C' = D x C' + C' x D + D x D
             cross = self._coarse_rows(d, rest)
             delta = cross + cross.T + self._coarse_rows(d, d)
@@ -186,15 +185,16 @@ class TileCoarse:
         coarse = np.matmul(self.inv, sums.reshape(-1, self.mc, 1)).ravel()
         return coarse[tile_pos] + (r - mean[tile_pos]) / diag
 
-    def apply_pillar(self, p: int, r: np.ndarray, members: np.ndarray) -> np.ndarray:
+    def apply_pillar(self, p: int, r: np.ndarray, members: np.ndarray,
+                     diag: float) -> np.ndarray:
         """M^-1 r on pillar p alone, for a residual over its attached
-        ``members`` (operator-order indices): the local solves of
-        `brushcore.numerics.pillar_solve`."""
+        ``members`` (operator-order indices; ``diag`` as for `apply`): the
+        local solves of `brushcore.numerics.pillar_solve`."""
         slot = self._slot[members]
         sums = np.bincount(slot, weights=r, minlength=self.mc)
         counts = self.counts[p * self.mc:(p + 1) * self.mc]
         mean = np.divide(sums, counts, out=np.zeros_like(sums), where=counts > 0)
-        return (self.inv[p] @ sums)[slot] + (r - mean[slot]) / self._diag
+        return (self.inv[p] @ sums)[slot] + (r - mean[slot]) / diag
 
 
 def _from_corner(iy: np.ndarray, ix: np.ndarray, pillar_of: np.ndarray,
