@@ -273,18 +273,53 @@ def test_settled_needs_every_decision_clear_of_the_error():
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.9, 0.5])
-    err = 0.01 / SETTLE_SAFETY  # a margin of 0.01
+    err = 0.01 / SETTLE_SAFETY  # a margin of 0.01 (plus DECISION_FLOOR err)
+    z = np.full(3, err)
     # a cascade round: 1.0 and 0.9 go, 0.5 stays, all clear of the threshold 0.8
-    assert _settles(0.8, 1e-7, np, verdicts)(x, err)
-    assert not _settles(0.895, 1e-7, np, verdicts)(x, err)  # 0.9 within 0.01
+    assert _settles(0.8, 1e-7, np, verdicts)(x, z, err)
+    assert not _settles(0.895, 1e-7, np, verdicts)(x, z, err)  # 0.9 within 0.01
     # no element over the threshold: the next event takes 1.0 alone ...
-    assert _settles(1.2, 1e-7, np, verdicts)(x, err)
+    assert _settles(1.2, 1e-7, np, verdicts)(x, z, err)
     # ... unless the runner-up lies within the error of it
-    assert not _settles(1.2, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), err)
-    assert not _settles(None, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), err)
+    assert not _settles(1.2, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), z, err)
+    assert not _settles(None, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), z, err)
     # exact ties go together: settled
-    assert _settles(None, 1e-7, np, verdicts)(np.array([1.0, 1.0, 0.5]), err)
+    assert _settles(None, 1e-7, np, verdicts)(np.array([1.0, 1.0, 0.5]), z, err)
     assert verdicts == [True, False, True, False, False, True]
+
+
+def test_settled_weighs_each_element_by_its_own_error():
+    """At the tolerance a large error on an element far from every cut does
+    not hold the solve back; the same error on the runner-up does."""
+    from brushcore.numerics.pulloff import _settles
+
+    verdicts: list[bool] = []
+    x = np.array([1.0, 0.99, 0.5])  # no element over 1.2: the next event takes 1.0
+    z = np.array([1e-4, 1e-4, 0.01])
+    # margins 3 |z_i| + 0.3 max|z|: 0.0033 each for the two leaders, clear
+    # (3 max|z| for every element, 0.03, would not be)
+    assert _settles(1.2, 1e-7, np, verdicts)(x, z, 0.01)
+    assert not _settles(1.2, 1e-7, np, verdicts)(x, z[[0, 2, 1]], 0.01)  # 0.99 may lead
+    assert verdicts == [True, False]
+
+
+def test_decided_weighs_each_element_by_its_own_error():
+    """A cascade round stops early once every element clears the threshold
+    by DECISION_SAFETY times its own error estimate plus DECISION_FLOOR
+    times the largest: a large error far from the threshold does not hold
+    back the round, one near it does."""
+    from brushcore.numerics.pulloff import DECISION_FLOOR, DECISION_SAFETY, _decides
+
+    stopped: list[float] = []
+    x = np.array([1.2, 0.5, 0.9])  # threshold 1.0: the first element goes
+    z = np.array([0.0, 0.04, 0.001])  # the second's error is large, it is far below
+    assert 0.1 > DECISION_SAFETY * 0.001 + DECISION_FLOOR * 0.04  # 0.9 clears 1.0
+    assert _decides(1.0, np, stopped)(x, z, 0.04)
+    assert stopped == [0.04]  # the largest estimate, for the next certificate
+    # the same errors, but the large one on the element at 0.9: undecided
+    assert not _decides(1.0, np, stopped)(x, z[[0, 2, 1]], 0.04)
+    # nothing over the threshold: never decided early
+    assert not _decides(1.0, np, stopped)(np.array([0.5, 0.9]), np.zeros(2), 0.0)
 
 
 @pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")

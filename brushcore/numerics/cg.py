@@ -17,8 +17,8 @@ class ConvergenceError(RuntimeError):
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
         precondition: Callable[[np.ndarray], np.ndarray],
         b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int,
-        decided: Callable[[np.ndarray, float], bool] | None = None,
-        settled: Callable[[np.ndarray, float], bool] | None = None,
+        decided: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
+        settled: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
         floor: float = 0.0) -> tuple[np.ndarray, int]:
     """Solve A x = b for symmetric positive definite A.
 
@@ -34,11 +34,11 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         not do: with very soft springs x is ~1e-8 of b/diag(A), so a small
         residual can still leave x wrong in every digit that matters.
     max_iter : iterations allowed
-    decided : optional early exit: decided(x, zmax) is asked after each
-        iteration whose correction is still above the tolerance, with zmax
-        = max|z| the error estimate; True stops there (a caller that needs
-        only what x decides, not x itself)
-    settled : optional condition on the tolerance: settled(x, zmax) must
+    decided : optional early exit: decided(x, z, zmax) is asked after each
+        iteration whose correction is still above the tolerance, with z the
+        error estimate per element and zmax = max|z|; True stops there (a
+        caller that needs only what x decides, not x itself)
+    settled : optional condition on the tolerance: settled(x, z, zmax) must
         also hold before CG stops at rtol, unless max|z| <= floor max|x|
         (a caller whose next step depends on comparisons that the error
         could still flip)
@@ -66,8 +66,8 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               precondition: Callable[[np.ndarray], np.ndarray],
               b: np.ndarray, x0: np.ndarray, ax0: np.ndarray, y0: np.ndarray,
               rtol: float, max_iter: int,
-              decided: Callable[[np.ndarray, float], bool] | None = None,
-              settled: Callable[[np.ndarray, float], bool] | None = None,
+              decided: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
+              settled: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
               floor: float = 0.0) -> tuple[np.ndarray, np.ndarray, int]:
     """`pcg` that also carries a linear image y = Y x of the iterate.
 
@@ -102,8 +102,8 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
         if xmax > 0:
             history.append(zmax / xmax)
         if zmax <= rtol * xmax:
-            return settled is None or settled(x, zmax) or zmax <= floor * xmax
-        return decided is not None and decided(x, zmax)
+            return settled is None or settled(x, z, zmax) or zmax <= floor * xmax
+        return decided is not None and decided(x, z, zmax)
 
     if converged():
         return x, y, 0
