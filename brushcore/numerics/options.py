@@ -65,8 +65,9 @@ class SolverOptions:
         enter F_ad or W always run to the tolerance.  True by default, off
         in `exact()`.
     settle_decisions : a solve at the tolerance goes on (to 1e-9 at most)
-        while an element lies within three error estimates of sigma_c or of
-        the next event's cut, so that which elements detach follows the
+        while an element lies within its margin of sigma_c or of the next
+        event's cut (three times its own error estimate plus 0.3 times the
+        largest), so that which elements detach follows the
         model, not CG's rounding (`brushcore.numerics.pulloff._settles`);
         float32 transforms hand such a solve over to double.  Without it a
         soft random brush's W followed the warm start: random 1620 at kbar

@@ -126,8 +126,8 @@ def _decides(threshold: float, xp, stopped: list[float]):
     Per element, not the largest estimate for all: after a local update the
     error sits on the few pillars the detachment moved, while the elements
     closest to the threshold are often elsewhere (random 220 at kbar 1e-4,
-    512^2: 70 % of cascade solves decided at their warm start against 17 %
-    with 10 max|z| for every element).  Such a round only decides which
+    512^2: 70 % of its solves end at the warm start, against 50 % with 10
+    max|z| for every element).  Such a round only decides which
     elements go next; its stresses are re-solved before anything is
     recorded that enters F_ad or W (the cascade's last round, where nothing
     exceeds the threshold, always runs to the tolerance, and forces recorded
