@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import love_coefficient
+from brushcore.numerics.kernel import image_coordinate, images, love_coefficient
 
 
 def near_influence(cy: np.ndarray, cx: np.ndarray, radius: np.ndarray, h: float,
@@ -37,10 +37,8 @@ def near_influence(cy: np.ndarray, cx: np.ndarray, radius: np.ndarray, h: float,
     images belong to its own block or local solve).
     """
     r_near = np.zeros((cy.size, cy.size))
-    images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if mirrored else [(1, 1)]
-    for sy, sx in images:  # image of y is -h - y
-        iy = cy if sy > 0 else -h - cy
-        ix = cx if sx > 0 else -h - cx
+    for sy, sx in images(mirrored):
+        iy, ix = image_coordinate(cy, sy, h), image_coordinate(cx, sx, h)
         dist = np.hypot(cy[:, None] - iy[None], cx[:, None] - ix[None])
         gap = np.maximum(dist - radius[:, None] - radius[None, :], h)
         r_near += love_coefficient(gap, 0.0, h, e_star)

@@ -99,3 +99,21 @@ def folded_coefficient(ya: np.ndarray, xa: np.ndarray, yb: np.ndarray, xb: np.nd
     dx, sx = xa - xb, xa + xb + h
     return (love_coefficient(dy, dx, h, e_star) + love_coefficient(sy, dx, h, e_star)
             + love_coefficient(dy, sx, h, e_star) + love_coefficient(sy, sx, h, e_star))
+
+
+#: Signs (sy, sx) of an element's images on a mirror quadrant (see
+#: `folded_coefficient`): (1, 1) is the element itself, -1 reflects that
+#: coordinate about its mirror line.
+MIRROR_IMAGES = ((1, 1), (-1, 1), (1, -1), (-1, -1))
+
+
+def images(mirrored: bool) -> tuple[tuple[int, int], ...]:
+    """The (sy, sx) image signs to sum over: all four on a mirror quadrant,
+    the element alone on a whole grid."""
+    return MIRROR_IMAGES if mirrored else MIRROR_IMAGES[:1]
+
+
+def image_coordinate(c: np.ndarray, sign: int, h: float) -> np.ndarray:
+    """A coordinate [length] of an image: c itself for sign +1, its mirror
+    image -h - c for -1 (mirror line at -h/2)."""
+    return c if sign > 0 else -h - c

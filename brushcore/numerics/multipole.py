@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from brushcore.numerics.kernel import image_coordinate, images
+
 
 def field_terms(moments: np.ndarray, source: np.ndarray, target: np.ndarray,
                 centroids: tuple[np.ndarray, np.ndarray], h: float,
@@ -44,10 +46,9 @@ def field_terms(moments: np.ndarray, source: np.ndarray, target: np.ndarray,
     cy, cx = centroids
     a, my, mx = moments
     terms = np.zeros((6, cy.size))
-    images = [(1, 1), (-1, 1), (1, -1), (-1, -1)] if mirrored else [(1, 1)]
-    for sy, sx in images:  # the image of y is -h - y, and its moment flips
-        dy = cy[target] - (cy[source] if sy > 0 else -h - cy[source])
-        dx = cx[target] - (cx[source] if sx > 0 else -h - cx[source])
+    for sy, sx in images(mirrored):  # a mirrored source's moment flips sign too
+        dy = cy[target] - image_coordinate(cy[source], sy, h)
+        dx = cx[target] - image_coordinate(cx[source], sx, h)
         r2 = dy * dy + dx * dx
         inv_r = 1.0 / np.sqrt(np.where(r2 > 0.0, r2, np.inf))
         i2 = inv_r * inv_r
