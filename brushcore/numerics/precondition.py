@@ -88,7 +88,8 @@ class BlockInverse:
             self._packed = np.ascontiguousarray(self.inv[:, rows[order], cols[order]])
         self._drifted: set[int] = set()  # pillars whose c moved since the last factorisation
         # Elastic inverses H_p = K_pp^-1 of pillars that regained elements
-        # (`attach`), kept where twice the stack still fits the budget.
+        # (`attach`; pull-offs never attach, so they hold none), kept where
+        # the stack, its packed copy and the H's fit BORDER_BUDGET.
         self._elastic: dict[int, np.ndarray] = {}
         self._bordering = 2.5 * n_pillars * self.m * self.m * 8.0 <= self.BORDER_BUDGET
         self.factorisations = 0
