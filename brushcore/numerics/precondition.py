@@ -91,7 +91,7 @@ class BlockInverse:
         # (`attach`; pull-offs never attach, so they hold none), kept where
         # the stack, its packed copy and the H's fit BORDER_BUDGET.
         self._elastic: dict[int, np.ndarray] = {}
-        self._bordering = 2.5 * n_pillars * self.m * self.m * 8.0 <= self.BORDER_BUDGET
+        self._bordering = 2.5 * self.inv.nbytes <= self.BORDER_BUDGET
         self.factorisations = 0
         self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and self.interacting and n_pillars <= self.MAX_COARSE
@@ -504,10 +504,11 @@ class BlockInverse:
         touched = np.unique(pil)
         for p in touched:
             new = slot[pil == p]
-            if self._bordering:
-                self.inv[p] = self._bordered(int(p), np.flatnonzero(self._live[p]), new)
+            old = np.flatnonzero(self._live[p])
             self._live[p, new] = True
-            if not self._bordering:
+            if self._bordering:
+                self.inv[p] = self._bordered(int(p), old, new)
+            else:
                 live = np.flatnonzero(self._live[p])
                 g = self.inv[p]
                 g[...] = 0.0

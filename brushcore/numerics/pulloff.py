@@ -117,6 +117,12 @@ DECISION_SAFETY = 10.0
 DECISION_FLOOR = 0.3
 
 
+def _margins(safety: float, z, zmax: float, xp):
+    """Each element's margin: ``safety`` times its own error estimate plus
+    DECISION_FLOOR times the largest (shared by `_decides` and `_settles`)."""
+    return safety * xp.abs(z) + DECISION_FLOOR * zmax
+
+
 def _decides(threshold: float, xp, stopped: list[float]):
     """CG early exit for a cascade round: stop once the iterate detaches at
     least one element and every element clears the threshold by its margin
@@ -135,7 +141,7 @@ def _decides(threshold: float, xp, stopped: list[float]):
     stopped at is appended to ``stopped``.
     """
     def decided(x, z, zmax: float) -> bool:
-        margin = DECISION_SAFETY * xp.abs(z) + DECISION_FLOOR * zmax
+        margin = _margins(DECISION_SAFETY, z, zmax, xp)
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
@@ -169,7 +175,7 @@ def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool]):
     verdict is appended to ``verdicts``.
     """
     def settled(x, z, zmax: float) -> bool:
-        margin = SETTLE_SAFETY * xp.abs(z) + DECISION_FLOOR * zmax
+        margin = _margins(SETTLE_SAFETY, z, zmax, xp)
         verdict = True
         if threshold is not None:
             verdict = not bool(xp.any(xp.abs(x - threshold) < margin))

@@ -79,7 +79,7 @@ class TileCoarse:
         self._slot = slot[tile_index]  # tile slot within its pillar, per element
         self._pillar_of = pillar_of
         self.members = np.split(np.argsort(pillar_of, kind="stable"),
-                                 np.cumsum(np.bincount(pillar_of, minlength=n_pillars))[:-1])
+                                np.cumsum(np.bincount(pillar_of, minlength=n_pillars))[:-1])
         self._live = np.ones(elements.size, dtype=bool)
         self.counts = np.bincount(self.tile_of, minlength=n_pillars * self.mc).astype(float)
         self._table = love_coefficient(np.arange(n)[:, None] * h, np.arange(n)[None, :] * h,
