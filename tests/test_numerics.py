@@ -40,6 +40,29 @@ def test_convolution_equals_dense_boussinesq(n, use_pyfftw):
         assert err < 1e-12, f"{conv.backend}: relative error {err:.2e}"
 
 
+def test_certificate_backoff_spaces_failing_tries_and_resets_on_success():
+    """A local cascade tries the far-field certificate every round at first;
+    after each TRIES failures in a row the gap between tries doubles, up to
+    2^DOUBLINGS rounds; one success brings back every round."""
+    from brushcore.numerics.pulloff import _Backoff
+
+    b = _Backoff()
+    tries = []
+    for r in range(2000):
+        if b.due():
+            tries.append(r)
+            b.record(False)
+    gaps = np.diff(tries)
+    t = _Backoff.TRIES
+    assert list(gaps[: t - 1]) == [1] * (t - 1)
+    assert list(gaps[t - 1: 2 * t - 1]) == [2] * t
+    assert list(gaps[2 * t - 1: 3 * t - 1]) == [4] * t
+    assert gaps.max() == 2 ** _Backoff.DOUBLINGS == gaps[-1]
+    assert len(tries) < 100  # of 2,000 rounds
+    b.record(True)
+    assert all(b.due() for _ in range(3))
+
+
 @pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")
 @pytest.mark.parametrize("mirrored", [False, True])
 def test_single_precision_transforms_round_at_float32(mirrored):
