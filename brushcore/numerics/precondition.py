@@ -44,6 +44,22 @@ from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 from brushcore.numerics.multipole import field_terms
 
 
+def _remove_slots(g: np.ndarray, gone: np.ndarray, values: np.ndarray | None = None
+                  ) -> np.ndarray | None:
+    """Remove slots ``gone`` from the inverse g of a symmetric block, in place:
+    g - g[:, D] g[D, D]^-1 g[D, :], the inverse of the block without them
+    (zero rows and columns at D).  With ``values`` on D, also return
+    g[:, D] g[D, D]^-1 values (from the same solve), what a vector g b loses
+    with them; else None."""
+    cols = g[:, gone]
+    rhs = cols.T if values is None else np.column_stack([cols.T, values])
+    x = np.linalg.solve(g[np.ix_(gone, gone)], rhs)
+    g -= cols @ x[:, : g.shape[0]]
+    g[gone, :] = 0.0  # exact in exact arithmetic; remove round-off
+    g[:, gone] = 0.0
+    return None if values is None else cols @ x[:, g.shape[0]]
+
+
 class BlockInverse:
     """Stacked inverses G_p of the per-pillar blocks, padded to a common size.
 
@@ -357,14 +373,9 @@ class BlockInverse:
                 if w is not None:
                     w[p] = 0.0
                 continue
-            cols = g[:, d]
-            rhs = cols.T if w is None else np.column_stack([cols.T, w[p, d]])
-            x = np.linalg.solve(g[np.ix_(d, d)], rhs)
-            g -= cols @ x[:, : self.m]
-            g[d, :] = 0.0  # exact in exact arithmetic; remove round-off
-            g[:, d] = 0.0
+            response = _remove_slots(g, d, None if w is None else w[p, d])
             if w is not None:
-                w[p] -= cols @ x[:, self.m]
+                w[p] -= response
                 w[p, d] = 0.0
         self._refresh(touched)
         if w is None:
@@ -546,10 +557,7 @@ class BlockInverse:
         if self._remaining[p] == 0:
             del self._elastic[p]
             return
-        cols = h[:, gone]
-        h -= cols @ np.linalg.solve(h[np.ix_(gone, gone)], cols.T)
-        h[gone, :] = 0.0
-        h[:, gone] = 0.0
+        _remove_slots(h, gone)
 
     def _refresh(self, touched: np.ndarray) -> None:
         """Packed copies, coarse vectors and (when drifted) the coarse factor
