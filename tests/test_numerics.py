@@ -129,7 +129,7 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, see
         # packed storage (BLAS spmv) is used for large blocks only; force it
         mp.setattr(BlockInverse, "PACKED_MIN_BLOCK", 1 if packed else 10**9)
         op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
-    assert (op.block._packed is not None) == packed
+    assert (op.block._pack_index is not None) == packed
     for _ in range(2):
         drop = rng.random(op.size) < 0.3
         drop[0] = False
@@ -139,6 +139,49 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, see
     blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
     r = rng.standard_normal(op.size)
     assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("packed", [False, True], ids=["matmul", "packed"])
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_single_precision_blocks_round_at_float32_with_exact_pillar_totals(packed, seed):
+    """An operator with single-precision transforms applies float32 blocks:
+    ~1e-7 off the exact block inverse, except each pillar's total, which a
+    soft spring makes ~1e-6 of the rest here (G_p is nearly singular along
+    1) and float32 round-off alone gets wrong by 25-40 %; its `refined`
+    solves apply the float64 blocks."""
+    from brushcore.numerics.precondition import BlockInverse, _stack_times
+
+    rng, labels, _ = _random_problem(seed, n=12)
+    compliance = np.full(3, 1e5)  # h^2 / k: very soft springs
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(BlockInverse, "SINGLE_PACKED_MIN_BLOCK", 1 if packed else 10**9)
+        op = BrushOperator(Convolver(12), labels, compliance, 1.0, 1.0, coarse=False,
+                           precise=lambda: Convolver(12))
+    assert op.block.single and (op.block._pack_index is not None) == packed
+    drop = rng.random(op.size) < 0.3
+    drop[0] = False
+    op.detach(drop)
+    dense = _dense_operator(labels, compliance, op.attached)
+    pl = op.pl
+    exact = np.linalg.solve(np.where(pl[:, None] == pl[None, :], dense, 0.0),
+                            rng.standard_normal(op.size))
+    r = np.where(pl[:, None] == pl[None, :], dense, 0.0) @ exact  # blocks^-1 r = exact
+    z = op.precondition(r)
+    scale = np.abs(exact).max()
+    assert 1e-12 * scale < np.abs(z - exact).max() < 1e-5 * scale
+    totals = np.bincount(pl, weights=exact)
+    assert np.abs(np.bincount(pl, weights=z) - totals).max() < 1e-10 * scale
+    with op.refined():
+        assert np.allclose(op.precondition(r), exact, rtol=1e-9, atol=1e-9 * scale)
+    assert op.block.single
+    # what the exact totals mend: plain float32 blocks miss the uniform mode
+    block = op.block
+    w = np.zeros((block.inv.shape[0], block.m))
+    w.ravel()[op._bpos] = r
+    plain = _stack_times(block.inv.astype(np.float32), False, w.astype(np.float32),
+                         block._remaining).sum(axis=1)
+    assert np.abs(plain - totals).max() > 1e3 * np.abs(np.bincount(pl, weights=z) - totals).max()
 
 
 @settings(max_examples=15, deadline=None)

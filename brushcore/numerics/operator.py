@@ -79,7 +79,8 @@ class BrushOperator:
         self.block: BlockInverse | None = None
         if use_block and be.on_host and BlockInverse.fits(pillar_of, max_block=max_block):
             self.block = BlockInverse(self.elements, pillar_of, convolver.n, compliance, h,
-                                      e_star, coarse, getattr(convolver, "mirrored", False))
+                                      e_star, coarse, getattr(convolver, "mirrored", False),
+                                      single=precise is not None)
         elif use_block and not be.on_host and DeviceBlocks.fits_device(pillar_of, be):
             self.block = DeviceBlocks(self.elements, pillar_of, convolver.n, compliance, h,
                                       e_star, coarse, backend=be)
@@ -166,15 +167,21 @@ class BrushOperator:
 
     @contextlib.contextmanager
     def refined(self) -> Iterator[None]:
-        """Apply with the double-precision twin of the convolver inside the block."""
+        """Apply with the double-precision twin of the convolver, and the
+        block preconditioner in double precision, inside the block."""
         single, self.conv = self.conv, self._precise()
         self.conv.flat_buffer[...] = 0.0  # entries left from an earlier use
         start = self.conv.applications
+        blocks_single = self.block is not None and self.block.single
+        if blocks_single:
+            self.block.single = False
         try:
             yield
         finally:
             self.refined_applications += self.conv.applications - start
             self.conv = single
+            if blocks_single:
+                self.block.single = True
 
     def _gather(self, where: Any) -> Any:
         """The convolved buffer at ``where``, in double precision whatever

@@ -60,6 +60,28 @@ def _remove_slots(g: np.ndarray, gone: np.ndarray, values: np.ndarray | None = N
     return None if values is None else cols @ x[:, g.shape[0]]
 
 
+def _pack_index(m: int) -> np.ndarray:
+    """Flat indices into an m x m block of its upper triangle, packed
+    column by column (BLAS spmv's layout)."""
+    rows, cols = np.triu_indices(m)
+    order = np.lexsort((rows, cols))
+    return rows[order] * m + cols[order]
+
+
+def _stack_times(stack: np.ndarray, packed: bool, w: np.ndarray,
+                 remaining: np.ndarray) -> np.ndarray:
+    """blockdiag(stack_p) w for stacked (N, m) w: one batched matmul, or one
+    BLAS spmv per pillar with elements left from packed ``stack`` (float32
+    or float64, as w)."""
+    if not packed:
+        return np.matmul(stack, w[:, :, None])[:, :, 0]
+    spmv = blas.sspmv if stack.dtype == np.float32 else blas.dspmv
+    z = np.zeros_like(w)
+    for p in np.flatnonzero(remaining):  # detached pillars have G_p = 0
+        z[p] = spmv(w.shape[1], 1.0, stack[p], w[p])
+    return z
+
+
 class BlockInverse:
     """Stacked inverses G_p of the per-pillar blocks, padded to a common size.
 
@@ -76,14 +98,19 @@ class BlockInverse:
         mid-lines (`brushcore.numerics.mirror`): every influence includes
         the three images, and each block is the exact diagonal block of the
         folded operator (a pillar near a mirror line feels its own images)
+    single : apply the blocks from a float32 copy (`_blocks_times`), for an
+        operator whose transforms are single precision already; `single`
+        is also the attribute its `refined` solves turn off
     """
 
     #: Where the stacks live (`DeviceBlocks` sets its device's backend).
     backend = CPU
+    #: Blocks applied in single precision (see the ``single`` parameter).
+    single = False
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
-                 coarse: bool = True, mirrored: bool = False) -> None:
+                 coarse: bool = True, mirrored: bool = False, single: bool = False) -> None:
         n_pillars = compliance.size
         counts = self._layout(elements, pillar_of, n, compliance, h, e_star, mirrored)
         self.inv = np.zeros((n_pillars, self.m, self.m))
@@ -92,16 +119,20 @@ class BlockInverse:
             self.inv[group, :counts[p], :counts[p]] = np.linalg.inv(
                 self._block(p, np.arange(counts[p])))
         self._work = np.zeros((n_pillars, self.m))
-        # Large blocks are applied from packed upper triangles (BLAS dspmv):
-        # the application streams the stacked inverses from memory, and the
-        # packed copy halves the bytes (6.8 -> 3.6 ms for 64 blocks of 491).
-        self._packed = None
         self._remaining = counts.copy()  # attached elements per pillar
-        if self.m >= self.PACKED_MIN_BLOCK:
-            rows, cols = np.triu_indices(self.m)
-            order = np.lexsort((rows, cols))  # column-major upper packing
-            self._pack_index = rows[order] * self.m + cols[order]  # into a flat block
-            self._packed = np.ascontiguousarray(self.inv[:, rows[order], cols[order]])
+        self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
+        # The application streams the stacked inverses from memory.  Large
+        # blocks are applied from packed upper triangles (BLAS spmv), which
+        # halves the bytes (6.8 -> 3.6 ms for 64 blocks of 491); an operator
+        # with single-precision transforms applies a float32 copy instead
+        # (the float64 stack stays for downdates and `refined` solves).
+        self.single = single and self.interacting  # `_blocks_times` needs `_z`
+        packed_from = self.SINGLE_PACKED_MIN_BLOCK if self.single else self.PACKED_MIN_BLOCK
+        self._pack_index = _pack_index(self.m) if self.m >= packed_from else None
+        self._copy = None if self._pack_index is None and not self.single else np.zeros(
+            (n_pillars,) + ((self.m, self.m) if self._pack_index is None
+                            else self._pack_index.shape),
+            dtype=np.float32 if self.single else np.float64)
         self._drifted: set[int] = set()  # pillars whose c moved since the last factorisation
         # Elastic inverses H_p = K_pp^-1 of pillars that regained elements
         # (`attach`; pull-offs never attach, so they hold none), kept where
@@ -109,8 +140,8 @@ class BlockInverse:
         self._elastic: dict[int, np.ndarray] = {}
         self._bordering = 2.5 * self.inv.nbytes <= self.BORDER_BUDGET
         self.factorisations = 0
-        self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and self.interacting and n_pillars <= self.MAX_COARSE
+        self._refresh_copy(np.arange(n_pillars))
         if self.interacting:
             self._r, r_near = self._interaction(counts)
             self._bound = FarFieldBound(r_near)
@@ -205,6 +236,10 @@ class BlockInverse:
     #: Smallest block size applied from packed storage (one BLAS call per
     #: pillar; below it one batched matmul over all pillars is faster).
     PACKED_MIN_BLOCK = 128
+    #: ... in single precision, where the batched matmul is faster for
+    #: longer (one core, phi 0.12: 0.33 against 0.78 ms at m = 128, 1.06
+    #: against 0.82 ms at 256, 2.6 against 1.6 ms at 495).
+    SINGLE_PACKED_MIN_BLOCK = 256
     #: Largest pillar count with the N x N pillar interaction matrix.
     MAX_INTERACTION = 4000
     #: Refactorise E once this fraction of pillars changed c by > 25 %.
@@ -332,8 +367,8 @@ class BlockInverse:
         """
         max_block = cls.MAX_BLOCK if max_block is None else max_block
         m, stack_bytes = cls.stack_size(pillar_of)
-        copies = 1.5 if m >= cls.PACKED_MIN_BLOCK else 1.0
-        return m <= max_block and stack_bytes * copies <= budget_bytes
+        # the stack and its copy for the application: half its bytes at most
+        return m <= max_block and stack_bytes * 1.5 <= budget_bytes
 
     @staticmethod
     def stack_size(pillar_of: np.ndarray) -> tuple[int, float]:
@@ -562,9 +597,7 @@ class BlockInverse:
     def _refresh(self, touched: np.ndarray) -> None:
         """Packed copies, coarse vectors and (when drifted) the coarse factor
         of the pillars whose blocks changed."""
-        if self._packed is not None:
-            for p in touched:
-                np.take(self.inv[p].ravel(), self._pack_index, out=self._packed[p])
+        self._refresh_copy(touched)
         if self.interacting:
             for p in touched:  # views: a fancy-indexed copy of large blocks costs more
                 g = self.inv[p]
@@ -603,13 +636,34 @@ class BlockInverse:
         shift = self._bound.shift(np.abs(pillar_change))
         return (self._reach * shift[:, None]).ravel()[attached_pos]
 
+    def _refresh_copy(self, touched: np.ndarray) -> None:
+        """The application's copy of the touched pillars' inverses."""
+        if self._copy is None:
+            return
+        for p in touched:  # views: a fancy-indexed copy of large blocks costs more
+            g = self.inv[p]
+            self._copy[p] = g if self._pack_index is None else g.ravel()[self._pack_index]
+
     def _blocks_times(self, w: np.ndarray) -> np.ndarray:
-        """blockdiag(G_p) w for the stacked (N, m) vector w."""
-        if self._packed is None:
-            return np.matmul(self.inv, w[:, :, None])[:, :, 0]
-        z = np.zeros_like(w)
-        for p in np.flatnonzero(self._remaining):  # detached pillars have G_p = 0
-            z[p] = blas.dspmv(self.m, 1.0, self._packed[p], w[p])
+        """blockdiag(G_p) w for the stacked (N, m) vector w.
+
+        From the float32 copy while `single`, with each pillar's total
+        then set to its exact value (G_p 1)^T w_p: a soft spring makes
+        G_p nearly singular along 1 (the pillar's uniform mode, eigenvalue
+        ~1 / (m h^2 / k_p)), and float32 round-off of G_p's O(1) entries
+        would swamp that eigenvalue and could make the preconditioner
+        indefinite there.  The round-off left in the other directions is
+        ~1e-7 relative, as in the single-precision transforms.
+        """
+        if not self.single:  # a float64 copy is a packed one
+            if self._copy is None or self._copy.dtype != np.float64:
+                return _stack_times(self.inv, False, w, self._remaining)
+            return _stack_times(self._copy, True, w, self._remaining)
+        z = _stack_times(self._copy, self._pack_index is not None, w.astype(np.float32),
+                         self._remaining).astype(np.float64)
+        gap = (self._z * w).sum(axis=1) - z.sum(axis=1)  # z is 0 off the live slots
+        live = np.maximum(self._remaining, 1)
+        z += (gap / live)[:, None] * self._live
         return z
 
     def apply(self, r: np.ndarray, attached_pos: np.ndarray) -> np.ndarray:
