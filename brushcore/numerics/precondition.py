@@ -129,10 +129,12 @@ class BlockInverse:
         self.single = single and self.interacting  # `_blocks_times` needs `_z`
         packed_from = self.SINGLE_PACKED_MIN_BLOCK if self.single else self.PACKED_MIN_BLOCK
         self._pack_index = _pack_index(self.m) if self.m >= packed_from else None
-        self._copy = None if self._pack_index is None and not self.single else np.zeros(
-            (n_pillars,) + ((self.m, self.m) if self._pack_index is None
-                            else self._pack_index.shape),
-            dtype=np.float32 if self.single else np.float64)
+        self._copy = None  # what `_blocks_times` applies instead of `inv`
+        if self.single:
+            shape = (self.m, self.m) if self._pack_index is None else self._pack_index.shape
+            self._copy = np.zeros((n_pillars,) + shape, dtype=np.float32)
+        elif self._pack_index is not None:
+            self._copy = np.zeros((n_pillars,) + self._pack_index.shape)
         self._drifted: set[int] = set()  # pillars whose c moved since the last factorisation
         # Elastic inverses H_p = K_pp^-1 of pillars that regained elements
         # (`attach`; pull-offs never attach, so they hold none), kept where
@@ -595,8 +597,8 @@ class BlockInverse:
         _remove_slots(h, gone)
 
     def _refresh(self, touched: np.ndarray) -> None:
-        """Packed copies, coarse vectors and (when drifted) the coarse factor
-        of the pillars whose blocks changed."""
+        """The application's copy, coarse vectors and (when drifted) the
+        coarse factor of the pillars whose blocks changed."""
         self._refresh_copy(touched)
         if self.interacting:
             for p in touched:  # views: a fancy-indexed copy of large blocks costs more
