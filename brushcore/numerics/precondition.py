@@ -642,9 +642,11 @@ class BlockInverse:
         """The application's copy of the touched pillars' inverses."""
         if self._copy is None:
             return
-        for p in touched:  # views: a fancy-indexed copy of large blocks costs more
-            g = self.inv[p]
-            self._copy[p] = g if self._pack_index is None else g.ravel()[self._pack_index]
+        for p in touched:
+            if self._pack_index is None:
+                self._copy[p] = self.inv[p]
+            else:  # into the copy, casting, without a temporary
+                np.take(self.inv[p].ravel(), self._pack_index, out=self._copy[p])
 
     def _blocks_times(self, w: np.ndarray) -> np.ndarray:
         """blockdiag(G_p) w for the stacked (N, m) vector w.
