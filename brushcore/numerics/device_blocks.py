@@ -192,7 +192,7 @@ class DeviceBlocks(BlockInverse):
             ref = self._c_factor[touched]
             drift = np.abs(c - ref) > 0.25 * ref
             self._drifted.update(touched[drift].tolist())
-            if len(self._drifted) > self.REFACTOR_FRACTION * self._z.shape[0]:
+            if self._refactor_due():
                 self._factorise()
                 self._drifted = set()
 
