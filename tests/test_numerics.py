@@ -239,7 +239,7 @@ def test_two_level_preconditioner_is_spd_and_the_balancing_formula(single, seed)
     scale = np.abs(textbook).max()
     assert np.allclose(precise, textbook, rtol=1e-9, atol=1e-9 * scale)
     off = np.abs(p - textbook).max()
-    assert off < 1e-9 * scale if not single else 1e-12 * scale < off < 1e-5 * scale
+    assert (1e-12 * scale < off < 1e-5 * scale) if single else off < 1e-9 * scale
 
 
 def test_sherman_morrison_preconditioner_inverts_diagonal_plus_spring():
