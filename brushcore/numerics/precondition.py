@@ -370,8 +370,11 @@ class BlockInverse:
             self.coarse = False
             return
         # float32 copy for `single` applications: half the bytes to read, and
-        # at N = 1620 (10 MB) it can stay in the last-level cache
-        self._e_inverse_single = self._e_inverse.astype(np.float32) if self.single else None
+        # at N = 1620 (10 MB) it can stay in the last-level cache.  Made
+        # whenever the blocks' copy is float32 (the build-time choice), not
+        # by `single`, which `refined` turns off for a while.
+        single = self._copy is not None and self._copy.dtype == np.float32
+        self._e_inverse_single = self._e_inverse.astype(np.float32) if single else None
         self._c_factor = c
         self._c_inverse = np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
         self.factorisations += 1
