@@ -163,12 +163,20 @@ def test_progress_in_a_log_has_no_carriage_returns(tmp_path):
     assert "\r" not in text and re.fullmatch(r" +50\.0% detached, 3 events, +\S+ s\n", text)
 
 
+def _default_sigint() -> None:
+    """A child's default Ctrl-C, even where pytest runs as a background job
+    of a shell, whose children inherit SIGINT ignored (Python then keeps it
+    ignored and the job never sees the interrupt)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     out = tmp_path / "c.nc"
     proc = subprocess.Popen([sys.executable, "-m", "brushcore.cli", "simulate", "--layout",
                              "regular", "--pillars", "256", "--kbar", "0.455", "--grid", "512",
-                             "--out", str(out)], stderr=subprocess.PIPE, text=True)
-    first = proc.stderr.readline()  # printed after every check, before the ~10 s pull-off
+                             "--out", str(out)], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
+    first = proc.stderr.readline()  # printed after every check, before the ~5 s pull-off
     assert first.startswith("grid 512: pillar radius"), first
     time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
