@@ -108,7 +108,7 @@ class MirrorConvolver(HostBuffers):
         self.applications += 1
         m = self.n
         if self.backend == "pyfftw":
-            return self._pruned(self._work)
+            return self._pruned(self._work, self._work)
         import scipy.fft as sfft
 
         padded = np.zeros((self.full, self.full))
