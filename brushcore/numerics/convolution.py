@@ -100,9 +100,9 @@ def planner_flags(n: int) -> tuple[str, ...]:
     on one core, both plans in one process, alternating: 0.82-0.89x the
     time per application at n = 256, 512 and 1024 in single precision and
     at 512 in double, for 5, 12 and 40 s of planning (single precision),
-    once per machine (wisdom is cached on disk).  At n = 2048 it saves 2 % for 160 s of planning,
-    and below 256 its seconds of planning outweigh what a curve there
-    saves.  The mirrored quadrant's DCTs gained nothing (`MirrorConvolver`
+    once per machine (wisdom is cached on disk).  At n = 2048 it saves 2 %
+    for 160 s of planning, and below 256 its seconds of planning outweigh
+    what a curve there saves.  The mirrored quadrant's DCTs gained nothing (`MirrorConvolver`
     keeps FFTW_MEASURE, so regular brushes' results are unchanged).
     """
     return ("FFTW_PATIENT",) if n in PATIENT_GRIDS else ("FFTW_MEASURE",)

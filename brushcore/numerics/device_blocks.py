@@ -188,13 +188,8 @@ class DeviceBlocks(BlockInverse):
                     self._tilt[int(p), :, :] = self.inv[int(p), :, :] @ self._tilt_basis[int(p), :, :]
         if self.coarse:
             idx = self.backend.asarray(touched.astype(np.int64))
-            c = self.backend.to_host(xp.sum(xp.take(self._z, idx, axis=0), axis=1))
-            ref = self._c_factor[touched]
-            drift = np.abs(c - ref) > 0.25 * ref
-            self._drifted.update(touched[drift].tolist())
-            if self._refactor_due():
-                self._factorise()
-                self._drifted = set()
+            self._note_drift(touched, self.backend.to_host(
+                xp.sum(xp.take(self._z, idx, axis=0), axis=1)))
 
     def far_field_uncertainty(self, pillar_change: Any, attached_pos: Any) -> Any:
         """See `BlockInverse.far_field_uncertainty`."""

@@ -638,17 +638,18 @@ class BlockInverse:
                 if self._far:
                     self._tilt[p] = g @ self._tilt_basis[p]
         if self.coarse:
-            c = self._z[touched].sum(axis=1)
-            drift = np.abs(c - self._c_factor[touched]) > 0.25 * self._c_factor[touched]
-            self._drifted.update(touched[drift].tolist())
-            if self._refactor_due():
-                self._factorise()
-                self._drifted = set()
+            self._note_drift(touched, self._z[touched].sum(axis=1))
 
-    def _refactor_due(self) -> bool:
-        """Whether enough pillars drifted to refactorise E (REFACTOR_FRACTION)."""
+    def _note_drift(self, touched: np.ndarray, c: np.ndarray) -> None:
+        """Mark the touched pillars whose c (host values) moved by > 25 % since
+        the last factorisation, and refactorise E once enough have
+        (REFACTOR_FRACTION)."""
+        ref = self._c_factor[touched]
+        self._drifted.update(touched[np.abs(c - ref) > 0.25 * ref].tolist())
         n = self._z.shape[0]
-        return len(self._drifted) > self.REFACTOR_FRACTION * n * max(1.0, n / self.REFACTOR_PILLARS)
+        if len(self._drifted) > self.REFACTOR_FRACTION * n * max(1.0, n / self.REFACTOR_PILLARS):
+            self._factorise()
+            self._drifted = set()
 
     def far_field_uncertainty(self, pillar_change: np.ndarray,
                               attached_pos: np.ndarray) -> np.ndarray | None:
