@@ -11,8 +11,7 @@ from brushcore.model import theory
 from brushcore.numerics.cg import ConvergenceError, pcg
 from brushcore.numerics.convolution import HAVE_PYFFTW, Convolver, planner_flags
 from brushcore.numerics.mirror import MirrorConvolver
-from brushcore.numerics.kernel import (dense_influence_matrix, love_coefficient, offset_table,
-                                       symmetric_pairs, wrapped_kernel)
+from brushcore.numerics.kernel import dense_influence_matrix, love_coefficient
 from brushcore.numerics.operator import BrushOperator
 
 
@@ -26,44 +25,6 @@ def test_love_coefficient_matches_quadrature():
         assert love_coefficient(x, y, 1.0, 2.0) == pytest.approx(ref, rel=1e-7), (x, y)
     assert love_coefficient(0.0, 0.0, 1.0, 1.0) == pytest.approx(theory.self_compliance(1, 1),
                                                                  rel=1e-14)
-
-
-@pytest.mark.parametrize("h", [1.0, 0.5, 0.7])
-def test_offset_table_and_wrapped_kernel_equal_love_coefficients(h):
-    """The corner-lattice table (one f per corner) against Love's formula
-    per offset: the same numbers for h a power of two (exact corners), else
-    within the formula's own far-field round-off (its four terms cancel to
-    ~1e-10 of their size at 200 elements); the wrapped kernel reads it for
-    both signs of each offset."""
-    n, e_star = 200, 3.0
-    off = np.arange(n) * h
-    ref = love_coefficient(off[:, None], off[None, :], h, e_star)
-    table = offset_table(n, h, e_star)
-    if h in (1.0, 0.5):
-        assert np.array_equal(table, ref)
-    assert np.abs(table - ref).max() <= 1e-9 * np.abs(ref).max()
-    assert not table.flags.writeable  # shared between kernels and blocks
-    idx = np.arange(2 * n)
-    signed = np.where(idx < n, idx, idx - 2 * n) * h
-    direct = love_coefficient(signed[:, None], signed[None, :], h, e_star)
-    direct[n, :] = direct[:, n] = 0.0
-    assert np.abs(wrapped_kernel(n, h, e_star) - direct).max() <= 1e-9 * np.abs(ref).max()
-
-
-def test_symmetric_pairs_fills_both_triangles_from_one():
-    rng = np.random.default_rng(2)
-    y, x = rng.uniform(0, 50, (2, 9))
-    calls = []
-
-    def coefficient(i, j):
-        calls.append(i.size)
-        return love_coefficient(y[i] - y[j], x[i] - x[j], 1.0, 1.0)
-
-    full = love_coefficient(y[:, None] - y[None], x[:, None] - x[None], 1.0, 1.0)
-    np.fill_diagonal(full, 0.0)
-    out = symmetric_pairs(coefficient, 9)
-    assert calls == [36] and np.array_equal(out, out.T)
-    assert np.allclose(out, full, rtol=1e-13, atol=0.0)
 
 
 @pytest.mark.parametrize("n", [3, 7, 12])

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import image_coordinate, images, love_coefficient, symmetric_pairs
+from brushcore.numerics.kernel import image_coordinate, images, love_coefficient
 
 
 def near_influence(cy: np.ndarray, cx: np.ndarray, radius: np.ndarray, h: float,
@@ -36,14 +36,14 @@ def near_influence(cy: np.ndarray, cx: np.ndarray, radius: np.ndarray, h: float,
     (N, N) array [length / stress], zero on the diagonal (a pillar's own
     images belong to its own block or local solve).
     """
-    def influence(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        total = np.zeros(p.size)
-        for sy, sx in images(mirrored):  # |c_p - image(c_q)| = |c_q - image(c_p)|
-            iy, ix = image_coordinate(cy[q], sy, h), image_coordinate(cx[q], sx, h)
-            gap = np.maximum(np.hypot(cy[p] - iy, cx[p] - ix) - radius[p] - radius[q], h)
-            total += love_coefficient(gap, 0.0, h, e_star)
-        return total
-    return symmetric_pairs(influence, cy.size)
+    r_near = np.zeros((cy.size, cy.size))
+    for sy, sx in images(mirrored):
+        iy, ix = image_coordinate(cy, sy, h), image_coordinate(cx, sx, h)
+        dist = np.hypot(cy[:, None] - iy[None], cx[:, None] - ix[None])
+        gap = np.maximum(dist - radius[:, None] - radius[None, :], h)
+        r_near += love_coefficient(gap, 0.0, h, e_star)
+    np.fill_diagonal(r_near, 0.0)
+    return r_near
 
 
 class FarFieldBound:

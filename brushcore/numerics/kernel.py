@@ -13,8 +13,6 @@ asinh form avoids the cancellation of the usual log-ratio form far away.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from functools import lru_cache
 
 import numpy as np
 
@@ -49,38 +47,12 @@ def love_coefficient(x: np.ndarray, y: np.ndarray, h: float, e_star: float) -> n
     return u / (np.pi * e_star)
 
 
-@lru_cache(maxsize=4)
-def offset_table(size: int, h: float, e_star: float) -> np.ndarray:
-    """Love coefficients at the non-negative element offsets (i h, j h),
-    0 <= i, j < size, as a read-only array shared within a process.
-
-    `love_coefficient` evaluates f at the four corners of every offset's
-    square; neighbouring offsets share corners, so f is evaluated once per
-    point of the (size + 1)^2 corner lattice ((k - 1/2) h) and differenced:
-    a quarter of the work, the same numbers where h is a power of two (the
-    corners are then exact).  The convolution kernels and the block tables
-    of one grid share the table.
-
-    Returns
-    -------
-    numpy.ndarray, shape (size, size)
-        Displacement per unit pressure [length / stress].
-    """
-    corner = (np.arange(size + 1) - 0.5) * h
-    f = _f(corner[:, None], corner[None, :])
-    table = f[1:, 1:] - f[1:, :-1] - f[:-1, 1:] + f[:-1, :-1]
-    table /= np.pi * e_star
-    table.flags.writeable = False
-    return table
-
-
 def wrapped_kernel(n: int, h: float, e_star: float) -> np.ndarray:
     """Influence coefficients on the 2n x 2n DC-FFT grid in wrap-around order.
 
     Row/column i holds offset i h for i < n and (i - 2n) h for i > n; the
     middle line i = n is never reached by a non-periodic n x n convolution
-    and is set to zero (Liu, Wang & Liu, Wear 243 (2000) 101).  The kernel
-    is even in both offsets, so both halves read `offset_table`.
+    and is set to zero (Liu, Wang & Liu, Wear 243 (2000) 101).
 
     Returns
     -------
@@ -88,24 +60,11 @@ def wrapped_kernel(n: int, h: float, e_star: float) -> np.ndarray:
         Kernel [length / stress].
     """
     idx = np.arange(2 * n)
-    span = np.where(idx < n, idx, 2 * n - idx)  # |offset|; n at the middle line
-    span[n] = 0
-    kern = offset_table(n, h, e_star)[span[:, None], span[None, :]]
+    off = np.where(idx < n, idx, idx - 2 * n).astype(float) * h
+    kern = love_coefficient(off[:, None], off[None, :], h, e_star)
     kern[n, :] = 0.0
     kern[:, n] = 0.0
     return kern
-
-
-def symmetric_pairs(coefficient: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                    count: int) -> np.ndarray:
-    """A symmetric (count, count) matrix with zero diagonal from
-    ``coefficient(i, j)`` (index arrays), evaluated once per pair i < j:
-    half the work of the full matrix, and exactly symmetric."""
-    i, j = np.triu_indices(count, 1)
-    out = np.zeros((count, count))
-    out[i, j] = coefficient(i, j)
-    out[j, i] = out[i, j]
-    return out
 
 
 def dense_influence_matrix(n: int, h: float, e_star: float) -> np.ndarray:

@@ -40,8 +40,7 @@ from scipy.linalg import blas
 
 from brushcore.numerics.backend import CPU
 from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import (folded_coefficient, love_coefficient, offset_table,
-                                       symmetric_pairs)
+from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 from brushcore.numerics.multipole import field_terms
 
 
@@ -203,7 +202,8 @@ class BlockInverse:
         self._ixx.ravel()[self.pos] = ix
         # Blocks look their coefficients up at integer offsets: evaluating Love's
         # formula for m^2 pairs per pillar costs more than inverting at m ~ 2000.
-        self._table = offset_table(2 * n if mirrored else n, h, e_star)
+        off = np.arange(2 * n if mirrored else n) * h
+        self._table = love_coefficient(off[:, None], off[None, :], h, e_star)
         self._compliance = np.asarray(compliance, dtype=float)
         self._live = np.arange(self.m)[None, :] < counts[:, None]  # attached slots
         return counts
@@ -229,7 +229,8 @@ class BlockInverse:
         cx = xx.sum(axis=1) / counts
         self._centroids = cy, cx  # also for `_near_pillars`
         # Diagonals are zero: a pillar's own images are in its block.
-        r = symmetric_pairs(lambda i, j: self._influence(cy[i], cx[i], cy[j], cx[j]), cy.size)
+        r = self._influence(cy[:, None], cx[:, None], cy[None], cx[None])
+        np.fill_diagonal(r, 0.0)
         # For the uncertainty bound: the influence at the closest approach
         # of two footprints, not at their centroids (close random pillars).
         reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import offset_table
+from brushcore.numerics.kernel import love_coefficient
 
 
 class TileCoarse:
@@ -82,7 +82,8 @@ class TileCoarse:
                                 np.cumsum(np.bincount(pillar_of, minlength=n_pillars))[:-1])
         self._live = np.ones(elements.size, dtype=bool)
         self.counts = np.bincount(self.tile_of, minlength=n_pillars * self.mc).astype(float)
-        self._table = offset_table(n, h, e_star)
+        self._table = love_coefficient(np.arange(n)[:, None] * h, np.arange(n)[None, :] * h,
+                                       h, e_star)
         self._compliance = np.asarray(compliance, dtype=float)
         self.kc = np.zeros((n_pillars, self.mc, self.mc))
         shapes: dict[bytes, list[int]] = {}
