@@ -76,6 +76,20 @@ def _spread(op: BrushOperator, x: np.ndarray) -> np.ndarray:
     return full
 
 
+def far_field_bound(op: BrushOperator, sigma1: np.ndarray,
+                    reference: np.ndarray) -> np.ndarray | None:
+    """How far the other pillars' far field can move each attached element's
+    stress since the last global solve (``reference``, see `_spread`):
+    FAR_FIELD_SAFETY times `BrushOperator.far_field_uncertainty` of the
+    pillars' summed |change|; None without a local solver.  The far-field
+    part of `_certain_detachments`' margin, without the solve's noise."""
+    xp = op.backend.xp
+    moved = xp.abs(_spread(op, sigma1) - reference)
+    change = op.backend.bincount(op.pillar_of, weights=moved, minlength=op.n_pillars)
+    bound = op.far_field_uncertainty(change)
+    return None if bound is None else FAR_FIELD_SAFETY * bound
+
+
 def _certain_detachments(op: BrushOperator, sigma1: np.ndarray, threshold: float,
                          reference: np.ndarray, noise: float) -> np.ndarray | None:
     """Elements that exceed the threshold whatever the far field does, or None.
@@ -93,12 +107,10 @@ def _certain_detachments(op: BrushOperator, sigma1: np.ndarray, threshold: float
     which moves a neighbour's stresses all the same.
     """
     xp = op.backend.xp
-    moved = xp.abs(_spread(op, sigma1) - reference)
-    change = op.backend.bincount(op.pillar_of, weights=moved, minlength=op.n_pillars)
-    bound = op.far_field_uncertainty(change)
+    bound = far_field_bound(op, sigma1, reference)
     if bound is None:
         return None
-    bound = FAR_FIELD_SAFETY * bound + noise
+    bound = bound + noise
     over = sigma1 - bound >= threshold
     unsure = (sigma1 + bound >= threshold) & ~over
     return None if bool(xp.any(unsure)) else over
