@@ -33,7 +33,7 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
          "lookahead": "--lookahead", "cascade": "--cascade", "symmetry": "--no-symmetry", "threads": "--threads",
          "precision": "--precision", "early_decisions": "--no-early-decisions",
-         "settle_decisions": "--no-settle-decisions",
+         "settle_decisions": "--no-settle-decisions", "fft_library": "--fft-library",
          "out": "--out", "allow_coarse": "--allow-coarse", "shape": "--shape",
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
@@ -164,6 +164,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="FFT precision on the CPU: mixed = single-precision transforms, "
                           "the rest double (needs --rtol >= 1e-6); auto = mixed for random "
                           "layouts at --rtol >= 1e-6, else double")
+    sim.add_argument("--fft-library", choices=("auto", "fftw", "mkl"),
+                     default=SolverOptions.fft_library,
+                     help="whose FFTs the whole grid runs on: mkl needs "
+                          "pip install 'brushcore[mkl]' (one thread, faster on Intel CPUs); "
+                          "auto = mkl where installed and --threads is 1, else fftw")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",
@@ -273,7 +278,8 @@ def _simulate(args: argparse.Namespace) -> int:
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,
                                 early_decisions=args.early_decisions,
-                                settle_decisions=args.settle_decisions)
+                                settle_decisions=args.settle_decisions,
+                                fft_library=args.fft_library)
         if args.threads < 1:
             raise ParameterError("threads", args.threads, "an integer >= 1")
         check_output_path(args.out)

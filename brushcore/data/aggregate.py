@@ -70,7 +70,8 @@ ATTRIBUTE_SCALARS = {
 SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols")
 #: ... and those that may differ (numerics): kept as attributes, distinct values joined by "; ".
 SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "symmetry",
-                     "precision", "fft_precision", "early_decisions",
+                     "precision", "fft_precision", "fft_library", "fft_library_used",
+                     "early_decisions",
                      "settle_decisions", "allow_coarse")
 #: Per-step curves, NaN-padded to the longest curve of the sweep.
 CURVE_VARIABLES = (

@@ -120,7 +120,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
         conv = grid_convolver(params, backend, options)
         grid_labels = labels
         double = partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
-                         False)
+                         False, options.fft_library_for(fft_threads()))
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                        single_transforms(params, options, folded=True))
@@ -160,12 +160,23 @@ def single_transforms(params: BrushParams, options: SolverOptions, folded: bool)
     return HAVE_PYFFTW and options.single_transforms(symmetric)
 
 
+def fft_library_used(options: SolverOptions, backend: Backend, symmetry_fold: int) -> str:
+    """What a run's transforms ran on: "mkl", "fftw", "scipy" (FFTW missing)
+    or "cupy" (a device)."""
+    if not backend.on_host:
+        return "cupy"
+    if symmetry_fold == 1 and options.fft_library_for(fft_threads()) == "mkl":
+        return "mkl"
+    return "fftw" if HAVE_PYFFTW else "scipy"
+
+
 def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
     """The whole-grid convolver for ``backend`` (cached per process); a device
     always transforms in double precision."""
     if backend.on_host:
         return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
-                                single_transforms(params, options, folded=False))
+                                single_transforms(params, options, folded=False),
+                                options.fft_library_for(fft_threads()))
     return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 
@@ -262,6 +273,8 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         # what "auto" resolved to; a device is always double
         "fft_precision": ("single" if backend.on_host and single_transforms(
             params, options, folded=symmetry_fold > 1) else "double"),
+        # whose transforms the whole grid ran on (a quadrant: FFTW's DCTs)
+        "fft_library_used": fft_library_used(options, backend, symmetry_fold),
         "device_name": backend.device_name,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),

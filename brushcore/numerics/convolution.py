@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brushcore.numerics import mkl
 from brushcore.numerics.backend import CPU
 from brushcore.numerics.kernel import wrapped_kernel
 
@@ -139,7 +140,7 @@ class HostBuffers:
     @property
     def real_dtype(self) -> str:
         """Precision of the planned transforms: float32 with ``single``."""
-        return "float32" if self.single and self.backend == "pyfftw" else "float64"
+        return "float32" if self.single and self.backend in ("pyfftw", "mkl") else "float64"
 
     def _pruned(self, work: np.ndarray, product: np.ndarray) -> np.ndarray:
         """The planned pyfftw transforms: rows of the n data rows only, columns
@@ -172,16 +173,18 @@ class Convolver(HostBuffers):
     e_star : effective modulus E* [stress]
     threads : FFTW threads
     use_pyfftw : use pyfftw when available (False forces scipy.fft)
-    single : single-precision transforms (pyfftw only; 1.4-1.8x faster,
+    single : single-precision transforms (pyfftw and MKL; 1.4-1.8x faster,
         relative error ~1e-7, see `SolverOptions.precision`); the scipy
         fallback stays in double precision
+    library : "fftw" (pyfftw, or scipy.fft where it is missing) or "mkl"
+        (`brushcore.numerics.mkl`, one thread; see `SolverOptions.fft_library`)
     """
 
     #: A plain grid: no mirror images (see `brushcore.numerics.mirror`).
     mirrored = False
 
     def __init__(self, n: int, h: float = 1.0, e_star: float = 1.0, threads: int = 1,
-                 use_pyfftw: bool = True, single: bool = False) -> None:
+                 use_pyfftw: bool = True, single: bool = False, library: str = "fftw") -> None:
         self.n = n
         self.threads = threads
         self.single = single
@@ -189,8 +192,19 @@ class Convolver(HostBuffers):
         spectrum = np.fft.rfft2(wrapped_kernel(n, h, e_star))
         # The wrapped kernel is even in both axes, so its spectrum is real.
         self.spectrum = np.ascontiguousarray(spectrum.real)
-        self.backend = "pyfftw" if (use_pyfftw and HAVE_PYFFTW) else "scipy"
-        if self.backend == "pyfftw":
+        if library == "mkl":
+            self.backend = "mkl"
+        else:
+            self.backend = "pyfftw" if (use_pyfftw and HAVE_PYFFTW) else "scipy"
+        if self.backend == "mkl":
+            real = self.real_dtype
+            self._real_in = np.zeros((n, 2 * n), dtype=real)
+            self._half = np.zeros((2 * n, n + 1), dtype="complex64" if real == "float32"
+                                  else "complex128")
+            self._real_out = np.zeros((n, 2 * n), dtype=real)
+            # MKL's backward transforms are normalised: the kernel stays unscaled.
+            self._scaled = np.repeat(self.spectrum.astype(real), 2, axis=1)
+        elif self.backend == "pyfftw":
             self._plan()
             # FFTW transforms are unnormalised: fold 1/(2n)^2 into the kernel.
             # Repeated for each (re, im) pair, the product is a real one on the
@@ -247,6 +261,8 @@ class Convolver(HostBuffers):
         """
         self.applications += 1
         n = self.n
+        if self.backend == "mkl":
+            return mkl.pruned_pair(self._real_in, self._half, self._scaled, self._real_out)
         if self.backend == "pyfftw":
             return self._pruned(self._half, self._half_real)
         import scipy.fft as sfft
@@ -259,6 +275,7 @@ class Convolver(HostBuffers):
 
 @lru_cache(maxsize=4)
 def cached_convolver(n: int, h: float, e_star: float, threads: int,
-                     single: bool = False) -> Convolver:
-    """One Convolver per (grid, h, E*, threads, precision) in a process: plans are costly."""
-    return Convolver(n, h, e_star, threads, single=single)
+                     single: bool = False, library: str = "fftw") -> Convolver:
+    """One Convolver per (grid, h, E*, threads, precision, library) in a
+    process: plans are costly."""
+    return Convolver(n, h, e_star, threads, single=single, library=library)
