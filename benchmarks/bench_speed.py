@@ -5,6 +5,7 @@
     python benchmarks/bench_speed.py fine --grid 2048 --threads 2 regular:2304:0.455 ...
 
 ``ratio``: ms of one operator application on the whole grid (pruned DC-FFT)
+on FFTW and, where mkl_fft is installed, on MKL (``SolverOptions.fft_library``),
 and on the quadrant of a mirror-symmetric brush (DCT-II/III), in double and
 in single precision (the default, ``SolverOptions.precision``), beside a
 bare double-precision pyfftw r2c + c2r pair of the padded 2n x 2n grid; one
@@ -35,6 +36,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from brushcore import BrushParams, SolverOptions, simulate
+from brushcore.numerics import mkl
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.mirror import MirrorConvolver
 from brushcore.numerics.threads import pin_threads
@@ -53,13 +55,16 @@ def _ms(conv, fill: int, repeats: int = 20) -> float:
 
 
 def ratio(grids: list[int]) -> None:
+    libraries = ("fftw", "mkl") if mkl.available() else ("fftw",)
     print("ratio = ms / bare double FFT pair; 64 = double, 32 = single-precision transforms")
-    print(f"{'grid':>6} {'pair ms':>8} {'whole 64':>9} {'whole 32':>9} {'quad 64':>8} "
-          f"{'quad 32':>8}")
+    print(f"{'grid':>6} {'pair ms':>8} " + " ".join(
+        f"{lib + ' ' + str(b):>9}" for lib in libraries for b in (64, 32))
+        + f" {'quad 64':>8} {'quad 32':>8}")
     with threadpool_limits(1):
         for n in grids:
             pair = bare_fft_pair_ms(n, 10)
-            cells = [_ms(Convolver(n, single=single), n) for single in (False, True)]
+            cells = [_ms(Convolver(n, single=single, library=lib), n)
+                     for lib in libraries for single in (False, True)]
             cells += [_ms(MirrorConvolver(n, single=single), n // 2) for single in (False, True)]
             print(f"{n:6d} {pair:8.2f} " + " ".join(f"{c / pair:8.2f}" for c in cells)
                   + "   (ms: " + ", ".join(f"{c:.2f}" for c in cells) + ")", flush=True)
