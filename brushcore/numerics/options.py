@@ -84,8 +84,8 @@ class SolverOptions:
         workflow's ``threads``), else "fftw".  The two round differently,
         so curves agree to round-off and not to the bit (F_ad, W within
         1e-5 on soft random brushes, whose cascades follow near-ties).  The
-        mirror quadrant's DCTs (regular brushes) and the tiles' pillar
-        solves stay on FFTW, a GPU on CuPy.
+        mirror quadrant's DCTs (regular brushes) stay on FFTW, the tiles'
+        pillar solves on scipy.fft, a GPU on CuPy.
     """
 
     rtol: float = 1e-4
