@@ -82,8 +82,9 @@ class SolverOptions:
         a soft random curve 25-27 % faster.  "auto" is "mkl" where it is
         installed and the FFTs run one thread (BRUSHCORE_THREADS, the
         workflow's ``threads``), else "fftw".  The two round differently,
-        so curves agree to round-off and not to the bit (F_ad, W within
-        1e-5 on soft random brushes, whose cascades follow near-ties).  The
+        so curves agree to round-off and not to the bit (over the default
+        sweep F_ad within 3.8e-6, W within 5.0e-5: soft random brushes'
+        cascades follow near-ties).  The
         mirror quadrant's DCTs (regular brushes) stay on FFTW, the tiles'
         pillar solves on scipy.fft, a GPU on CuPy.
     """
