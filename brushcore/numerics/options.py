@@ -85,9 +85,9 @@ class SolverOptions:
         so curves agree to round-off and not to the bit (over the default
         sweep F_ad within 3.8e-6, W within 5.0e-5 but on one soft random
         curve, whose near-ties give it two W 3.4e-4 apart between two sets
-        of FFTW plans as well).  The
-        mirror quadrant's DCTs (regular brushes) stay on FFTW, the tiles'
-        pillar solves on scipy.fft, a GPU on CuPy.
+        of FFTW plans as well).  The mirror quadrant's DCTs (regular
+        brushes) stay on FFTW, the tiles' pillar solves on scipy.fft, a GPU
+        on CuPy.
     """
 
     rtol: float = 1e-4
