@@ -106,9 +106,10 @@ class BrushOperator:
             self._tpos = self.tiles.tile_of[self.attached]
         self.pl = self.pillar_of[self.attached]
         self.counts = self.backend.bincount(self.pl, minlength=self.n_pillars)
-        # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
-        s = self.compliance
-        self._sm = (s / (self.diag + s * xp.astype(self.counts, xp.float64)))[self.pl]
+        if self.block is None and self.tiles is None:
+            # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
+            s = self.compliance
+            self._sm = (s / (self.diag + s * xp.astype(self.counts, xp.float64)))[self.pl]
 
     @property
     def size(self) -> int:

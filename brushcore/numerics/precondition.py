@@ -747,7 +747,7 @@ class BlockInverse:
                 y1 = self._e_inverse @ t
             w.ravel()[attached_pos] -= (t * self._c_inverse)[attached_pos // self.m]
         z = self._blocks_times(w)
-        w.ravel()[attached_pos] = 0.0
+        w.fill(0.0)  # a memset, not a scatter: zero off the attached slots too
         if self.coarse:
             z += self._z * (y1 - z.sum(axis=1) * self._c_inverse)[:, None]
-        return z.ravel()[attached_pos]
+        return z.take(attached_pos)
