@@ -462,8 +462,8 @@ class BlockInverse:
             sources = self._neighbour_response(touched, live_before, before)
             if self._far:
                 self._far_response(sources)
-        out = w.ravel()[attached_pos].copy()
-        w.ravel()[attached_pos] = 0.0
+        out = w.take(attached_pos)
+        w.fill(0.0)
         return out
 
     def _neighbour_response(self, touched: np.ndarray, live_before: np.ndarray,
