@@ -161,6 +161,29 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, see
     assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
 
 
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_one_slot_downdates_and_reach_follow_the_exact_inverses(seed):
+    """Elements detached one at a time (`_remove_slots`' in-place one-slot
+    path, most cascade rounds) leave each pillar's exact block inverse, as
+    the many-slot path above does, and `reach()` is sum |G| of the blocks
+    as they are now (it is brought up to date lazily)."""
+    rng, labels, compliance = _random_problem(seed)
+    op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
+    for _ in range(6):
+        if op.size < 3:
+            break
+        drop = np.zeros(op.size, dtype=bool)
+        drop[rng.integers(1, op.size)] = True
+        op.detach(drop)
+    dense = _dense_operator(labels, compliance, op.attached)
+    pl = op.pl
+    blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
+    r = rng.standard_normal(op.size)
+    assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+    assert np.array_equal(op.block.reach(), np.abs(op.block.inv).sum(axis=2))
+
+
 @pytest.mark.parametrize("packed", [False, True], ids=["matmul", "packed"])
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))

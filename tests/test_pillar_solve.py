@@ -75,10 +75,10 @@ def test_reach_bound_holds_on_dense_blocks(kbar):
     compliance = np.full(16, 0.0 if np.isinf(kbar) else 1.0 / (kbar * 128))
     block = BlockInverse(elements, pillar_of, 128, compliance, 1.0, 1.0)
     diag = float(love_coefficient(0.0, 0.0, 1.0, 1.0))
-    whole = (block._reach * diag)[block._live]
+    whole = (block.reach() * diag)[block._live]
     rng = np.random.default_rng(1)
     block.detach(np.flatnonzero(rng.random(elements.size) < 0.4))
-    ragged = (block._reach * diag)[block._live]
+    ragged = (block.reach() * diag)[block._live]
     assert whole.max() <= PillarSolver.REACH and ragged.max() <= PillarSolver.REACH
     assert whole.max() > 0.8 * PillarSolver.REACH  # and it is not loose
 

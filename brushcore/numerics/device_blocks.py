@@ -191,6 +191,10 @@ class DeviceBlocks(BlockInverse):
             self._note_drift(touched, self.backend.to_host(
                 xp.sum(xp.take(self._z, idx, axis=0), axis=1)))
 
+    def reach(self) -> Any:
+        """See `BlockInverse.reach` (kept up to date by `_refresh` here)."""
+        return self._reach
+
     def far_field_uncertainty(self, pillar_change: Any, attached_pos: Any) -> Any:
         """See `BlockInverse.far_field_uncertainty`."""
         xp = self.backend.xp

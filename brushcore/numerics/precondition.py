@@ -683,10 +683,18 @@ class BlockInverse:
         if not self.interacting:
             return None if self.inv.shape[0] > 1 else np.zeros(attached_pos.size)
         shift = self._bound.shift(np.abs(pillar_change))
+        return (self.reach() * shift[:, None]).ravel()[attached_pos]
+
+    def reach(self) -> np.ndarray:
+        """sum_j |G_p[i, j]| per pillar and slot, shape (N, m) [stress /
+        length]: each element's largest stress response to a unit
+        displacement of any shape over its pillar (see
+        `far_field_uncertainty`), brought up to date for the pillars whose
+        blocks changed since it was last read."""
         for p in self._reach_stale:
             self._reach[p] = np.abs(self.inv[p]).sum(axis=1)
         self._reach_stale.clear()
-        return (self._reach * shift[:, None]).ravel()[attached_pos]
+        return self._reach
 
     def _refresh_copy(self, touched: np.ndarray) -> None:
         """The application's copy of the touched pillars' inverses."""
