@@ -138,6 +138,16 @@ def test_operator_symmetric_and_matches_dense(seed, use_block):
     assert np.all(np.linalg.eigvalsh(dense) > 0), "operator must be positive definite"
 
 
+def _assert_exact_block_inverse(op, labels, compliance, rng) -> None:
+    """op's preconditioner is the inverse of its operator's per-pillar blocks
+    (dense, over the attached elements), checked on a random vector."""
+    dense = _dense_operator(labels, compliance, op.attached)
+    pl = op.pl
+    blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
+    r = rng.standard_normal(op.size)
+    assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+
+
 @pytest.mark.parametrize("packed", [False, True], ids=["matmul", "packed"])
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
@@ -154,11 +164,7 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, see
         drop = rng.random(op.size) < 0.3
         drop[0] = False
         op.detach(drop)
-    dense = _dense_operator(labels, compliance, op.attached)
-    pl = op.pl
-    blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
-    r = rng.standard_normal(op.size)
-    assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+    _assert_exact_block_inverse(op, labels, compliance, rng)
 
 
 @settings(max_examples=10, deadline=None)
@@ -176,11 +182,7 @@ def test_one_slot_downdates_and_reach_follow_the_exact_inverses(seed):
         drop = np.zeros(op.size, dtype=bool)
         drop[rng.integers(1, op.size)] = True
         op.detach(drop)
-    dense = _dense_operator(labels, compliance, op.attached)
-    pl = op.pl
-    blocks = np.where(pl[:, None] == pl[None, :], dense, 0.0)
-    r = rng.standard_normal(op.size)
-    assert np.allclose(op.precondition(r), np.linalg.solve(blocks, r), rtol=1e-9, atol=1e-9)
+    _assert_exact_block_inverse(op, labels, compliance, rng)
     assert np.array_equal(op.block.reach(), np.abs(op.block.inv).sum(axis=2))
 
 
