@@ -172,11 +172,12 @@ class BlockInverse:
             self._r, r_near = self._interaction(counts)
             self._bound = FarFieldBound(r_near)
             self._z = self.inv.sum(axis=2)
-            self._reach = np.abs(self.inv).sum(axis=2)  # see far_field_uncertainty
-            # Pillars whose _reach is out of date: only a certificate reads it,
-            # and most rounds try none (`pulloff._Backoff`), so it is brought
-            # up to date there (a pass over a block of 495 costs ~0.5 ms).
-            self._reach_stale: set[int] = set()
+            # sum |G_p| per slot (see `reach`), for the pillars not in
+            # _reach_stale: only a certificate reads it, and most rounds try
+            # none (`pulloff._Backoff`), so `reach` computes it there (a pass
+            # over a block of 495 costs ~0.5 ms), not at every downdate.
+            self._reach = np.zeros_like(self._z)
+            self._reach_stale: set[int] = set(range(n_pillars))
             # max_p sum_q R_pq c_q: the far-field displacement of a pillar
             # when all pillars carry their own unit-displacement load.
             self.coupling = float((self._r @ self._z.sum(axis=1)).max())
