@@ -94,14 +94,21 @@ def test_preconditioner_is_symmetric_positive_definite_with_a_stale_inverse():
 
 
 def test_tile_size_bounds_the_tiles_per_pillar(monkeypatch):
+    """The smallest tile side whose stack of coarse inverses stays within
+    STACK_PER_CELL entries per grid cell, and within MAX_TILES a pillar."""
     labels = build_labels(BrushParams(layout="regular", n_pillars=4, kbar=1.0, grid=128))
     flat = labels.ravel()
-    elements = np.flatnonzero(flat >= 0)
-    assert tile_size(elements, flat[elements], 128) == 2  # 491 elements: 135 tiles
-    monkeypatch.setattr(TileCoarse, "MAX_TILES", 60)
-    a = tile_size(elements, flat[elements], 128)
-    tiles = TileCoarse(elements, flat[elements], 128, np.zeros(4), 1.0, 1.0)
-    assert a == tiles.a and tiles.mc <= 60 < max_tiles(elements, flat[elements], 128, a - 1)
+    elements, pillar_of = np.flatnonzero(flat >= 0), flat[np.flatnonzero(flat >= 0)]
+    assert max_tiles(elements, pillar_of, 128, 2) == 132  # 4 x 132^2 <= 5 x 128^2
+    assert tile_size(elements, pillar_of, 128) == 2
+    monkeypatch.setattr(TileCoarse, "STACK_PER_CELL", 2.0)  # 4 x 132^2 > 2 x 128^2
+    tiles = TileCoarse(elements, pillar_of, 128, np.zeros(4), 1.0, 1.0)
+    assert tiles.a == tile_size(elements, pillar_of, 128) == 3
+    assert 4 * tiles.mc ** 2 <= 2.0 * 128 ** 2
+    monkeypatch.setattr(TileCoarse, "MAX_TILES", 30)
+    a = tile_size(elements, pillar_of, 128)
+    tiles = TileCoarse(elements, pillar_of, 128, np.zeros(4), 1.0, 1.0)
+    assert a == tiles.a and tiles.mc <= 30 < max_tiles(elements, pillar_of, 128, a - 1)
 
 
 def _first_solve_iterations(op: BrushOperator) -> int:
@@ -125,13 +132,16 @@ def test_tiles_cut_iterations_where_dense_blocks_do_not_fit(kbar):
     assert 2 * _first_solve_iterations(tiled) <= _first_solve_iterations(jacobi)
 
 
-@pytest.mark.parametrize("kbar", [np.inf, 1e-3])
-def test_pull_off_with_tiles_matches_exact(monkeypatch, kbar):
+@pytest.mark.parametrize("kbar, stack", [(np.inf, 2.0), (1e-3, 2.0), (1e-3, 0.2)])
+def test_pull_off_with_tiles_matches_exact(monkeypatch, kbar, stack):
     """The whole pull-off on the tile path agrees with the exact settings
-    (dense blocks, global cascades, CG to 1e-8) within 2e-4 (measured 2e-5)."""
+    (dense blocks, global cascades, CG to 1e-8) within 2e-4 (measured 2e-5),
+    also with the larger tiles (a = 4 instead of 2) that a smaller stack
+    per grid cell asks for."""
     params = BrushParams(layout="regular", n_pillars=64, kbar=kbar, grid=256)
     exact = simulate(params, SolverOptions.exact())
     monkeypatch.setattr(BlockInverse, "fits", classmethod(lambda cls, *a, **k: False))
+    monkeypatch.setattr(TileCoarse, "STACK_PER_CELL", stack)
     tiled = simulate(params)
     for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
         assert float(tiled[name]) == pytest.approx(float(exact[name]), rel=2e-4), name

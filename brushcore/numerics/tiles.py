@@ -23,8 +23,17 @@ makes it work: added to them (additive two-level) it leaves CG where it was.
 Measured on the first solve of the 8 x 8 brush (rigid and k = 1e-3): 11-14
 iterations at a = 2-4 against 37-54 for Jacobi with Sherman-Morrison and 4-7
 for the dense blocks, the same at 512^2 and 1024^2: the count depends on a,
-not on m.  a is chosen so that a pillar has at most MAX_TILES tiles, which
-bounds memory by N MAX_TILES^2 whatever the pillar size.
+not on m.  Each application streams the stacked inverses, N mc^2 numbers
+for mc tiles a pillar (0.5-0.8 ns each, against 20-40 ns a grid cell for
+the padded FFTs), so a is the smallest side >= 2 that keeps them within
+STACK_PER_CELL numbers per cell of the n x n grid, about a tenth of the
+application, and at most MAX_TILES tiles a pillar (memory, N MAX_TILES^2
+whatever the pillar size).  Larger tiles cost a few iterations (first
+solve from zero to rtol 1e-6, random 64 rigid: 16 / 15 / 16 / 17 / 23 at
+a = 2 / 3 / 4 / 5 / 8 on 1024^2, 17 / 19 / 21 at a = 3 / 5 / 6 on 2048^2),
+so the bound is where fewer bytes stop paying: on 1024^2, 517 tiles a
+pillar at a = 2 took 12.9 ms an application beside 20 ms of FFTs, 243 at
+a = 3 about a fifth of that.
 
 K_c is kept exact as elements detach or attach (one row of K per changed
 element, aggregated by tile: m^2 over a whole curve), and its inverse is
@@ -55,6 +64,8 @@ class TileCoarse:
 
     #: Most tiles a pillar may have (bounds the memory per pillar to 8 MB twice).
     MAX_TILES = 1024
+    #: Most stacked coarse-inverse entries, N mc^2, per cell of the n x n grid.
+    STACK_PER_CELL = 5.0
     #: Refresh a pillar's inverse once its attached count moved by this fraction.
     REFRESH = 0.1
     #: Rows of K gathered at once during assembly (bounds the temporary to ~100 MB).
@@ -223,8 +234,11 @@ def max_tiles(elements: np.ndarray, pillar_of: np.ndarray, n: int, a: int) -> in
 
 
 def tile_size(elements: np.ndarray, pillar_of: np.ndarray, n: int) -> int:
-    """Smallest tile side a >= 2 [elements] giving at most MAX_TILES tiles a pillar."""
+    """Smallest tile side a >= 2 [elements] giving at most MAX_TILES tiles a
+    pillar and a stack of N mc^2 <= STACK_PER_CELL n^2 coarse entries."""
+    n_pillars = int(pillar_of.max()) + 1
+    most = min(TileCoarse.MAX_TILES, int(np.sqrt(TileCoarse.STACK_PER_CELL * n * n / n_pillars)))
     a = 2
-    while max_tiles(elements, pillar_of, n, a) > TileCoarse.MAX_TILES:
+    while max_tiles(elements, pillar_of, n, a) > most:
         a += 1
     return a
