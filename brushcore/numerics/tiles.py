@@ -24,7 +24,7 @@ Measured on the first solve of the 8 x 8 brush (rigid and k = 1e-3): 11-14
 iterations at a = 2-4 against 37-54 for Jacobi with Sherman-Morrison and 4-7
 for the dense blocks, the same at 512^2 and 1024^2: the count depends on a,
 not on m.  Each application streams the stacked inverses, N mc^2 numbers
-for mc tiles a pillar (0.5-0.8 ns each, against 20-40 ns a grid cell for
+for mc tiles a pillar (0.45-0.8 ns each, against 20-40 ns a grid cell for
 the padded FFTs), so a is the smallest side >= 2 that keeps them within
 STACK_PER_CELL numbers per cell of the n x n grid, about a tenth of the
 application, and at most MAX_TILES tiles a pillar (memory, N MAX_TILES^2
