@@ -33,7 +33,7 @@ solve from zero to rtol 1e-6, random 64 rigid: 16 / 15 / 16 / 17 / 23 at
 a = 2 / 3 / 4 / 5 / 8 on 1024^2, 17 / 19 / 21 at a = 3 / 5 / 6 on 2048^2),
 so the bound is where fewer bytes stop paying: on 1024^2, 517 tiles a
 pillar at a = 2 took 12.9 ms an application beside 20 ms of FFTs, 243 at
-a = 3 about a fifth of that.
+a = 3 took 3.7 ms.
 
 K_c is kept exact as elements detach or attach (one row of K per changed
 element, aggregated by tile: m^2 over a whole curve), and its inverse is
