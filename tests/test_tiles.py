@@ -98,7 +98,8 @@ def test_tile_size_bounds_the_tiles_per_pillar(monkeypatch):
     STACK_PER_CELL entries per grid cell, and within MAX_TILES a pillar."""
     labels = build_labels(BrushParams(layout="regular", n_pillars=4, kbar=1.0, grid=128))
     flat = labels.ravel()
-    elements, pillar_of = np.flatnonzero(flat >= 0), flat[np.flatnonzero(flat >= 0)]
+    elements = np.flatnonzero(flat >= 0)
+    pillar_of = flat[elements]
     assert max_tiles(elements, pillar_of, 128, 2) == 132  # 4 x 132^2 <= 5 x 128^2
     assert tile_size(elements, pillar_of, 128) == 2
     monkeypatch.setattr(TileCoarse, "STACK_PER_CELL", 2.0)  # 4 x 132^2 > 2 x 128^2
@@ -132,7 +133,8 @@ def test_tiles_cut_iterations_where_dense_blocks_do_not_fit(kbar):
     assert 2 * _first_solve_iterations(tiled) <= _first_solve_iterations(jacobi)
 
 
-@pytest.mark.parametrize("kbar, stack", [(np.inf, 5.0), (1e-3, 5.0), (1e-3, 0.2)])
+@pytest.mark.parametrize("kbar, stack", [(np.inf, TileCoarse.STACK_PER_CELL),
+                                         (1e-3, TileCoarse.STACK_PER_CELL), (1e-3, 0.2)])
 def test_pull_off_with_tiles_matches_exact(monkeypatch, kbar, stack):
     """The whole pull-off on the tile path agrees with the exact settings
     (dense blocks, global cascades, CG to 1e-8) within 2e-4 (measured 2e-5),
