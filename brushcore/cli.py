@@ -167,8 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--fft-library", choices=("auto", "fftw", "mkl"),
                      default=SolverOptions.fft_library,
                      help="whose FFTs the whole grid runs on: mkl needs "
-                          "pip install 'brushcore[mkl]' (one thread, faster on Intel CPUs); "
-                          "auto = mkl where installed and --threads is 1, else fftw")
+                          "pip install 'brushcore[mkl]' (faster on Intel CPUs); "
+                          "auto = mkl where installed, else fftw")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",

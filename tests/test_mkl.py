@@ -50,6 +50,53 @@ def test_mkl_convolution_at_256_equals_boussinesq_sums(single):
 
 
 @needs_mkl
+@pytest.mark.parametrize("n", [5, 12, 64, 101])
+@pytest.mark.parametrize("single", [False, True])
+def test_mkl_threads_give_the_same_bits(n, single):
+    """Cut into slabs of rows and columns, each transformed by its own
+    thread, the pair gives the one-thread numbers to the bit, for uneven
+    slabs too (n + 1 columns over 2 or 3 threads)."""
+    stress = np.random.default_rng(n).standard_normal((n, n))
+    one = Convolver(n, 0.7, 2.0, threads=1, single=single, library="mkl")(stress)
+    for threads in (2, 3):
+        conv = Convolver(n, 0.7, 2.0, threads=threads, single=single, library="mkl")
+        for _ in range(2):
+            assert np.array_equal(conv(stress), one), threads
+
+
+@needs_mkl
+def test_mkl_team_raises_a_threads_error_and_recovers():
+    """A slab that fails does not leave the others waiting at the barrier:
+    the error reaches the caller, and the team works afterwards."""
+    team = mkl._team(2)
+
+    def failing(i: int) -> None:
+        if i == 1:
+            raise ValueError("slab 1 failed")
+        team.barrier.wait()
+
+    with pytest.raises(ValueError, match="slab 1 failed"):
+        team.run(failing)
+    done = []
+    team.run(lambda i: (team.barrier.wait(), done.append(i)))
+    assert sorted(done) == [0, 1]
+
+
+@needs_mkl
+def test_mkl_curve_is_the_same_on_one_and_two_threads(monkeypatch):
+    """A random brush's curve on two FFT threads is the one-thread curve to
+    the bit (MKL's slabs; FFTW's threaded plans round differently)."""
+    params = BrushParams(layout="random", n_pillars=16, kbar=1e-3, grid=128, seed=1)
+    curves = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("BRUSHCORE_THREADS", threads)
+        curves[threads] = simulate(params, SolverOptions())
+        assert curves[threads].attrs["fft_library_used"] == "mkl"
+    for name in ("force", "displacement", "work_of_separation", "adhesive_force"):
+        assert np.array_equal(curves["1"][name].values, curves["2"][name].values), name
+
+
+@needs_mkl
 def test_mkl_and_fftw_curves_agree_to_round_off():
     """A random brush (float32 transforms) and a regular one on the whole
     grid (double) on both libraries: the same F_ad and W to 1e-6, and each
@@ -67,15 +114,13 @@ def test_mkl_and_fftw_curves_agree_to_round_off():
 
 def test_fft_library_is_checked_and_resolved(monkeypatch):
     """Unknown names and "mkl" without mkl_fft fail at the options, naming the
-    parameter; "auto" takes MKL only where it is installed and one thread
-    does the transforms."""
+    parameter; "auto" takes MKL where it is installed."""
     with pytest.raises(ParameterError, match="fft_library.*'auto', 'fftw' or 'mkl'"):
         SolverOptions(fft_library="cufft")
-    assert SolverOptions(fft_library="fftw").fft_library_for(1) == "fftw"
-    assert SolverOptions().fft_library_for(2) == "fftw"
+    assert SolverOptions(fft_library="fftw").host_fft_library() == "fftw"
     monkeypatch.setattr(mkl, "available", lambda: True)
-    assert SolverOptions().fft_library_for(1) == "mkl"
+    assert SolverOptions().host_fft_library() == "mkl"
     monkeypatch.setattr(mkl, "available", lambda: False)
-    assert SolverOptions().fft_library_for(1) == "fftw"
+    assert SolverOptions().host_fft_library() == "fftw"
     with pytest.raises(ParameterError, match="fft_library.*needs mkl_fft"):
         SolverOptions(fft_library="mkl")

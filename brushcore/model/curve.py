@@ -120,7 +120,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
         conv = grid_convolver(params, backend, options)
         grid_labels = labels
         double = partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
-                         False, options.fft_library_for(fft_threads()))
+                         False, options.host_fft_library())
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                        single_transforms(params, options, folded=True))
@@ -165,7 +165,7 @@ def fft_library_used(options: SolverOptions, backend: Backend, symmetry_fold: in
     or "cupy" (a device)."""
     if not backend.on_host:
         return "cupy"
-    if symmetry_fold == 1 and options.fft_library_for(fft_threads()) == "mkl":
+    if symmetry_fold == 1 and options.host_fft_library() == "mkl":
         return "mkl"
     return "fftw" if HAVE_PYFFTW else "scipy"
 
@@ -176,7 +176,7 @@ def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions
     if backend.on_host:
         return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                 single_transforms(params, options, folded=False),
-                                options.fft_library_for(fft_threads()))
+                                options.host_fft_library())
     return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 

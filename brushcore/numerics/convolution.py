@@ -8,8 +8,8 @@ columns (length 2n, n + 1 of them) -> multiply by the real kernel spectrum ->
 columns back -> only the first n rows back.  That is 3/4 of the work of a
 full pair.  FFTW plans are made once per grid (with wisdom cached on disk)
 and reused for every application; scipy.fft is the fallback without pyfftw,
-and Intel MKL (`brushcore.numerics.mkl`) the faster choice for one thread
-where the ``mkl`` extra is installed.
+and Intel MKL (`brushcore.numerics.mkl`) the faster choice where the
+``mkl`` extra is installed.
 """
 
 from __future__ import annotations
@@ -173,13 +173,14 @@ class Convolver(HostBuffers):
     n : grid size (elements per side)
     h : element size [length]
     e_star : effective modulus E* [stress]
-    threads : FFTW threads
+    threads : FFT threads (FFTW's threaded plans, or MKL's passes cut
+        into slabs)
     use_pyfftw : use pyfftw when available (False forces scipy.fft)
     single : single-precision transforms (pyfftw and MKL; 1.4-1.8x faster,
         relative error ~1e-7, see `SolverOptions.precision`); the scipy
         fallback stays in double precision
     library : "fftw" (pyfftw, or scipy.fft where it is missing) or "mkl"
-        (`brushcore.numerics.mkl`, one thread; see `SolverOptions.fft_library`)
+        (`brushcore.numerics.mkl`; see `SolverOptions.fft_library`)
     """
 
     #: A plain grid: no mirror images (see `brushcore.numerics.mirror`).
@@ -264,7 +265,8 @@ class Convolver(HostBuffers):
         self.applications += 1
         n = self.n
         if self.backend == "mkl":
-            return mkl.pruned_pair(self._real_in, self._half, self._scaled, self._real_out)
+            return mkl.pruned_pair(self._real_in, self._half, self._scaled, self._real_out,
+                                   self.threads)
         if self.backend == "pyfftw":
             return self._pruned(self._half, self._half_real)
         import scipy.fft as sfft

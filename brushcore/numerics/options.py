@@ -76,12 +76,13 @@ class SolverOptions:
         with it.  True by default, off in `exact()`.
     fft_library : "auto" (default), "fftw" or "mkl": whose FFTs the host's
         whole-grid transforms run on.  "mkl" needs the ``mkl`` extra
-        (``pip install 'brushcore[mkl]'``, Intel's MKL through mkl_fft) and
-        runs one thread (`brushcore.numerics.mkl`): on an Intel Xeon 0.68x
-        FFTW's time a pruned pair in single precision and 0.86x in double,
-        a soft random curve 25-27 % faster.  "auto" is "mkl" where it is
-        installed and the FFTs run one thread (BRUSHCORE_THREADS, the
-        workflow's ``threads``), else "fftw".  The two round differently,
+        (``pip install 'brushcore[mkl]'``, Intel's MKL through mkl_fft;
+        `brushcore.numerics.mkl`): on an Intel Xeon 0.68x FFTW's time a
+        pruned pair in single precision and 0.86x in double, a soft random
+        curve 25-27 % faster on one thread; with two threads (BRUSHCORE_THREADS,
+        the workflow's ``threads``) 0.57-0.75x FFTW's threaded plans, and
+        the same numbers to the bit as on one.  "auto" is "mkl" where it is
+        installed, else "fftw".  The two round differently,
         so curves agree to round-off and not to the bit (over the default
         sweep F_ad within 3.8e-6, W within 5.0e-5 but on one soft random
         curve, whose near-ties give it two W 3.4e-4 apart between two sets
@@ -143,9 +144,9 @@ class SolverOptions:
         return self.precision == "mixed" or (self.precision == "auto" and not symmetric
                                              and self.rtol >= self.MIXED_MIN_RTOL)
 
-    def fft_library_for(self, threads: int) -> str:
-        """The library the host's whole-grid FFTs run on with ``threads`` FFT
-        threads: "mkl" or "fftw" (see ``fft_library``)."""
+    def host_fft_library(self) -> str:
+        """The library the host's whole-grid FFTs run on: "mkl" or "fftw"
+        (see ``fft_library``)."""
         if self.fft_library == "auto":
-            return "mkl" if threads == 1 and mkl.available() else "fftw"
+            return "mkl" if mkl.available() else "fftw"
         return self.fft_library
