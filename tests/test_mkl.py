@@ -10,6 +10,7 @@ from brushcore import BrushParams, SolverOptions, simulate
 from brushcore.numerics import mkl
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.kernel import dense_influence_matrix, love_coefficient
+from brushcore.numerics.precondition import BlockInverse
 from brushcore.validation import ParameterError
 
 needs_mkl = pytest.mark.skipif(not mkl.available(),
@@ -58,34 +59,20 @@ def test_mkl_threads_give_the_same_bits(n, single):
     slabs too (n + 1 columns over 2 or 3 threads)."""
     stress = np.random.default_rng(n).standard_normal((n, n))
     one = Convolver(n, 0.7, 2.0, threads=1, single=single, library="mkl")(stress)
-    for threads in (2, 3):
-        conv = Convolver(n, 0.7, 2.0, threads=threads, single=single, library="mkl")
+    for count in (2, 3):
+        conv = Convolver(n, 0.7, 2.0, threads=count, single=single, library="mkl")
         for _ in range(2):
-            assert np.array_equal(conv(stress), one), threads
+            assert np.array_equal(conv(stress), one), count
 
 
 @needs_mkl
-def test_mkl_team_raises_a_threads_error_and_recovers():
-    """A slab that fails does not leave the others waiting at the barrier:
-    the error reaches the caller, and the team works afterwards."""
-    team = mkl._team(2)
-
-    def failing(i: int) -> None:
-        if i == 1:
-            raise ValueError("slab 1 failed")
-        team.barrier.wait()
-
-    with pytest.raises(ValueError, match="slab 1 failed"):
-        team.run(failing)
-    done = []
-    team.run(lambda i: (team.barrier.wait(), done.append(i)))
-    assert sorted(done) == [0, 1]
-
-
-@needs_mkl
-def test_mkl_curve_is_the_same_on_one_and_two_threads(monkeypatch):
-    """A random brush's curve on two FFT threads is the one-thread curve to
-    the bit (MKL's slabs; FFTW's threaded plans round differently)."""
+@pytest.mark.parametrize("tiles", [False, True])
+def test_mkl_curve_is_the_same_on_one_and_two_threads(monkeypatch, tiles):
+    """A random brush's curve on two threads is the one-thread curve to the
+    bit, on the dense blocks and on the tile path (MKL's slabs and the
+    stacked inverses' slabs; FFTW's threaded plans round differently)."""
+    if tiles:
+        monkeypatch.setattr(BlockInverse, "fits", classmethod(lambda cls, *a, **k: False))
     params = BrushParams(layout="random", n_pillars=16, kbar=1e-3, grid=128, seed=1)
     curves = {}
     for threads in ("1", "2"):

@@ -61,6 +61,7 @@ class BrushOperator:
                  max_block: int = BlockInverse.MAX_BLOCK) -> None:
         self.conv = convolver
         self._precise = precise
+        threads = getattr(convolver, "threads", 1)  # the job's FFT threads share the stacks too
         self.refined_applications = 0  # applications made by the twin (`refined`)
         self.backend = be = convolver.array_backend
         xp = be.xp
@@ -80,7 +81,7 @@ class BrushOperator:
         if use_block and be.on_host and BlockInverse.fits(pillar_of, max_block=max_block):
             self.block = BlockInverse(self.elements, pillar_of, convolver.n, compliance, h,
                                       e_star, coarse, getattr(convolver, "mirrored", False),
-                                      single=precise is not None)
+                                      single=precise is not None, threads=threads)
         elif use_block and not be.on_host and DeviceBlocks.fits_device(pillar_of, be):
             self.block = DeviceBlocks(self.elements, pillar_of, convolver.n, compliance, h,
                                       e_star, coarse, backend=be)
@@ -89,7 +90,8 @@ class BrushOperator:
         self.tiles: TileCoarse | None = None
         if (use_block and be.on_host and self.block is None
                 and TileCoarse.fits(self.elements, pillar_of, convolver.n)):
-            self.tiles = TileCoarse(self.elements, pillar_of, convolver.n, compliance, h, e_star)
+            self.tiles = TileCoarse(self.elements, pillar_of, convolver.n, compliance, h, e_star,
+                                    threads=threads)
         # ... and their exact local responses on small FFT grids (local cascades).
         self.local: PillarSolver | None = None
         if self.tiles is not None:

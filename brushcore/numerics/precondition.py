@@ -42,6 +42,7 @@ from brushcore.numerics.backend import CPU
 from brushcore.numerics.farfield import FarFieldBound, near_influence
 from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 from brushcore.numerics.multipole import field_terms
+from brushcore.numerics.threads import stacked_matmul
 
 
 def _remove_slots(g: np.ndarray, gone: np.ndarray, values: np.ndarray | None = None
@@ -93,12 +94,12 @@ def _pack_index(m: int) -> np.ndarray:
 
 
 def _stack_times(stack: np.ndarray, packed: bool, w: np.ndarray,
-                 remaining: np.ndarray) -> np.ndarray:
-    """blockdiag(stack_p) w for stacked (N, m) w: one batched matmul, or one
-    BLAS spmv per pillar with elements left from packed ``stack`` (float32
-    or float64, as w)."""
+                 remaining: np.ndarray, threads: int = 1) -> np.ndarray:
+    """blockdiag(stack_p) w for stacked (N, m) w: one batched matmul (its
+    slabs of pillars on ``threads`` threads), or one BLAS spmv per pillar
+    with elements left from packed ``stack`` (float32 or float64, as w)."""
     if not packed:
-        return np.matmul(stack, w[:, :, None])[:, :, 0]
+        return stacked_matmul(stack, w[:, :, None], threads)[:, :, 0]
     spmv = blas.sspmv if stack.dtype == np.float32 else blas.dspmv
     z = np.zeros_like(w)
     for p in np.flatnonzero(remaining):  # detached pillars have G_p = 0
@@ -125,17 +126,23 @@ class BlockInverse:
     single : apply the blocks from a float32 copy (`_blocks_times`), for an
         operator whose transforms are single precision already; `single`
         is also the attribute its `refined` solves turn off
+    threads : threads that share each application's unpacked stack
+        (`brushcore.numerics.threads.stacked_matmul`)
     """
 
     #: Where the stacks live (`DeviceBlocks` sets its device's backend).
     backend = CPU
     #: Blocks applied in single precision (see the ``single`` parameter).
     single = False
+    #: Threads that share an application (see the ``threads`` parameter).
+    threads = 1
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
-                 coarse: bool = True, mirrored: bool = False, single: bool = False) -> None:
+                 coarse: bool = True, mirrored: bool = False, single: bool = False,
+                 threads: int = 1) -> None:
         n_pillars = compliance.size
+        self.threads = threads
         counts = self._layout(elements, pillar_of, n, compliance, h, e_star, mirrored)
         self.inv = np.zeros((n_pillars, self.m, self.m))
         for group in self._shape_groups(counts):
@@ -720,10 +727,10 @@ class BlockInverse:
         """
         if not self.single:  # a float64 copy is a packed one
             if self._copy is None or self._copy.dtype != np.float64:
-                return _stack_times(self.inv, False, w, self._remaining)
+                return _stack_times(self.inv, False, w, self._remaining, self.threads)
             return _stack_times(self._copy, True, w, self._remaining)
         z = _stack_times(self._copy, self._pack_index is not None, w.astype(np.float32),
-                         self._remaining).astype(np.float64)
+                         self._remaining, self.threads).astype(np.float64)
         gap = (self._z * w).sum(axis=1) - z.sum(axis=1)  # z is 0 off the live slots
         live = np.maximum(self._remaining, 1)
         z += (gap / live)[:, None] * self._live

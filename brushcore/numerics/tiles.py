@@ -50,6 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from brushcore.numerics.kernel import love_coefficient
+from brushcore.numerics.threads import stacked_matmul
 
 
 class TileCoarse:
@@ -60,6 +61,8 @@ class TileCoarse:
     elements, pillar_of, n, compliance, h, e_star : as for
         `brushcore.numerics.precondition.BlockInverse`
     tile : tile side a in elements (default: `tile_size`)
+    threads : threads that share each application's stacked inverses
+        (`brushcore.numerics.threads.stacked_matmul`)
     """
 
     #: Most tiles a pillar may have (bounds the memory per pillar to 8 MB twice).
@@ -73,8 +76,9 @@ class TileCoarse:
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
-                 tile: int | None = None) -> None:
+                 tile: int | None = None, threads: int = 1) -> None:
         n_pillars = compliance.size
+        self.threads = threads
         self.a = tile_size(elements, pillar_of, n) if tile is None else tile
         iy, ix = np.divmod(elements, n)
         self._iy, self._ix = iy, ix
@@ -193,7 +197,7 @@ class TileCoarse:
         """
         sums = np.bincount(tile_pos, weights=r, minlength=self.counts.size)
         mean = np.divide(sums, self.counts, out=np.zeros_like(sums), where=self.counts > 0)
-        coarse = np.matmul(self.inv, sums.reshape(-1, self.mc, 1)).ravel()
+        coarse = stacked_matmul(self.inv, sums.reshape(-1, self.mc, 1), self.threads).ravel()
         return coarse[tile_pos] + (r - mean[tile_pos]) / diag
 
     def apply_pillar(self, p: int, r: np.ndarray, members: np.ndarray,

@@ -1,0 +1,48 @@
+"""Work shared out by slabs (`brushcore.numerics.threads`): the same
+numbers whatever the thread count, and errors that reach the caller."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brushcore.numerics.threads import slab, stacked_matmul, team
+
+
+def test_slabs_cover_the_items_once():
+    for count in (1, 2, 7, 64, 513):
+        for threads in (1, 2, 3, 5):
+            bounds = [slab(count, i, threads) for i in range(threads)]
+            assert bounds[0][0] == 0 and bounds[-1][1] == count
+            assert all(a[1] == b[0] for a, b in zip(bounds, bounds[1:]))
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_stacked_matmul_gives_the_same_bits_on_any_thread_count(dtype):
+    """Stacks of matrix-vector products as the preconditioners form them
+    ((N, m, m) @ (N, m, 1)), more threads than items included."""
+    rng = np.random.default_rng(3)
+    for n_items in (1, 3, 64):
+        a = rng.standard_normal((n_items, 37, 37)).astype(dtype)
+        b = rng.standard_normal((n_items, 37, 1)).astype(dtype)
+        one = np.matmul(a, b)
+        for threads in (2, 3, 5):
+            got = stacked_matmul(a, b, threads)
+            assert got.dtype == one.dtype and np.array_equal(got, one), (n_items, threads)
+
+
+def test_team_raises_a_threads_error_and_recovers():
+    """A thread that fails does not leave the others waiting at the barrier:
+    its error reaches the caller, and the team works afterwards."""
+    crew = team(2)
+
+    def failing(i: int) -> None:
+        if i == 1:
+            raise ValueError("slab 1 failed")
+        crew.barrier.wait()
+
+    with pytest.raises(ValueError, match="slab 1 failed"):
+        crew.run(failing)
+    done = []
+    crew.run(lambda i: (crew.barrier.wait(), done.append(i)))
+    assert sorted(done) == [0, 1]
