@@ -174,7 +174,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",
                      help="stop CG at the tolerance even where an element lies within its "
                           "error of sigma_c or of the next event's cut")
-    sim.add_argument("--threads", type=int, default=1, help="threads of the FFTs, BLAS and the preconditioners' stacked inverses")
+    sim.add_argument("--threads", type=int, default=1,
+                     help="threads of the FFTs, BLAS and the preconditioners' stacked inverses")
     sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
                           "pip install 'brushcore[gpu]' and a CUDA 12 card; whole grid, "
