@@ -7,6 +7,7 @@ import pytest
 
 from brushcore import BrushParams, SolverOptions, simulate
 from brushcore.model.layout import build_labels
+from brushcore.numerics import mkl
 from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 from brushcore.numerics.pillar_solve import PillarSolver
 from brushcore.numerics.precondition import BlockInverse
@@ -23,9 +24,12 @@ def _blobs(n: int, rng: np.random.Generator) -> np.ndarray:
     return labels
 
 
+@pytest.mark.parametrize("library", [
+    "scipy", pytest.param("mkl", marks=pytest.mark.skipif(not mkl.available(),
+                                                          reason="mkl_fft not installed"))])
 @pytest.mark.parametrize("mirrored", [False, True])
 @pytest.mark.parametrize("soft", [False, True])
-def test_local_response_is_the_exact_schur_complement(mirrored, soft):
+def test_local_response_is_the_exact_schur_complement(mirrored, soft, library):
     """After a detachment each touched pillar's stresses solve its own block
     exactly with the others held fixed: B_p'p' d sigma = B_p'D sigma_D,
     against a dense solve of Love's (or, on a quadrant, the folded) matrix."""
@@ -37,7 +41,8 @@ def test_local_response_is_the_exact_schur_complement(mirrored, soft):
     pillar_of = flat[elements]
     compliance = np.array([40.0, 0.0, 5.0]) if soft else np.zeros(3)
     tiles = TileCoarse(elements, pillar_of, n, compliance, h, e_star, tile=2)
-    solver = PillarSolver(elements, pillar_of, n, compliance, h, e_star, mirrored, tiles)
+    solver = PillarSolver(elements, pillar_of, n, compliance, h, e_star, mirrored, tiles,
+                          library)
     stress = rng.uniform(0.2, 1.0, elements.size)
     gone = np.flatnonzero((pillar_of != 1) & (rng.random(elements.size) < 0.2))
     attached = np.ones(elements.size, dtype=bool)

@@ -44,6 +44,8 @@ class BrushOperator:
         transforms are double already
     max_block : largest pillar (elements) with a dense block inverse on
         the host; larger ones take the tiles (`BlockInverse.fits`)
+    local_library : "scipy" or "mkl": whose FFTs the tiles' local pillar
+        solves run on (`brushcore.numerics.pillar_solve`)
 
     Notes
     -----
@@ -58,7 +60,7 @@ class BrushOperator:
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
                  h: float, e_star: float, use_block: bool = True, coarse: bool = True,
                  precise: Callable[[], Convolver] | None = None,
-                 max_block: int = BlockInverse.MAX_BLOCK) -> None:
+                 max_block: int = BlockInverse.MAX_BLOCK, local_library: str = "scipy") -> None:
         self.conv = convolver
         self._precise = precise
         threads = getattr(convolver, "threads", 1)  # the job's FFT threads share the stacks too
@@ -96,7 +98,8 @@ class BrushOperator:
         self.local: PillarSolver | None = None
         if self.tiles is not None:
             self.local = PillarSolver(self.elements, pillar_of, convolver.n, compliance, h,
-                                      e_star, getattr(convolver, "mirrored", False), self.tiles)
+                                      e_star, getattr(convolver, "mirrored", False), self.tiles,
+                                      local_library)
         self._update()
 
     def _update(self) -> None:

@@ -87,8 +87,8 @@ class SolverOptions:
         sweep F_ad within 3.8e-6, W within 5.0e-5 but on one soft random
         curve, whose near-ties give it two W 3.4e-4 apart between two sets
         of FFTW plans as well).  The mirror quadrant's DCTs (regular
-        brushes) stay on FFTW, the tiles' pillar solves on scipy.fft, a GPU
-        on CuPy.
+        brushes) stay on FFTW, a GPU on CuPy; the tiles' local pillar
+        solves run on MKL with "mkl", else on scipy.fft.
     """
 
     rtol: float = 1e-4
