@@ -46,3 +46,20 @@ def test_team_raises_a_threads_error_and_recovers():
     done = []
     crew.run(lambda i: (crew.barrier.wait(), done.append(i)))
     assert sorted(done) == [0, 1]
+
+
+def test_a_forked_child_gets_its_own_team():
+    """The parent's pool threads do not survive a fork; a child that used
+    the parent's team would wait forever."""
+    import multiprocessing
+
+    crew = team(2)
+    crew.run(lambda i: None)  # the parent's pool thread exists now
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        got = pool.apply_async(_sum_on_two_threads).get(timeout=60)
+    assert got == 2 * 64 * 64
+
+
+def _sum_on_two_threads() -> float:
+    a = np.ones((2, 64, 64))
+    return float(stacked_matmul(a, np.ones((2, 64, 1)), 2).sum())

@@ -85,9 +85,14 @@ class Team:
             raise (cause or errors)[0]
 
 
-@lru_cache(maxsize=None)
 def team(threads: int) -> Team:
-    """One team per thread count (>= 2) in a process."""
+    """One team per thread count (>= 2) in a process (a forked child gets
+    its own: the parent's pool threads do not exist there)."""
+    return _team(threads, os.getpid())
+
+
+@lru_cache(maxsize=None)
+def _team(threads: int, pid: int) -> Team:
     return Team(threads)
 
 
