@@ -25,7 +25,7 @@ def _blobs(n: int, rng: np.random.Generator) -> np.ndarray:
 
 
 @pytest.mark.parametrize("library", [
-    "scipy", pytest.param("mkl", marks=pytest.mark.skipif(not mkl.available(),
+    "fftw", pytest.param("mkl", marks=pytest.mark.skipif(not mkl.available(),
                                                           reason="mkl_fft not installed"))])
 @pytest.mark.parametrize("mirrored", [False, True])
 @pytest.mark.parametrize("soft", [False, True])

@@ -132,7 +132,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     single = getattr(conv, "real_dtype", "float64") == "float32"
     before = conv.applications
     op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star,
-                       precise=double if single else None, local_library=local_library(options))
+                       precise=double if single else None, local_library=options.host_fft_library())
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
@@ -168,12 +168,6 @@ def fft_library_used(options: SolverOptions, backend: Backend, symmetry_fold: in
     if symmetry_fold == 1 and options.host_fft_library() == "mkl":
         return "mkl"
     return "fftw" if HAVE_PYFFTW else "scipy"
-
-
-def local_library(options: SolverOptions) -> str:
-    """Whose FFTs the tiles' local pillar solves run on: MKL's where the
-    run's whole-grid transforms are, else scipy.fft."""
-    return "mkl" if options.host_fft_library() == "mkl" else "scipy"
 
 
 def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
@@ -228,7 +222,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
         compliance = spring_compliance(params, n_pillars)
     op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
                        params.e_star, max_block=BlockInverse.MAX_BLOCK_PROTOCOL,
-                       local_library=local_library(options))
+                       local_library=options.host_fft_library())
     z = np.zeros(op.size)
     if heights is not None:
         z += np.asarray(heights, dtype=float)[backend.to_host(op.pillar_of)]

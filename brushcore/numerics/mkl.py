@@ -68,20 +68,16 @@ def pruned_pair(real_in: np.ndarray, work: np.ndarray, spectrum: np.ndarray,
     ``real_out``
     """
     threads = max(1, min(threads, real_in.shape[0] // 2))
-    if threads == 1:
-        fft = _module()
-        n = real_in.shape[0]
-        work[n:] = 0.0  # the zero padding, overwritten by the in-place columns
-        fft.rfft(real_in, axis=1, out=work[:n])
-        fft.fft(work, axis=0, out=work)
-        product = work.view(real_in.dtype)
-        np.multiply(product, spectrum, out=product)
-        fft.ifft(work, axis=0, out=work)
-        fft.irfft(work[:n], n=2 * n, axis=1, out=real_out)
+    if threads == 1:  # one slab: the whole grid, on the calling thread
+        _slab(0, 1, _ALONE, real_in, work, spectrum, real_out)
         return real_out
     crew = team(threads)
     crew.run(lambda i: _slab(i, threads, crew.barrier, real_in, work, spectrum, real_out))
     return real_out
+
+
+#: The barrier of a lone slab: passes at once.
+_ALONE = threading.Barrier(1)
 
 
 def _slab(i: int, threads: int, barrier: threading.Barrier, real_in: np.ndarray,
@@ -91,7 +87,7 @@ def _slab(i: int, threads: int, barrier: threading.Barrier, real_in: np.ndarray,
     fft = _module()
     n = real_in.shape[0]
     lo, hi = slab(n, i, threads)
-    work[n + lo:n + hi] = 0.0
+    work[n + lo:n + hi] = 0.0  # the zero padding, overwritten by the in-place columns
     fft.rfft(real_in[lo:hi], axis=1, out=work[lo:hi])
     barrier.wait()
     left, right = slab(n + 1, i, threads)

@@ -44,8 +44,9 @@ class BrushOperator:
         transforms are double already
     max_block : largest pillar (elements) with a dense block inverse on
         the host; larger ones take the tiles (`BlockInverse.fits`)
-    local_library : "scipy" or "mkl": whose FFTs the tiles' local pillar
-        solves run on (`brushcore.numerics.pillar_solve`)
+    local_library : the run's host FFT library, "fftw" or "mkl"
+        (`SolverOptions.host_fft_library`), for the tiles' local pillar
+        solves (`brushcore.numerics.pillar_solve`)
 
     Notes
     -----
@@ -60,7 +61,7 @@ class BrushOperator:
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
                  h: float, e_star: float, use_block: bool = True, coarse: bool = True,
                  precise: Callable[[], Convolver] | None = None,
-                 max_block: int = BlockInverse.MAX_BLOCK, local_library: str = "scipy") -> None:
+                 max_block: int = BlockInverse.MAX_BLOCK, local_library: str = "fftw") -> None:
         self.conv = convolver
         self._precise = precise
         threads = getattr(convolver, "threads", 1)  # the job's FFT threads share the stacks too

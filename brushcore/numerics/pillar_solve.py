@@ -44,8 +44,9 @@ class PillarSolver:
         `brushcore.numerics.precondition.BlockInverse`
     tiles : the tile preconditioner, whose per-pillar blocks precondition
         the local solves
-    library : "scipy" or "mkl" (`brushcore.numerics.mkl`): whose FFTs the
-        local solves run on
+    library : the run's host FFT library, "fftw" or "mkl": the local
+        solves run on MKL's FFTs with "mkl", else on scipy.fft (FFTW plans
+        for every pillar's box shape would cost more than they save)
     """
 
     #: Bound on sum_j |G_p[i, j]| K_ii, the reach of a pillar's inverse.
@@ -64,7 +65,7 @@ class PillarSolver:
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float, mirrored: bool,
-                 tiles: TileCoarse, library: str = "scipy") -> None:
+                 tiles: TileCoarse, library: str = "fftw") -> None:
         n_pillars = compliance.size
         fft = mkl._module() if library == "mkl" else sfft
         self._rfft2, self._irfft2 = fft.rfft2, fft.irfft2

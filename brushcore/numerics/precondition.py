@@ -134,9 +134,6 @@ class BlockInverse:
     backend = CPU
     #: Blocks applied in single precision (see the ``single`` parameter).
     single = False
-    #: Threads that share an application (see the ``threads`` parameter).
-    threads = 1
-
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
                  coarse: bool = True, mirrored: bool = False, single: bool = False,
