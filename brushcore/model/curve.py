@@ -18,6 +18,7 @@ from brushcore.model import theory
 from brushcore.numerics.backend import Backend, resolve_backend
 from brushcore.numerics.convolution import HAVE_PYFFTW, cached_convolver
 from brushcore.numerics.device_convolution import cached_device_convolver
+from brushcore.numerics.fft_choice import faster_library
 from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels
@@ -120,7 +121,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
         conv = grid_convolver(params, backend, options)
         grid_labels = labels
         double = partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
-                         False, options.host_fft_library())
+                         False, host_library(params, options))
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                        single_transforms(params, options, folded=True))
@@ -160,12 +161,26 @@ def single_transforms(params: BrushParams, options: SolverOptions, folded: bool)
     return HAVE_PYFFTW and options.single_transforms(symmetric)
 
 
-def fft_library_used(options: SolverOptions, backend: Backend, symmetry_fold: int) -> str:
+def host_library(params: BrushParams, options: SolverOptions) -> str:
+    """The library of a host run's whole-grid FFTs, "fftw" or "mkl":
+    ``options.fft_library``, with "auto" (both installed) resolved to the
+    faster for this grid, thread count and precision on this machine
+    (`brushcore.numerics.fft_choice`).  A solve handed over to double
+    precision stays on the same library."""
+    library = options.host_fft_library()
+    if options.fft_library == "auto" and library == "mkl":
+        return faster_library(params.grid, params.h, params.e_star, fft_threads(),
+                              single_transforms(params, options, folded=False))
+    return library
+
+
+def fft_library_used(params: BrushParams, options: SolverOptions, backend: Backend,
+                     symmetry_fold: int) -> str:
     """What a run's transforms ran on: "mkl", "fftw", "scipy" (FFTW missing)
     or "cupy" (a device)."""
     if not backend.on_host:
         return "cupy"
-    if symmetry_fold == 1 and options.host_fft_library() == "mkl":
+    if symmetry_fold == 1 and host_library(params, options) == "mkl":
         return "mkl"
     return "fftw" if HAVE_PYFFTW else "scipy"
 
@@ -176,7 +191,7 @@ def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions
     if backend.on_host:
         return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                 single_transforms(params, options, folded=False),
-                                options.host_fft_library())
+                                host_library(params, options))
     return cached_device_convolver(params.grid, params.h, params.e_star, backend)
 
 
@@ -275,7 +290,7 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "fft_precision": ("single" if backend.on_host and single_transforms(
             params, options, folded=symmetry_fold > 1) else "double"),
         # whose transforms the whole grid ran on (a quadrant: FFTW's DCTs)
-        "fft_library_used": fft_library_used(options, backend, symmetry_fold),
+        "fft_library_used": fft_library_used(params, options, backend, symmetry_fold),
         "device_name": backend.device_name,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),

@@ -39,28 +39,27 @@ except ImportError:  # pragma: no cover - exercised only where pyfftw is missing
 _WISDOM_LOCK = threading.Lock()
 
 
+def cache_dir() -> Path:
+    """This machine's brushcore cache (``BRUSHCORE_WISDOM_DIR``, else
+    ``$XDG_CACHE_HOME/brushcore`` or ``~/.cache/brushcore``)."""
+    return Path(os.environ.get("BRUSHCORE_WISDOM_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "brushcore"))
+
+
 def _wisdom_path() -> Path:
-    root = os.environ.get("BRUSHCORE_WISDOM_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "brushcore"
-    )
-    return Path(root) / "fftw-wisdom.pickle"
+    return cache_dir() / "fftw-wisdom.pickle"
 
 
 @contextlib.contextmanager
-def _wisdom_lock() -> Iterator[None]:
-    """Serialise planning across processes on this machine.
-
-    FFTW_MEASURE picks algorithms by timing, so two jobs planning at once
-    under different load could pick different plans and round differently.
-    With the lock the first job plans and saves wisdom; every later job
-    imports it and gets the same plans, hence bit-identical results.
-    """
-    path = _wisdom_path().with_suffix(".lock")
+def machine_lock(name: str) -> Iterator[None]:
+    """Hold the lock file ``name`` in `cache_dir` (one process at a time on
+    this machine); without a writable cache, no lock."""
+    path = cache_dir() / name
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fh = open(path, "a")
     except OSError:
-        yield  # unwritable cache: plan without the lock
+        yield
         return
     with fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
@@ -68,6 +67,17 @@ def _wisdom_lock() -> Iterator[None]:
             yield
         finally:
             fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _wisdom_lock() -> contextlib.AbstractContextManager[None]:
+    """Serialise planning across processes on this machine.
+
+    FFTW_MEASURE picks algorithms by timing, so two jobs planning at once
+    under different load could pick different plans and round differently.
+    With the lock the first job plans and saves wisdom; every later job
+    imports it and gets the same plans, hence bit-identical results.
+    """
+    return machine_lock("fftw-wisdom.lock")
 
 
 def _load_wisdom() -> None:

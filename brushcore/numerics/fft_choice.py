@@ -1,0 +1,108 @@
+"""Which library's FFTs are faster for a whole-grid pair on this machine.
+
+``fft_library: auto`` used to mean MKL wherever mkl_fft is installed, from
+measurements on an Intel Xeon.  On an AMD EPYC the answer turned
+(2026-12-03, pruned pair in single precision, medians of alternating
+rounds): FFTW 0.85 / 4.75 / 22.8 / 127 ms against MKL 1.12 / 5.44 / 24.1 /
+119 ms at n = 256 / 512 / 1024 / 2048 on one thread, and on two 0.58 /
+1.89 / 15.9 / 95 against 0.86 / 3.08 / 15.6 / 75 ms; a soft random curve
+(random 1620 at kbar 1e-5, 512^2, two jobs side by side) 81.9 s on FFTW
+against 89.6 s on MKL, the mean of four runs each.  So the faster library
+depends on the processor, the grid and the threads, and is found as FFTW
+finds its plans: by timing both, once per machine and case, and
+remembering the answer (``fft-library.json`` beside FFTW's wisdom, under a
+lock, so that concurrent jobs share one answer and the same case runs on
+the same library, rounding alike, in every later job on this machine).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from functools import lru_cache
+
+import numpy as np
+
+from brushcore.numerics.convolution import Convolver, cache_dir, machine_lock
+
+#: Alternating rounds of the timing; the median of each library's rounds counts.
+ROUNDS = 5
+#: Seconds a round of one library's applications lasts, at least.
+ROUND_SECONDS = 0.05
+
+
+def _path():
+    return cache_dir() / "fft-library.json"
+
+
+def _key(n: int, threads: int, single: bool) -> str:
+    return f"n={n} threads={threads} {'float32' if single else 'float64'}"
+
+
+def _load() -> dict:
+    try:
+        with open(_path()) as fh:
+            data = json.load(fh)
+        return data if isinstance(data, dict) else {}
+    except (OSError, ValueError):
+        return {}  # none yet, or unreadable: time afresh
+
+
+def _save(data: dict) -> None:
+    path = _path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
+        os.replace(tmp, path)  # atomic: a concurrent reader never sees half a file
+    except OSError:
+        pass  # a read-only cache times again next time
+
+
+def time_pairs(n: int, h: float, e_star: float, threads: int,
+               single: bool) -> dict[str, float]:
+    """ms per pruned pair of an n x n grid on FFTW and on MKL: the median of
+    `ROUNDS` alternating rounds.  The convolvers are dropped afterwards (the
+    run builds the winner again: FFTW's plans from the wisdom saved here)."""
+    stress = np.random.default_rng(0).random((n, n))
+    convolvers = {lib: Convolver(n, h, e_star, threads, single=single, library=lib)
+                  for lib in ("fftw", "mkl")}
+    repeats = {}
+    for lib, conv in convolvers.items():
+        t = time.perf_counter()
+        conv(stress)  # warm: first touches of the work arrays
+        repeats[lib] = max(1, int(ROUND_SECONDS / max(time.perf_counter() - t, 1e-6)))
+    rounds: dict[str, list[float]] = {lib: [] for lib in convolvers}
+    for _ in range(ROUNDS):
+        for lib, conv in convolvers.items():
+            t = time.perf_counter()
+            for _ in range(repeats[lib]):
+                conv(stress)
+            rounds[lib].append((time.perf_counter() - t) / repeats[lib] * 1e3)
+    return {lib: float(np.median(ms)) for lib, ms in rounds.items()}
+
+
+@lru_cache(maxsize=None)  # one answer a process, even where the cache is read-only
+def faster_library(n: int, h: float, e_star: float, threads: int, single: bool) -> str:
+    """"fftw" or "mkl", whichever ran the whole-grid pair of this case
+    faster on this machine (timed the first time, then remembered).
+
+    Parameters
+    ----------
+    n : grid (elements per side)
+    h, e_star : element size [length] and contact modulus [stress] (the
+        convolver's kernel; they do not change the timing)
+    threads : FFT threads of the run
+    single : single-precision transforms
+    """
+    key = _key(n, threads, single)
+    with machine_lock("fft-library.lock"):
+        data = _load()
+        entry = data.get(key)
+        if not (isinstance(entry, dict) and entry.get("library") in ("fftw", "mkl")):
+            ms = time_pairs(n, h, e_star, threads, single)
+            entry = {"library": min(ms, key=ms.get), **{f"{lib}_ms": v for lib, v in ms.items()}}
+            data[key] = entry
+            _save(data)
+    return entry["library"]
