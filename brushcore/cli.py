@@ -168,7 +168,8 @@ def build_parser() -> argparse.ArgumentParser:
                      default=SolverOptions.fft_library,
                      help="whose FFTs the whole grid runs on: mkl needs "
                           "pip install 'brushcore[mkl]' (faster on Intel CPUs); "
-                          "auto = mkl where installed, else fftw")
+                          "auto = the faster of the two on this machine, timed "
+                          "once per grid, thread count and precision")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",

@@ -81,8 +81,12 @@ class SolverOptions:
         pruned pair in single precision and 0.86x in double, a soft random
         curve 25-27 % faster on one thread; with two threads (BRUSHCORE_THREADS,
         the workflow's ``threads``) 0.57-0.75x FFTW's threaded plans, and
-        the same numbers to the bit as on one.  "auto" is "mkl" where it is
-        installed, else "fftw".  The two round differently,
+        the same numbers to the bit as on one.  On an AMD EPYC FFTW is the
+        faster below 2048^2.  "auto" (with both installed) times the two
+        pairs once per machine, grid, thread count and precision and runs
+        the faster, remembered beside FFTW's wisdom
+        (`brushcore.numerics.fft_choice`); without mkl_fft it is "fftw".
+        The two round differently,
         so curves agree to round-off and not to the bit (over the default
         sweep F_ad within 3.8e-6, W within 5.0e-5 but on one soft random
         curve, whose near-ties give it two W 3.4e-4 apart between two sets
