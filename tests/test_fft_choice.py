@@ -38,7 +38,9 @@ def test_the_faster_library_is_timed_once_and_remembered(cache, monkeypatch):
     assert fft_choice.faster_library(64, 1.0, 1.0, 1, True) == "mkl"
     assert fft_choice.faster_library(64, 1.0, 1.0, 2, True) == "fftw"
     entries = json.loads(cache.read_text())
-    assert entries["n=64 threads=1 float32"] == {"library": "mkl", "fftw_ms": 2.0, "mkl_ms": 1.5}
+    assert entries[fft_choice._key(64, 1, True)] == {"library": "mkl", "fftw_ms": 2.0,
+                                                     "mkl_ms": 1.5}
+    assert fft_choice.processor() in fft_choice._key(64, 1, True)
     assert timed == [(64, 1, True), (64, 2, True)]
 
     fft_choice.faster_library.cache_clear()
@@ -59,7 +61,7 @@ def test_timing_both_libraries_gives_positive_times(cache):
     ms = fft_choice.time_pairs(24, 0.5, 2.0, 1, True)
     assert set(ms) == {"fftw", "mkl"} and min(ms.values()) > 0.0
     library = fft_choice.faster_library(24, 0.5, 2.0, 1, False)
-    entry = json.loads(cache.read_text())["n=24 threads=1 float64"]
+    entry = json.loads(cache.read_text())[fft_choice._key(24, 1, False)]
     assert library == entry["library"] == min(("fftw", "mkl"), key=lambda k: entry[f"{k}_ms"])
 
 

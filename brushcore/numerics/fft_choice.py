@@ -13,12 +13,15 @@ finds its plans: by timing both, once per machine and case, and
 remembering the answer (``fft-library.json`` beside FFTW's wisdom, under a
 lock, so that concurrent jobs share one answer and the same case runs on
 the same library, rounding alike, in every later job on this machine).
+Answers are kept per processor model: a cluster's nodes may share one home
+directory, and with it the cache, across different processors.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import platform
 import time
 from functools import lru_cache
 
@@ -36,8 +39,22 @@ def _path():
     return cache_dir() / "fft-library.json"
 
 
+@lru_cache(maxsize=1)
+def processor() -> str:
+    """This machine's processor model (Linux's /proc/cpuinfo, else what
+    `platform` knows)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
 def _key(n: int, threads: int, single: bool) -> str:
-    return f"n={n} threads={threads} {'float32' if single else 'float64'}"
+    return f"{processor()}: n={n} threads={threads} {'float32' if single else 'float64'}"
 
 
 def _load() -> dict:
