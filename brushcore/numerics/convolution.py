@@ -89,16 +89,22 @@ def _load_wisdom() -> None:
         pass  # no or unreadable wisdom: plan afresh
 
 
-def _save_wisdom() -> None:
-    path = _wisdom_path()
+def save_to_cache(name: str, data: bytes) -> None:
+    """Write ``data`` to the file ``name`` in `cache_dir`, atomically (a
+    concurrent job never reads half a file); a read-only cache is skipped,
+    which only costs the work of finding the data again next time."""
+    path = cache_dir() / name
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        with open(tmp, "wb") as fh:
-            pickle.dump(pyfftw.export_wisdom(), fh)
-        os.replace(tmp, path)  # atomic: concurrent jobs never read half a file
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
     except OSError:
-        pass  # a read-only cache only costs planning time
+        pass
+
+
+def _save_wisdom() -> None:
+    save_to_cache(_wisdom_path().name, pickle.dumps(pyfftw.export_wisdom()))
 
 
 #: Grids (elements per side) whose `Convolver` plans with FFTW_PATIENT.

@@ -20,14 +20,13 @@ directory, and with it the cache, across different processors.
 from __future__ import annotations
 
 import json
-import os
 import platform
 import time
 from functools import lru_cache
 
 import numpy as np
 
-from brushcore.numerics.convolution import Convolver, cache_dir, machine_lock
+from brushcore.numerics.convolution import Convolver, cache_dir, machine_lock, save_to_cache
 
 #: Alternating rounds of the timing; the median of each library's rounds counts.
 ROUNDS = 5
@@ -67,14 +66,7 @@ def _load() -> dict:
 
 
 def _save(data: dict) -> None:
-    path = _path()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(data, indent=1, sort_keys=True))
-        os.replace(tmp, path)  # atomic: a concurrent reader never sees half a file
-    except OSError:
-        pass  # a read-only cache times again next time
+    save_to_cache(_path().name, json.dumps(data, indent=1, sort_keys=True).encode())
 
 
 def time_pairs(n: int, h: float, e_star: float, threads: int,
