@@ -133,7 +133,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     single = getattr(conv, "real_dtype", "float64") == "float32"
     before = conv.applications
     op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star,
-                       precise=double if single else None, local_library=options.host_fft_library())
+                       precise=double if single else None)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
@@ -236,8 +236,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)
     op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
-                       params.e_star, max_block=BlockInverse.MAX_BLOCK_PROTOCOL,
-                       local_library=options.host_fft_library())
+                       params.e_star, max_block=BlockInverse.MAX_BLOCK_PROTOCOL)
     z = np.zeros(op.size)
     if heights is not None:
         z += np.asarray(heights, dtype=float)[backend.to_host(op.pillar_of)]

@@ -44,9 +44,6 @@ class BrushOperator:
         transforms are double already
     max_block : largest pillar (elements) with a dense block inverse on
         the host; larger ones take the tiles (`BlockInverse.fits`)
-    local_library : the run's host FFT library, "fftw" or "mkl"
-        (`SolverOptions.host_fft_library`), for the tiles' local pillar
-        solves (`brushcore.numerics.pillar_solve`)
 
     Notes
     -----
@@ -61,7 +58,7 @@ class BrushOperator:
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,
                  h: float, e_star: float, use_block: bool = True, coarse: bool = True,
                  precise: Callable[[], Convolver] | None = None,
-                 max_block: int = BlockInverse.MAX_BLOCK, local_library: str = "fftw") -> None:
+                 max_block: int = BlockInverse.MAX_BLOCK) -> None:
         self.conv = convolver
         self._precise = precise
         threads = getattr(convolver, "threads", 1)  # the job's FFT threads share the stacks too
@@ -99,8 +96,7 @@ class BrushOperator:
         self.local: PillarSolver | None = None
         if self.tiles is not None:
             self.local = PillarSolver(self.elements, pillar_of, convolver.n, compliance, h,
-                                      e_star, getattr(convolver, "mirrored", False), self.tiles,
-                                      local_library)
+                                      e_star, getattr(convolver, "mirrored", False), self.tiles)
         self._update()
 
     def _update(self) -> None:

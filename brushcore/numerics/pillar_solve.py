@@ -12,9 +12,7 @@ the same system is small: K restricted to one pillar is a convolution over
 the pillar's bounding box, one FFT pair on a grid twice the box (256^2
 against the 2048^2 of a global application), solved by CG with the tile
 preconditioner's block of that pillar (`TileCoarse.apply_pillar`).  The
-small transforms run on scipy.fft, or on MKL where the run's FFTs do
-(`SolverOptions.fft_library`): a pair on a 200^2 grid (a pillar of radius
-50) 0.46-0.51 against 1.9-2.0 ms, 0.13-0.21 against 0.27-0.34 ms on 100^2.  On a
+small transforms run on planned FFTW (`BoxTransforms`).  On a
 mirror quadrant the pillar's own three images enter the same way: an
 image's influence depends on i + j, a convolution of the flipped box.
 
@@ -28,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
-from brushcore.numerics import mkl
 from brushcore.numerics.cg import pcg
+from brushcore.numerics.convolution import HAVE_PYFFTW, planning
 from brushcore.numerics.farfield import FarFieldBound, near_influence
 from brushcore.numerics.kernel import love_coefficient, self_compliance
 from brushcore.numerics.tiles import TileCoarse
@@ -44,9 +42,6 @@ class PillarSolver:
         `brushcore.numerics.precondition.BlockInverse`
     tiles : the tile preconditioner, whose per-pillar blocks precondition
         the local solves
-    library : the run's host FFT library, "fftw" or "mkl": the local
-        solves run on MKL's FFTs with "mkl", else on scipy.fft (FFTW plans
-        for every pillar's box shape would cost more than they save)
     """
 
     #: Bound on sum_j |G_p[i, j]| K_ii, the reach of a pillar's inverse.
@@ -65,10 +60,9 @@ class PillarSolver:
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float, mirrored: bool,
-                 tiles: TileCoarse, library: str = "fftw") -> None:
+                 tiles: TileCoarse) -> None:
         n_pillars = compliance.size
-        fft = mkl._module() if library == "mkl" else sfft
-        self._rfft2, self._irfft2 = fft.rfft2, fft.irfft2
+        self._transforms = BoxTransforms()
         self._h, self._e_star, self._mirrored = h, e_star, mirrored
         self._compliance = np.asarray(compliance, dtype=float)
         self._tiles = tiles
@@ -126,10 +120,7 @@ class PillarSolver:
         sources = [box]
         if self._mirrored:  # in the order of the kernels: (y, x) direct or flipped
             sources = [box, box[:, ::-1], box[::-1, :], box[::-1, ::-1]]
-        transformed = self._rfft2(np.stack(sources), s=shape)
-        field = self._irfft2((transformed * spectra).sum(axis=0), s=shape)
-        by, bx = self._box[p]
-        return field[:by, :bx]
+        return self._transforms(np.stack(sources), spectra, shape)
 
     def _operator(self, p: int, where: np.ndarray, values: np.ndarray,
                   at: np.ndarray) -> np.ndarray:
@@ -173,3 +164,63 @@ class PillarSolver:
             return np.zeros(pillar_of.size)
         shift = self.bound.shift(np.abs(pillar_change))
         return (self.REACH / self.diag) * shift[pillar_of]
+
+
+class BoxTransforms:
+    """The local solves' convolutions on planned FFTW transforms (double
+    precision, one thread), one plan pair per number of sources and
+    transform shape; scipy.fft without pyfftw.
+
+    Pillars' boxes come in a few transform shapes (`next_fast_len` rounds
+    their doubled sides), so a curve makes a few plans, kept in FFTW's
+    wisdom like the whole grid's.  A pair on the 200^2 grid of a pillar of
+    radius 50 (the 8 x 8 brush at 2048^2), one thread, 2026-12-04 on an
+    AMD EPYC: 0.31 ms planned, against 1.06 on scipy.fft and 1.13 on MKL
+    (0.08 / 0.15 / 0.16 ms on 100^2; four sources on a quadrant, 200^2:
+    0.87 / 4.07 / 3.36 ms); planning took 0.2-0.4 s a shape without wisdom.
+    """
+
+    def __init__(self) -> None:
+        self._plans: dict[tuple[int, int, int], tuple] = {}
+
+    def _plan(self, count: int, shape: tuple[int, int]) -> tuple:
+        key = (count, *shape)
+        if key not in self._plans:
+            import pyfftw
+
+            py, px = shape
+            real = pyfftw.empty_aligned((count, py, px), "float64")
+            half = pyfftw.empty_aligned((count, py, px // 2 + 1), "complex128")
+            product = pyfftw.empty_aligned((py, px // 2 + 1), "complex128")
+            field = pyfftw.empty_aligned((py, px), "float64")
+            with planning():
+                forward = pyfftw.FFTW(real, half, axes=(1, 2), flags=("FFTW_MEASURE",))
+                backward = pyfftw.FFTW(product, field, axes=(0, 1), direction="FFTW_BACKWARD",
+                                       flags=("FFTW_MEASURE",))
+            self._plans[key] = (real, half, product, forward, backward)
+        return self._plans[key]
+
+    def __call__(self, sources: np.ndarray, spectra: np.ndarray,
+                 shape: tuple[int, int]) -> np.ndarray:
+        """sum_k of sources[k] convolved with the kernel whose spectrum is
+        spectra[k] (``rfft2`` at ``shape``), over the sources' box.
+
+        Parameters
+        ----------
+        sources : (k, by, bx) stresses [stress]
+        spectra : (k, py, px // 2 + 1) kernel spectra [length / stress]
+        shape : (py, px), the transform grid (at least twice the box)
+        """
+        count, by, bx = sources.shape
+        if not HAVE_PYFFTW:  # pragma: no cover - pyfftw is a declared dependency
+            field = sfft.irfft2((sfft.rfft2(sources, s=shape) * spectra).sum(axis=0), s=shape)
+            return field[:by, :bx]
+        real, half, product, forward, backward = self._plan(count, tuple(shape))
+        real[...] = 0.0  # planning and larger boxes of the same shape leave values
+        real[:, :by, :bx] = sources
+        forward()
+        if count == 1:
+            np.multiply(half[0], spectra[0], out=product)
+        else:
+            np.sum(half * spectra, axis=0, out=product)
+        return backward()[:by, :bx].copy()
