@@ -27,7 +27,8 @@ def cache(tmp_path, monkeypatch):
 def test_the_faster_library_is_timed_once_and_remembered(cache, monkeypatch):
     """The first call times both and picks the faster; later calls (another
     process: the in-process answer cleared) read the file and time nothing;
-    each case has its own answer; an unreadable file is timed again."""
+    each case has its own answer, and so has each pair of library versions;
+    an unreadable file is timed again."""
     timed = []
 
     def fake(n, h, e_star, threads, single):
@@ -41,12 +42,20 @@ def test_the_faster_library_is_timed_once_and_remembered(cache, monkeypatch):
     assert entries[fft_choice._key(64, 1, True)] == {"library": "mkl", "fftw_ms": 2.0,
                                                      "mkl_ms": 1.5}
     assert fft_choice.processor() in fft_choice._key(64, 1, True)
+    assert fft_choice.versions() in fft_choice._key(64, 1, True)
     assert timed == [(64, 1, True), (64, 2, True)]
 
     fft_choice.faster_library.cache_clear()
     monkeypatch.setattr(fft_choice, "time_pairs", lambda *a: pytest.fail("timed again"))
     assert fft_choice.faster_library(64, 1.0, 1.0, 1, True) == "mkl"
     assert fft_choice.faster_library(64, 1.0, 1.0, 2, True) == "fftw"
+
+    # An upgrade of either library is a new case (its answer may turn).
+    fft_choice.faster_library.cache_clear()
+    monkeypatch.setattr(fft_choice, "versions", lambda: "pyfftw 9.9, mkl_fft 9.9")
+    monkeypatch.setattr(fft_choice, "time_pairs", fake)
+    assert fft_choice.faster_library(64, 1.0, 1.0, 1, True) == "mkl"
+    assert timed[-1] == (64, 1, True) and len(json.loads(cache.read_text())) == 3
 
     fft_choice.faster_library.cache_clear()
     cache.write_text("{ half a file")

@@ -13,8 +13,10 @@ finds its plans: by timing both, once per machine and case, and
 remembering the answer (``fft-library.json`` beside FFTW's wisdom, under a
 lock, so that concurrent jobs share one answer and the same case runs on
 the same library, rounding alike, in every later job on this machine).
-Answers are kept per processor model: a cluster's nodes may share one home
-directory, and with it the cache, across different processors.
+Answers are kept per processor model and library versions: a cluster's
+nodes may share one home directory, and with it the cache, across
+different processors, and an upgrade of either library may turn the
+answer.
 """
 
 from __future__ import annotations
@@ -52,8 +54,23 @@ def processor() -> str:
     return platform.processor() or platform.machine() or "unknown"
 
 
+@lru_cache(maxsize=1)
+def versions() -> str:
+    """The two libraries' versions as the answers are keyed by them."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def installed(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "none"
+
+    return f"pyfftw {installed('pyfftw')}, mkl_fft {installed('mkl_fft')}"
+
+
 def _key(n: int, threads: int, single: bool) -> str:
-    return f"{processor()}: n={n} threads={threads} {'float32' if single else 'float64'}"
+    precision = "float32" if single else "float64"
+    return f"{processor()} ({versions()}): n={n} threads={threads} {precision}"
 
 
 def _load() -> dict:
