@@ -19,7 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from brushcore.numerics.collective import CollectiveMode, centroid_influence
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.device_blocks import DeviceBlocks
 from brushcore.numerics.precondition import BlockInverse
@@ -98,36 +97,7 @@ class BrushOperator:
         if self.tiles is not None:
             self.local = PillarSolver(self.elements, pillar_of, convolver.n, compliance, h,
                                       e_star, getattr(convolver, "mirrored", False), self.tiles)
-        # ... and the pillars' collective mode over them.
-        self.collective: CollectiveMode | None = None
-        if self.tiles is not None and self.COLLECTIVE and self.n_pillars > 1:
-            self.collective = self._collective_mode(
-                centroid_influence(self.elements, pillar_of, convolver.n, h, e_star,
-                                   getattr(convolver, "mirrored", False)))
         self._update()
-
-    #: Give the tile path the pillars' collective mode (`CollectiveMode`)
-    #: where they couple as much as the dense blocks' coarse space asks.
-    COLLECTIVE = True
-
-    def _collective_mode(self, r: np.ndarray) -> CollectiveMode | None:
-        z = np.zeros(self.elements.size)
-        mode = CollectiveMode(r, z, self.pillar_of)
-        for p in range(self.n_pillars):
-            self._tile_response(mode, p)
-        mode.refactorise()
-        coupling = float((r @ mode.c).max())
-        if not mode.valid or coupling < BlockInverse.COUPLING_PER_PILLAR * self.n_pillars:
-            return None
-        return mode
-
-    def _tile_response(self, mode: CollectiveMode, p: int) -> None:
-        """Pillar p's coarse vector M_p^-1 1 over its attached elements."""
-        members = self.tiles.members[p]
-        rest = members[self.attached[members]]
-        mode.z[members] = 0.0
-        if rest.size:
-            mode.z[rest] = self.tiles.apply_pillar(p, np.ones(rest.size), rest, self.diag)
 
     def _update(self) -> None:
         xp = self.backend.xp
@@ -136,8 +106,6 @@ class BrushOperator:
             self._bpos = self.block.pos[self.attached]
         if self.tiles is not None:
             self._tpos = self.tiles.tile_of[self.attached]
-        if self.collective is not None:
-            self._zc = self.collective.z[self.attached]
         self.pl = self.pillar_of[self.attached]
         self.counts = self.backend.bincount(self.pl, minlength=self.n_pillars)
         if self.block is None and self.tiles is None:
@@ -169,7 +137,6 @@ class BrushOperator:
         if self.tiles is not None:
             self.tiles.detach(pos)
         be.put(self.attached, pos, False)
-        self._collective_update(pos)
         self._update()
         if self.local is not None and stress is not None:
             full = _spread_host(self.attached.size, pos, which, stress, self.attached)
@@ -194,15 +161,7 @@ class BrushOperator:
         if self.tiles is not None:
             self.tiles.attach(positions)
         self.backend.put(self.attached, positions, True)
-        self._collective_update(positions)
         self._update()
-
-    def _collective_update(self, positions: Any) -> None:
-        """The collective mode after the pillars of ``positions`` changed."""
-        if self.collective is not None:
-            mode = self.collective
-            mode.update(np.unique(self.pillar_of[positions]),
-                        lambda p: self._tile_response(mode, p))
 
     @property
     def can_refine(self) -> bool:
@@ -291,9 +250,6 @@ class BrushOperator:
         if self.block is not None:
             return self.block.apply(r, self._bpos)
         if self.tiles is not None:
-            if self.collective is not None and self.collective.valid:
-                return self.collective.apply(r, self._zc, self.pl,
-                                             lambda v: self.tiles.apply(v, self._tpos, self.diag))
             return self.tiles.apply(r, self._tpos, self.diag)
         return (r - self._sm * self.pillar_sums(r)[self.pl]) / self.diag
 

@@ -40,8 +40,6 @@ element, aggregated by tile: m^2 over a whole curve), and its inverse is
 refreshed when a pillar's attached count moved by REFRESH since the last
 inversion, or a tile empty then has elements again; between refreshes the
 stale inverse still gives an SPD M.
-The pillars' interaction is left to CG and to the collective mode over
-the pillars (`brushcore.numerics.collective`), as on the block path.
 Images of the mirrored quadrant are left out of K_c: they are neighbour
 coupling, which block preconditioners leave to CG anyway, and leaving them
 out lets equal pillars share one assembly.
