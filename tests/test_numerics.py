@@ -344,6 +344,40 @@ def test_detach_warm_start_is_the_local_solve_and_its_neighbours_first_order(see
     assert np.allclose(got, y[keep], rtol=1e-9, atol=1e-9 * np.abs(y).max())
 
 
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_detach_bookkeeping_is_what_a_fresh_count_gives(seed):
+    """After detachments the operator's index arrays, cut down by the mask
+    (`BrushOperator._update`), equal those recomputed from `attached`, and
+    the neighbour coefficients sliced from a pillar's cached block
+    (`BlockInverse._near_block`) equal `_coefficients` bit for bit, with
+    at most NEAR_BLOCKS_KEPT blocks kept."""
+    from brushcore.numerics.precondition import BlockInverse
+
+    rng, labels, compliance = _random_problem(seed, n=16, n_pillars=8)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(BlockInverse, "NEIGHBOUR_PAIRS_PER_ELEMENT", 1e9)  # all pillars
+        op = BrushOperator(Convolver(16), labels, compliance, 1.0, 1.0, coarse=False)
+    block = op.block
+    for _ in range(3):
+        drop = rng.random(op.size) < 0.2
+        drop[0] = False
+        op.detach(drop, rng.uniform(0.5, 1.5, op.size))
+        cut = (op.idx.copy(), op._bpos.copy(), op.pl.copy(), op.counts.copy())
+        op._update()
+        for got, fresh in zip(cut, (op.idx, op._bpos, op.pl, op.counts)):
+            assert np.array_equal(got, fresh)
+    for p in range(block.inv.shape[0]):
+        cached, first_row = block._near_block(p)
+        cols = np.flatnonzero(block._live[p])
+        for q in block._neighbours[p]:
+            rows = np.flatnonzero(block._live[q])
+            assert np.array_equal(cached[np.ix_(first_row[q] + rows, cols)],
+                                  block._coefficients(q, rows, p, cols))
+        assert len(block._near_blocks) <= BlockInverse.NEAR_BLOCKS_KEPT
+        assert next(reversed(block._near_blocks)) == p  # the latest is kept
+
+
 def _far_response_error(mirrored: bool, distance: float, compliance: float) -> np.ndarray:
     """Largest relative error of `BlockInverse._far_response` against the
     exact first-order answer G_q K_qp dsigma_p, for two pillars at

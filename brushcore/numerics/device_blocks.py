@@ -73,6 +73,7 @@ class DeviceBlocks(BlockInverse):
         if self.coarse:
             self._factorise()
         self._neighbours = self._near_pillars(counts, n) if self.interacting else None
+        self._near_blocks = {}
         self._setup_far(counts)
 
     def _row(self, p: int) -> Any:

@@ -99,14 +99,26 @@ class BrushOperator:
                                       e_star, getattr(convolver, "mirrored", False), self.tiles)
         self._update()
 
-    def _update(self) -> None:
+    def _update(self, kept: Any = None) -> None:
+        """The attached elements' indices, from `attached`, or after a
+        detachment from the previous ones by ``kept`` (a boolean mask over
+        them): the same arrays, without a pass over every pillar element
+        (a soft random brush detaches thousands of times a curve)."""
         xp = self.backend.xp
-        self.idx = self._padded[self.attached]
-        if self.block is not None:
-            self._bpos = self.block.pos[self.attached]
-        if self.tiles is not None:
-            self._tpos = self.tiles.tile_of[self.attached]
-        self.pl = self.pillar_of[self.attached]
+        if kept is None:
+            self.idx = self._padded[self.attached]
+            if self.block is not None:
+                self._bpos = self.block.pos[self.attached]
+            if self.tiles is not None:
+                self._tpos = self.tiles.tile_of[self.attached]
+            self.pl = self.pillar_of[self.attached]
+        else:
+            self.idx = self.idx[kept]
+            if self.block is not None:
+                self._bpos = self._bpos[kept]
+            if self.tiles is not None:
+                self._tpos = self._tpos[kept]
+            self.pl = self.pl[kept]
         self.counts = self.backend.bincount(self.pl, minlength=self.n_pillars)
         if self.block is None and self.tiles is None:
             # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
@@ -137,7 +149,7 @@ class BrushOperator:
         if self.tiles is not None:
             self.tiles.detach(pos)
         be.put(self.attached, pos, False)
-        self._update()
+        self._update(~which)
         if self.local is not None and stress is not None:
             full = _spread_host(self.attached.size, pos, which, stress, self.attached)
             self.local.respond(full, self.attached, pos)

@@ -67,12 +67,15 @@ Progress = Callable[[int, int, int], None]
 FAR_FIELD_SAFETY = 3.0
 
 
-def _spread(op: BrushOperator, x: np.ndarray) -> np.ndarray:
-    """A compressed vector over the attached elements as a vector over all
-    pillar elements (operator order), zero at the detached ones."""
+def _spread(op: BrushOperator, x: np.ndarray, attached: np.ndarray | None = None
+            ) -> np.ndarray:
+    """A compressed vector over the attached elements (``attached``, by
+    default the operator's now) as a vector over all pillar elements
+    (operator order), zero at the detached ones."""
     be = op.backend
-    full = be.xp.zeros(op.attached.shape[0], dtype=be.xp.float64)
-    be.put(full, be.flatnonzero(op.attached), x)
+    attached = op.attached if attached is None else attached
+    full = be.xp.zeros(attached.shape[0], dtype=be.xp.float64)
+    be.put(full, be.flatnonzero(attached), x)
     return full
 
 
@@ -331,19 +334,23 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         mask = sigma1 >= peak * (1.0 - options.tie_rtol - options.lookahead)
         threshold = sigma_c * (1.0 - options.tie_rtol) / d
         # Re-solve at fixed d until no attached element exceeds sigma_c.
-        reference = _spread(op, sigma1)  # at the last global solve
+        # The stresses of the last global solve over all pillar elements,
+        # spread only when a certificate reads them (few rounds try one).
+        solved, reference = (sigma1, xp.asarray(op.attached, copy=True)), None
         while True:
             sigma1 = detach(mask, sigma1)
             if not op.size:
                 break
             if local and backoff.due():
+                if reference is None:
+                    reference = _spread(op, solved[0], solved[1])
                 mask = _certain_detachments(op, sigma1, threshold, reference, error)
                 certified = mask is not None and bool(xp.any(mask))
                 backoff.record(certified)
                 if certified:
                     continue  # decided without a global solve
             sigma1, error = solve(sigma1, threshold)
-            reference = _spread(op, sigma1)
+            solved, reference = (sigma1, xp.asarray(op.attached, copy=True)), None
             record(sigma1)
             mask = sigma1 >= threshold
             if not bool(xp.any(mask)):
