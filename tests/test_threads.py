@@ -31,6 +31,39 @@ def test_stacked_matmul_gives_the_same_bits_on_any_thread_count(dtype):
             assert got.dtype == one.dtype and np.array_equal(got, one), (n_items, threads)
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_packed_products_are_scipys_spmv_on_any_thread_count(dtype):
+    """The packed blocks' products through SciPy's exported BLAS pointer
+    (`brushcore.numerics.spmv`) are SciPy's f2py spmv to the bit, against
+    the dense symmetric product to round-off, and zero off ``which``."""
+    from scipy.linalg import blas
+
+    from brushcore.numerics.precondition import _pack_index
+    from brushcore.numerics.spmv import packed_products
+
+    rng = np.random.default_rng(5)
+    m, n_items = 41, 9
+    dense = rng.standard_normal((n_items, m, m))
+    dense = (dense + dense.transpose(0, 2, 1)).astype(dtype)
+    stack = np.stack([d.ravel()[_pack_index(m)] for d in dense])
+    w = rng.standard_normal((n_items, m)).astype(dtype)
+    which = np.array([0, 2, 3, 7, 8])
+    spmv = blas.sspmv if dtype == np.float32 else blas.dspmv
+    for threads in (1, 2, 3, 8):
+        z = packed_products(stack, w, which, threads)
+        assert z.dtype == dtype
+        for p in range(n_items):
+            if p in which:
+                assert np.array_equal(z[p], spmv(m, 1.0, stack[p], w[p])), (p, threads)
+            else:
+                assert not z[p].any()
+    eps = np.finfo(dtype).eps
+    assert np.allclose(z[which], np.einsum("pij,pj->pi", dense, w)[which],
+                       rtol=0, atol=100 * eps * m)
+    with pytest.raises(TypeError, match="float32 or float64"):
+        packed_products(stack.astype(np.float64), w.astype(np.float32), which)
+
+
 def test_team_raises_a_threads_error_and_recovers():
     """A thread that fails does not leave the others waiting at the barrier:
     its error reaches the caller, and the team works afterwards."""

@@ -42,6 +42,7 @@ from brushcore.numerics.backend import CPU
 from brushcore.numerics.farfield import FarFieldBound, near_influence
 from brushcore.numerics.kernel import folded_coefficient, love_coefficient
 from brushcore.numerics.multipole import field_terms
+from brushcore.numerics.spmv import packed_products
 from brushcore.numerics.threads import stacked_matmul
 
 
@@ -95,16 +96,14 @@ def _pack_index(m: int) -> np.ndarray:
 
 def _stack_times(stack: np.ndarray, packed: bool, w: np.ndarray,
                  remaining: np.ndarray, threads: int = 1) -> np.ndarray:
-    """blockdiag(stack_p) w for stacked (N, m) w: one batched matmul (its
-    slabs of pillars on ``threads`` threads), or one BLAS spmv per pillar
-    with elements left from packed ``stack`` (float32 or float64, as w)."""
+    """blockdiag(stack_p) w for stacked (N, m) w: one batched matmul, or
+    one BLAS spmv per pillar with elements left from packed ``stack``
+    (float32 or float64, as w); either way in slabs of pillars on
+    ``threads`` threads, the same numbers on any thread count."""
     if not packed:
         return stacked_matmul(stack, w[:, :, None], threads)[:, :, 0]
-    spmv = blas.sspmv if stack.dtype == np.float32 else blas.dspmv
-    z = np.zeros_like(w)
-    for p in np.flatnonzero(remaining):  # detached pillars have G_p = 0
-        z[p] = spmv(w.shape[1], 1.0, stack[p], w[p])
-    return z
+    # detached pillars have G_p = 0
+    return packed_products(stack, w, np.flatnonzero(remaining), threads)
 
 
 class BlockInverse:
@@ -760,7 +759,7 @@ class BlockInverse:
         if not self.single:  # a float64 copy is a packed one
             if self._copy is None or self._copy.dtype != np.float64:
                 return _stack_times(self.inv, False, w, self._remaining, self.threads)
-            return _stack_times(self._copy, True, w, self._remaining)
+            return _stack_times(self._copy, True, w, self._remaining, self.threads)
         z = _stack_times(self._copy, self._pack_index is not None, w.astype(np.float32),
                          self._remaining, self.threads).astype(np.float64)
         gap = (self._z * w).sum(axis=1) - z.sum(axis=1)  # z is 0 off the live slots
