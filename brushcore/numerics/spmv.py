@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from brushcore.numerics.threads import slab, team
+from brushcore.numerics.threads import in_slabs
 
 _P = ctypes.c_void_p
 _SPMV = ctypes.CFUNCTYPE(None, ctypes.c_char_p, _P, _P, _P, _P, _P, _P, _P, _P)
@@ -27,8 +27,9 @@ _SPMV = ctypes.CFUNCTYPE(None, ctypes.c_char_p, _P, _P, _P, _P, _P, _P, _P, _P)
 
 @lru_cache(maxsize=None)
 def _routine(name: str) -> Callable[..., None]:
-    """BLAS ``name`` (sspmv or dspmv, Fortran calling convention) from
-    SciPy's exported function pointers; a CFUNCTYPE call drops the GIL."""
+    """BLAS ``name`` (sspmv or dspmv; Fortran-style arguments, all by
+    reference) from SciPy's exported function pointers; a CFUNCTYPE call
+    drops the GIL."""
     import scipy.linalg.cython_blas as cython_blas
 
     api = ctypes.pythonapi
@@ -73,15 +74,10 @@ def packed_products(stack: np.ndarray, w: np.ndarray, which: np.ndarray,
     da, dw = stack.strides[0], w.strides[0]
     which = np.asarray(which, dtype=np.intp)
 
-    def task(i: int) -> None:
-        lo, hi = slab(which.size, i, threads)
+    def work(lo: int, hi: int) -> None:
         rn, r1, ra, rb = refs
         for p in which[lo:hi].tolist():
             spmv(b"U", rn, ra, a0 + p * da, w0 + p * dw, r1, rb, z0 + p * dw, r1)
 
-    threads = max(1, min(threads, which.size))
-    if threads == 1:
-        task(0)
-    else:
-        team(threads).run(task)
+    in_slabs(which.size, threads, work)
     return z

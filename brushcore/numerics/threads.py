@@ -96,6 +96,17 @@ def _team(threads: int, pid: int) -> Team:
     return Team(threads)
 
 
+def in_slabs(count: int, threads: int, work: Callable[[int, int], None]) -> None:
+    """work(lo, hi) for ``count`` items cut into slabs, one per thread of a
+    `Team` (at most one thread an item; one thread runs work(0, count) on
+    the caller).  ``work`` must release the GIL to run in parallel."""
+    threads = max(1, min(threads, count))
+    if threads == 1:
+        work(0, count)
+        return
+    team(threads).run(lambda i: work(*slab(count, i, threads)))
+
+
 def stacked_matmul(a: np.ndarray, b: np.ndarray, threads: int) -> np.ndarray:
     """np.matmul(a, b) of stacks with one leading axis, its slabs on
     ``threads`` threads: the same numbers, each item's product being
@@ -103,14 +114,10 @@ def stacked_matmul(a: np.ndarray, b: np.ndarray, threads: int) -> np.ndarray:
     inverses at 2048^2: 142 MB an application) take about 1/T the time
     (two threads: 6.8-7.4 against 13.0-13.8 ms for 64 inverses of 527^2).
     """
-    threads = max(1, min(threads, a.shape[0]))
-    if threads == 1:
-        return np.matmul(a, b)
     out = np.empty(a.shape[:-1] + b.shape[-1:], dtype=np.result_type(a, b))
 
-    def task(i: int) -> None:
-        lo, hi = slab(a.shape[0], i, threads)
+    def work(lo: int, hi: int) -> None:
         np.matmul(a[lo:hi], b[lo:hi], out=out[lo:hi])
 
-    team(threads).run(task)
+    in_slabs(a.shape[0], threads, work)
     return out
