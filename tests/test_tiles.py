@@ -133,6 +133,24 @@ def test_tiles_cut_iterations_where_dense_blocks_do_not_fit(kbar):
     assert 2 * _first_solve_iterations(tiled) <= _first_solve_iterations(jacobi)
 
 
+def test_pillar_coarse_space_cuts_the_tiles_iterations():
+    """The block path's pillar-level coarse space on the tiles (rigid
+    random 8 x 8 brush, 256^2, first solve from zero): the pillars' forces
+    coupled through the half space are what it carries.  Measured: 11
+    iterations with it against 13 without (in a pull-off on 1024^2: 12 %
+    fewer applications, README); require fewer."""
+    params = BrushParams(layout="random", n_pillars=64, kbar=np.inf, grid=256)
+    labels = build_labels(params)
+    compliance = spring_compliance(params, 64)
+    conv = Convolver(256)
+    counts = []
+    for coarse in (True, False):
+        op = BrushOperator(conv, labels, compliance, 1.0, 1.0, coarse=coarse, max_block=10)
+        assert op.block is None and op.tiles is not None and op.tiles.coarse is coarse
+        counts.append(_first_solve_iterations(op))
+    assert counts[0] < counts[1], counts
+
+
 @pytest.mark.parametrize("kbar, stack", [(np.inf, TileCoarse.STACK_PER_CELL),
                                          (1e-3, TileCoarse.STACK_PER_CELL), (1e-3, 0.2)])
 def test_pull_off_with_tiles_matches_exact(monkeypatch, kbar, stack):

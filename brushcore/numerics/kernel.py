@@ -101,6 +101,20 @@ def folded_coefficient(ya: np.ndarray, xa: np.ndarray, yb: np.ndarray, xb: np.nd
             + love_coefficient(dy, sx, h, e_star) + love_coefficient(sy, sx, h, e_star))
 
 
+def pillar_influence(cy: np.ndarray, cx: np.ndarray, h: float, e_star: float,
+                     mirrored: bool) -> np.ndarray:
+    """Monopole influence between pillar centroids (cy, cx) [length], images
+    included on a mirror quadrant, zero on the diagonal (a pillar's own
+    field is in its block), shape (N, N) [length / stress]: R of the
+    preconditioners' pillar-level coarse space."""
+    if mirrored:
+        r = folded_coefficient(cy[:, None], cx[:, None], cy[None], cx[None], h, e_star)
+    else:
+        r = love_coefficient(cy[:, None] - cy[None], cx[:, None] - cx[None], h, e_star)
+    np.fill_diagonal(r, 0.0)
+    return r
+
+
 #: Signs (sy, sx) of an element's images on a mirror quadrant (see
 #: `folded_coefficient`): (1, 1) is the element itself, -1 reflects that
 #: coordinate about its mirror line.

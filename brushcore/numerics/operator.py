@@ -91,7 +91,9 @@ class BrushOperator:
         if (use_block and be.on_host and self.block is None
                 and TileCoarse.fits(self.elements, pillar_of, convolver.n)):
             self.tiles = TileCoarse(self.elements, pillar_of, convolver.n, compliance, h, e_star,
-                                    threads=threads)
+                                    threads=threads,
+                                    mirrored=getattr(convolver, "mirrored", False),
+                                    coarse=coarse)
         # ... and their exact local responses on small FFT grids (local cascades).
         self.local: PillarSolver | None = None
         if self.tiles is not None:
@@ -120,6 +122,8 @@ class BrushOperator:
                 self._tpos = self._tpos[kept]
             self.pl = self.pl[kept]
         self.counts = self.backend.bincount(self.pl, minlength=self.n_pillars)
+        if self.tiles is not None:  # the touched pillars' z_p have changed
+            self._tz = self.tiles.z[self.attached] if self.tiles.coarse else None
         if self.block is None and self.tiles is None:
             # Sherman-Morrison for the per-pillar block (c I + s 1 1^T)^-1.
             s = self.compliance
@@ -262,7 +266,7 @@ class BrushOperator:
         if self.block is not None:
             return self.block.apply(r, self._bpos)
         if self.tiles is not None:
-            return self.tiles.apply(r, self._tpos, self.diag)
+            return self.tiles.apply(r, self._tpos, self.diag, self.pl, self._tz)
         return (r - self._sm * self.pillar_sums(r)[self.pl]) / self.diag
 
 

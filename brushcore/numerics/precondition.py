@@ -40,7 +40,7 @@ from scipy.linalg import blas
 
 from brushcore.numerics.backend import CPU
 from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import folded_coefficient, love_coefficient
+from brushcore.numerics.kernel import folded_coefficient, love_coefficient, pillar_influence
 from brushcore.numerics.multipole import field_terms
 from brushcore.numerics.spmv import packed_products
 from brushcore.numerics.threads import stacked_matmul
@@ -245,8 +245,7 @@ class BlockInverse:
         cx = xx.sum(axis=1) / counts
         self._centroids = cy, cx  # also for `_near_pillars`
         # Diagonals are zero: a pillar's own images are in its block.
-        r = self._influence(cy[:, None], cx[:, None], cy[None], cx[None])
-        np.fill_diagonal(r, 0.0)
+        r = pillar_influence(cy, cx, h, e_star, self._mirrored)
         # For the uncertainty bound: the influence at the closest approach
         # of two footprints, not at their centroids (close random pillars).
         reach = np.sqrt(((yy - cy[:, None]) ** 2 + (xx - cx[:, None]) ** 2)

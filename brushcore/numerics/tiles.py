@@ -49,7 +49,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import love_coefficient
+from brushcore.numerics.kernel import love_coefficient, pillar_influence, self_compliance
+from brushcore.numerics.precondition import BlockInverse
 from brushcore.numerics.threads import stacked_matmul
 
 
@@ -63,6 +64,12 @@ class TileCoarse:
     tile : tile side a in elements (default: `tile_size`)
     threads : threads that share each application's stacked inverses
         (`brushcore.numerics.threads.stacked_matmul`)
+    mirrored : the grid is a mirror quadrant (the coarse space's R
+        includes the images)
+    coarse : allow the block path's pillar-level coarse space
+        (`brushcore.numerics.precondition`), with z_p = M_p^-1 1 from the
+        tiles' own pillar blocks, under the same rule (1 < N <=
+        `BlockInverse.MAX_COARSE`, coupling >= `BlockInverse.COUPLING_PER_PILLAR` N)
     """
 
     #: Most tiles a pillar may have (bounds the memory per pillar to 8 MB twice).
@@ -76,7 +83,8 @@ class TileCoarse:
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float,
-                 tile: int | None = None, threads: int = 1) -> None:
+                 tile: int | None = None, threads: int = 1, mirrored: bool = False,
+                 coarse: bool = True) -> None:
         n_pillars = compliance.size
         self.threads = threads
         self.a = tile_size(elements, pillar_of, n) if tile is None else tile
@@ -113,6 +121,52 @@ class TileCoarse:
         self._inverted = np.zeros((n_pillars, self.mc), dtype=bool)  # tiles with a coarse row
         self.refreshes = 0
         self._refresh(np.arange(n_pillars))
+        self._setup_coarse(h, e_star, mirrored, coarse)
+
+    def _setup_coarse(self, h: float, e_star: float, mirrored: bool, coarse: bool) -> None:
+        """The pillar-level coarse space, where the rule allows it and E is
+        positive definite: R, and each pillar's z_p = M_p^-1 1 (`z`, over
+        all elements in operator order, zero at detached ones)."""
+        n_pillars = self._compliance.size
+        self.z = np.zeros(self._pillar_of.size)
+        self.coarse = coarse and 1 < n_pillars <= BlockInverse.MAX_COARSE
+        if not self.coarse:
+            return
+        counts = np.bincount(self._pillar_of, minlength=n_pillars)
+        cy = np.bincount(self._pillar_of, weights=self._iy * h, minlength=n_pillars) / counts
+        cx = np.bincount(self._pillar_of, weights=self._ix * h, minlength=n_pillars) / counts
+        self._r = pillar_influence(cy, cx, h, e_star, mirrored)
+        self._diag = self_compliance(e_star, h)
+        self._coarse_vectors(np.arange(n_pillars))
+        coupling = float((self._r @ self._c).max())
+        self.coarse = (self.coarse and coupling >= BlockInverse.COUPLING_PER_PILLAR * n_pillars)
+
+    def _coarse_vectors(self, pillars: np.ndarray) -> None:
+        """z_p of the given pillars, and E = diag(c) + C R C inverted anew
+        (N is small where pillars are this large: E costs less than a
+        round's bookkeeping).  An E that is not positive definite
+        (overlapping monopoles) turns the coarse space off; the tiles alone
+        remain a valid preconditioner."""
+        for p in pillars:
+            members = self.members[p]
+            live = members[self._live[members]]
+            self.z[members] = 0.0
+            if live.size:
+                self.z[live] = self.apply_pillar(int(p), np.ones(live.size), live, self._diag)
+        c = np.bincount(self._pillar_of, weights=self.z, minlength=self._compliance.size)
+        e = np.diag(c) + c[:, None] * self._r * c[None, :]
+        dead = c <= 0.0
+        e[dead, :] = 0.0
+        e[:, dead] = 0.0
+        e[dead, dead] = 1.0
+        try:
+            np.linalg.cholesky(e)
+        except np.linalg.LinAlgError:
+            self.coarse = False
+            return
+        self._c = c
+        self._e_inverse = np.linalg.inv(e)
+        self._c_inverse = np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
 
     @classmethod
     def fits(cls, elements: np.ndarray, pillar_of: np.ndarray, n: int,
@@ -180,6 +234,8 @@ class TileCoarse:
         moved |= ((counts > 0) & ~self._inverted[touched]).any(axis=1)
         if moved.any():
             self._refresh(touched[moved])
+        if self.coarse:
+            self._coarse_vectors(touched)
 
     def detach(self, positions: np.ndarray) -> None:
         """Remove detached elements (operator-order indices) from the coarse blocks."""
@@ -189,12 +245,31 @@ class TileCoarse:
         """Add re-attached elements (operator-order indices) to the coarse blocks."""
         self._change(np.asarray(positions, dtype=np.intp), 1.0)
 
-    def apply(self, r: np.ndarray, tile_pos: np.ndarray, diag: float) -> np.ndarray:
-        """M^-1 r for a compressed residual r over the attached elements.
+    def apply(self, r: np.ndarray, tile_pos: np.ndarray, diag: float,
+              pillar: np.ndarray | None = None, z: np.ndarray | None = None) -> np.ndarray:
+        """M^-1 r for a compressed residual r over the attached elements,
+        balanced with the pillar-level coarse space when it is on (as
+        `BlockInverse.apply`, with the tiles in place of the blocks).
 
         ``tile_pos`` is `tile_of` over the attached elements and ``diag``
-        the self-compliance K_ii [length / stress].
+        the self-compliance K_ii [length / stress]; ``pillar`` and ``z``,
+        the pillar index and `z` over them, are derived when not given
+        (the operator keeps them from one detachment to the next).
         """
+        if not self.coarse:
+            return self._two_level(r, tile_pos, diag)
+        pillar = tile_pos // self.mc if pillar is None else pillar
+        z = self.z[self._live] if z is None else z
+        n_pillars = self._c.size
+        t = np.bincount(pillar, weights=z * r, minlength=n_pillars)  # Z^T r
+        y = self._e_inverse @ t
+        out = self._two_level(r - (t * self._c_inverse)[pillar], tile_pos, diag)
+        sums = np.bincount(pillar, weights=out, minlength=n_pillars)
+        out += z * (y - sums * self._c_inverse)[pillar]
+        return out
+
+    def _two_level(self, r: np.ndarray, tile_pos: np.ndarray, diag: float) -> np.ndarray:
+        """The tiles' own M^-1 r (module docstring)."""
         sums = np.bincount(tile_pos, weights=r, minlength=self.counts.size)
         mean = np.divide(sums, self.counts, out=np.zeros_like(sums), where=self.counts > 0)
         coarse = stacked_matmul(self.inv, sums.reshape(-1, self.mc, 1), self.threads).ravel()
