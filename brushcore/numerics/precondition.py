@@ -86,6 +86,24 @@ def _spd_inverse(e: np.ndarray) -> np.ndarray:
     return tri + np.tril(tri, -1).T if lower else tri + np.triu(tri, 1).T
 
 
+def coarse_inverse(c: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """E^-1 of the pillar-level coarse space, E = diag(c) + C R C with
+    c_p = 1^T z_p (module docstring); a pillar without elements (c_p = 0)
+    gets a decoupled unit row.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If E is not positive definite (monopoles of overlapping footprints).
+    """
+    e = np.diag(c) + c[:, None] * r * c[None, :]
+    dead = c <= 0.0
+    e[dead, :] = 0.0
+    e[:, dead] = 0.0
+    e[dead, dead] = 1.0
+    return _spd_inverse(e)
+
+
 def _pack_index(m: int) -> np.ndarray:
     """Flat indices into an m x m block of its upper triangle, packed
     column by column (BLAS spmv's layout)."""
@@ -374,13 +392,9 @@ class BlockInverse:
 
     def _factorise(self) -> None:
         c = self._z.sum(axis=1)
-        e = np.diag(c) + c[:, None] * self._r * c[None, :]
         dead = c <= 0.0
-        e[dead, :] = 0.0
-        e[:, dead] = 0.0
-        e[dead, dead] = 1.0
         try:
-            self._e_inverse = _spd_inverse(e)
+            self._e_inverse = coarse_inverse(c, self._r)
         except np.linalg.LinAlgError:
             # Monopoles of overlapping or interleaved footprints need not give
             # a positive definite E; the blocks alone remain a valid preconditioner.

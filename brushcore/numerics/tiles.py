@@ -50,7 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from brushcore.numerics.kernel import love_coefficient, pillar_influence, self_compliance
-from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.precondition import BlockInverse, coarse_inverse
 from brushcore.numerics.threads import stacked_matmul
 
 
@@ -154,18 +154,13 @@ class TileCoarse:
             if live.size:
                 self.z[live] = self.apply_pillar(int(p), np.ones(live.size), live, self._diag)
         c = np.bincount(self._pillar_of, weights=self.z, minlength=self._compliance.size)
-        e = np.diag(c) + c[:, None] * self._r * c[None, :]
-        dead = c <= 0.0
-        e[dead, :] = 0.0
-        e[:, dead] = 0.0
-        e[dead, dead] = 1.0
         try:
-            np.linalg.cholesky(e)
+            self._e_inverse = coarse_inverse(c, self._r)
         except np.linalg.LinAlgError:
             self.coarse = False
             return
+        dead = c <= 0.0
         self._c = c
-        self._e_inverse = np.linalg.inv(e)
         self._c_inverse = np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
 
     @classmethod
