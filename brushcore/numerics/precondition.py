@@ -86,10 +86,10 @@ def _spd_inverse(e: np.ndarray) -> np.ndarray:
     return tri + np.tril(tri, -1).T if lower else tri + np.triu(tri, 1).T
 
 
-def coarse_inverse(c: np.ndarray, r: np.ndarray) -> np.ndarray:
+def coarse_inverse(c: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """E^-1 of the pillar-level coarse space, E = diag(c) + C R C with
-    c_p = 1^T z_p (module docstring); a pillar without elements (c_p = 0)
-    gets a decoupled unit row.
+    c_p = 1^T z_p (module docstring), and C^-1 (0 where c_p = 0); a pillar
+    without elements gets a decoupled unit row of E.
 
     Raises
     ------
@@ -101,7 +101,7 @@ def coarse_inverse(c: np.ndarray, r: np.ndarray) -> np.ndarray:
     e[dead, :] = 0.0
     e[:, dead] = 0.0
     e[dead, dead] = 1.0
-    return _spd_inverse(e)
+    return _spd_inverse(e), np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
 
 
 def _pack_index(m: int) -> np.ndarray:
@@ -392,9 +392,8 @@ class BlockInverse:
 
     def _factorise(self) -> None:
         c = self._z.sum(axis=1)
-        dead = c <= 0.0
         try:
-            self._e_inverse = coarse_inverse(c, self._r)
+            self._e_inverse, self._c_inverse = coarse_inverse(c, self._r)
         except np.linalg.LinAlgError:
             # Monopoles of overlapping or interleaved footprints need not give
             # a positive definite E; the blocks alone remain a valid preconditioner.
@@ -407,7 +406,6 @@ class BlockInverse:
         single = self._copy is not None and self._copy.dtype == np.float32
         self._e_inverse_single = self._e_inverse.astype(np.float32) if single else None
         self._c_factor = c
-        self._c_inverse = np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
         self.factorisations += 1
 
     @classmethod

@@ -143,8 +143,9 @@ class TileCoarse:
         self._r = pillar_influence(cy, cx, h, e_star, mirrored)
         self._diag = self_compliance(e_star, h)
         self._coarse_vectors(np.arange(n_pillars))
-        coupling = float((self._r @ self._c).max())
-        self.coarse = (self.coarse and coupling >= BlockInverse.COUPLING_PER_PILLAR * n_pillars)
+        if self.coarse:  # else E was not positive definite
+            coupling = float((self._r @ self._c).max())
+            self.coarse = coupling >= BlockInverse.COUPLING_PER_PILLAR * n_pillars
 
     def _coarse_vectors(self, pillars: np.ndarray) -> None:
         """z_p of the given pillars, and E = diag(c) + C R C inverted anew
@@ -160,13 +161,11 @@ class TileCoarse:
                 self.z[live] = self.apply_pillar(int(p), np.ones(live.size), live, self._diag)
         c = np.bincount(self._pillar_of, weights=self.z, minlength=self._compliance.size)
         try:
-            self._e_inverse = coarse_inverse(c, self._r)
+            self._e_inverse, self._c_inverse = coarse_inverse(c, self._r)
         except np.linalg.LinAlgError:
             self.coarse = False
             return
-        dead = c <= 0.0
         self._c = c
-        self._c_inverse = np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
 
     @classmethod
     def fits(cls, elements: np.ndarray, pillar_of: np.ndarray, n: int,
