@@ -87,6 +87,13 @@ def main(argv: list[str] | None = None) -> int:
              for label, n, kbar, grids in CASES]
     if args.with_4096:
         cases.append(("16x16 kbar 0.455", 256, 0.455, (4096,)))
+    # The first curve of a process pays for CuPy compiling its kernels: not a case.
+    t = time.perf_counter()
+    simulate(BrushParams("regular", 256, 0.455, 256, backend=args.backend),
+             SolverOptions(symmetry=False))
+    backend.synchronize()
+    print(f"warm-up curve (16x16 at 256^2, kernels compiled): {time.perf_counter() - t:.1f} s",
+          flush=True)
     print(f"{'case':>18} {'grid':>5} {'apps':>6} {'ms/app':>7} {'pair ms':>8} {'ratio':>6} "
           f"{'wall s':>7} {'F_ad/F_K':>9} {'W/W_K':>8}", flush=True)
     for label, n_pillars, kbar, grids in cases:

@@ -112,6 +112,13 @@ class Backend:
             return
         target[index] = values
 
+    def put_rows(self, target: Any, index: Any, values: Any) -> None:
+        """target[index] = values in place along the first axis (integer index)."""
+        if self.name == "strict":
+            target._array[index._array] = values._array
+            return
+        target[index] = values
+
     # --- the device ---------------------------------------------------------
     def synchronize(self) -> None:
         """Wait for queued device work (for timing); no-op on the host."""

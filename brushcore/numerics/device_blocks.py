@@ -52,13 +52,21 @@ class DeviceBlocks(BlockInverse):
         self.inv = xp.zeros((n_pillars, self.m, self.m), dtype=xp.float64)
         for group in self._shape_groups(counts):
             k = int(counts[group[0]])
-            block = be.asarray(np.linalg.inv(self._block(group[0], np.arange(k))))
-            for p in group:  # one host inversion per shape, copied on the device
+            block = xp.linalg.inv(be.asarray(self._block(group[0], np.arange(k))))
+            for p in group:  # one inversion per shape, on the device
                 self.inv[p, :k, :k] = block
         self._pos_host = self.pos
         self.pos = be.asarray(self.pos)
         self._work = xp.zeros(n_pillars * self.m, dtype=xp.float64)
         self._remaining = counts.copy()  # host: per-pillar counts are event data
+        # The neighbours' first-order response to a detachment
+        # (`BlockInverse._neighbour_response`, `_far_response`) saves
+        # applications where one costs more than its host-side coefficient
+        # lookups.  On a card it does not: 32 ms a detachment against 1.2 ms
+        # an application, 22 of the 43 s of 16 x 16 at kbar 0.455 on 1024^2
+        # (NVIDIA H200, 2026-12-04).  The strict namespace keeps it, so the
+        # code stays checked for portability.
+        self.respond = be.name != "gpu"
         self._drifted: set[int] = set()
         self.factorisations = 0
         self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
@@ -76,6 +84,15 @@ class DeviceBlocks(BlockInverse):
         self._near_blocks = {}
         self._setup_far(counts)
 
+    #: Bytes of touched blocks that one batched downdate takes at a time
+    #: (its temporaries are a few times this).
+    DOWNDATE_CHUNK_BYTES = 2e9
+    #: Largest pillar (elements) with dense blocks on a device, where they
+    #: fit DEVICE_MEMORY_FRACTION of its free memory: a card streams the
+    #: stack at memory bandwidth, and the alternative (Sherman-Morrison,
+    #: `BrushOperator.precondition`) needs many times the applications.
+    DEVICE_MAX_BLOCK = 8192
+
     def _row(self, p: int) -> Any:
         return self._work[p * self.m:(p + 1) * self.m]
 
@@ -87,12 +104,13 @@ class DeviceBlocks(BlockInverse):
 
     @classmethod
     def fits_device(cls, pillar_of: np.ndarray, backend: Backend,
-                    max_block: int = 2500) -> bool:
+                    max_block: int | None = None) -> bool:
         """Whether the stack fits half the device's free memory (and the block limit).
 
         Unlike the CPU's fixed budget this one reads the card: a GPU run's
         path may depend on the card, its results agree within CG tolerance.
         """
+        max_block = cls.DEVICE_MAX_BLOCK if max_block is None else max_block
         m, stack_bytes = cls.stack_size(pillar_of)
         return m <= max_block and stack_bytes <= DEVICE_MEMORY_FRACTION * backend.free_memory()
 
@@ -122,47 +140,102 @@ class DeviceBlocks(BlockInverse):
         return np.divmod(pos, self.m)
 
     def detach(self, elements: Any, stress: Any = None, attached_pos: Any = None) -> Any:
-        """See `BlockInverse.detach`; the downdates run on the device."""
+        """See `BlockInverse.detach`; the downdates run on the device, batched
+        over the touched pillars (a regular brush's event touches many at once)."""
         xp, be = self.backend.xp, self.backend
         pil, slot = self._pillars(elements)
-        m, work = self.m, self._work
         if stress is not None:
-            be.put(work, attached_pos, stress)
+            be.put(self._work, attached_pos, stress)
         touched = np.unique(pil)
-        self._remaining -= np.bincount(pil, minlength=self._remaining.size)
-        respond = stress is not None and self._neighbours is not None
+        lost = np.bincount(pil, minlength=self._remaining.size)
+        self._remaining -= lost
+        respond = stress is not None and self._neighbours is not None and self.respond
         live_before = self._live[touched].copy() if respond else None
         self._live[pil, slot] = False
         before = [xp.asarray(self._row(int(p)), copy=True) for p in touched] if respond else None
-        for p in touched:
-            p = int(p)
-            if self._remaining[p] == 0:  # the whole pillar lets go
-                self.inv[p, :, :] = 0.0
-                work[p * m:(p + 1) * m] = 0.0
-                continue
-            d = be.asarray(slot[pil == p])
-            g = self.inv[p, :, :]
-            cols = xp.take(g, d, axis=1)
-            gdd = xp.take(cols, d, axis=0)
-            rhs = xp.permute_dims(cols, (1, 0))
-            if stress is not None:
-                rhs = xp.concat([rhs, xp.take(work[p * m:(p + 1) * m], d)[:, None]], axis=1)
-            x = xp.linalg.solve(gdd, rhs)
-            keep = be.asarray(self._live[p].astype(float))
-            g = (g - cols @ x[:, :m]) * keep[:, None] * keep[None, :]
-            self.inv[p, :, :] = g  # zero rows and columns of D: exact, round-off removed
-            if stress is not None:
-                work[p * m:(p + 1) * m] = (work[p * m:(p + 1) * m] - cols @ x[:, m]) * keep
-        self._refresh(touched)
+        whole = touched[self._remaining[touched] == 0]  # whole pillars let go
+        for chunk in self._chunks(whole):
+            self._zero_pillars(chunk, stress is not None)
+        part = touched[self._remaining[touched] > 0]
+        order = np.lexsort((slot, pil))
+        first = np.searchsorted(pil[order], part)
+        # Pillars losing a like number of slots go together, padded to a power of two.
+        width = 1 << np.ceil(np.log2(lost[part])).astype(np.int64)
+        for w in np.unique(width):
+            group, starts = part[width == w], first[width == w]
+            for chunk in self._chunks(np.arange(group.size)):
+                ranks = np.arange(w)[None, :]
+                valid = ranks < lost[group[chunk]][:, None]
+                index = np.where(valid, starts[chunk][:, None] + ranks, 0)
+                gone = np.where(valid, slot[order][index], 0)
+                self._downdate(group[chunk], gone, valid, stress is not None)
+        self._note_coarse_drift(touched)
         if stress is None:
             return None
         if respond:
             sources = self._neighbour_response(touched, live_before, before)
             if self._far:
                 self._far_response(sources)
+        work = self._work
         out = work[attached_pos]
         work[...] = 0.0
         return out
+
+    def _chunks(self, items: np.ndarray) -> list[np.ndarray]:
+        """``items`` in runs whose blocks take DOWNDATE_CHUNK_BYTES at most."""
+        size = max(1, int(self.DOWNDATE_CHUNK_BYTES // (8.0 * self.m * self.m)))
+        return [items[i:i + size] for i in range(0, items.size, size)]
+
+    def _downdate(self, pillars: np.ndarray, gone: np.ndarray, valid: np.ndarray,
+                  with_work: bool) -> None:
+        """Remove slots ``gone`` (t, k; where ``valid``) from the touched
+        pillars' inverses in one batched Schur complement, as `_remove_slots`
+        does per pillar; with the stresses in `_work`, their exact local
+        response too.  Padding slots enter as identity rows, so they change
+        nothing."""
+        xp, be, m = self.backend.xp, self.backend, self.m
+        t, k = gone.shape
+        p = be.asarray(pillars.astype(np.int64))
+        d = be.asarray(gone.astype(np.int64))
+        v = be.asarray(valid.astype(np.float64))
+        g = xp.take(self.inv, p, axis=0)  # (t, m, m)
+        stack = xp.arange(t, dtype=xp.int64)
+        at = (stack[:, None, None] * (m * m) + xp.arange(m, dtype=xp.int64)[None, :, None] * m
+              + d[:, None, :])
+        cols = xp.reshape(xp.take(xp.reshape(g, (-1,)), xp.reshape(at, (-1,))), (t, m, k))
+        cols = cols * v[:, None, :]
+        at = stack[:, None, None] * (m * k) + d[:, :, None] * k + xp.arange(k, dtype=xp.int64)
+        gdd = xp.reshape(xp.take(xp.reshape(cols, (-1,)), xp.reshape(at, (-1,))), (t, k, k))
+        gdd = gdd * v[:, :, None] + xp.eye(k, dtype=xp.float64)[None, :, :] * (1.0 - v)[:, :, None]
+        rhs = xp.permute_dims(cols, (0, 2, 1))
+        if with_work:
+            w = xp.take(xp.reshape(self._work, (-1, m)), p, axis=0)  # (t, m)
+            wd = xp.take(xp.reshape(w, (-1,)), xp.reshape(stack[:, None] * m + d, (-1,)))
+            rhs = xp.concat([rhs, xp.reshape(wd, (t, k, 1)) * v[:, :, None]], axis=2)
+        x = xp.linalg.solve(gdd, rhs)
+        keep = be.asarray(self._live[pillars].astype(np.float64))  # after the detachment
+        # zero rows and columns of D: exact, round-off removed
+        g = (g - cols @ x[:, :, :m]) * keep[:, :, None] * keep[:, None, :]
+        be.put_rows(self.inv, p, g)
+        if with_work:
+            w = (w - (cols @ x[:, :, m:])[:, :, 0]) * keep
+            be.put(self._work, self._stack_index(p), xp.reshape(w, (-1,)))
+        self._refresh_rows(p, g)
+
+    def _zero_pillars(self, pillars: np.ndarray, with_work: bool) -> None:
+        """Pillars that let go entirely: zero inverses (and stresses)."""
+        xp, be, m = self.backend.xp, self.backend, self.m
+        p = be.asarray(pillars.astype(np.int64))
+        g = xp.zeros((pillars.size, m, m), dtype=xp.float64)
+        be.put_rows(self.inv, p, g)
+        if with_work:
+            be.put(self._work, self._stack_index(p), xp.zeros(pillars.size * m, dtype=xp.float64))
+        self._refresh_rows(p, g)
+
+    def _stack_index(self, p: Any) -> Any:
+        """Flat (N * m) positions of pillars p's slots, pillar by pillar."""
+        xp, m = self.backend.xp, self.m
+        return xp.reshape(p[:, None] * m + xp.arange(m, dtype=xp.int64)[None, :], (-1,))
 
     def attach(self, elements: Any) -> None:
         """See `BlockInverse.attach`: touched blocks inverted afresh (on the host,
@@ -176,21 +249,28 @@ class DeviceBlocks(BlockInverse):
             g[np.ix_(live, live)] = np.linalg.inv(self._block(p, live))
             self.inv[int(p), :, :] = self.backend.asarray(g)
         self._remaining += np.bincount(pil, minlength=self._remaining.size)
-        self._refresh(touched)
+        for chunk in self._chunks(touched):
+            p = self.backend.asarray(chunk.astype(np.int64))
+            self._refresh_rows(p, self.backend.xp.take(self.inv, p, axis=0))
+        self._note_coarse_drift(touched)
 
-    def _refresh(self, touched: np.ndarray) -> None:
-        """Coarse vectors and (when drifted) the coarse factor of changed pillars."""
-        xp = self.backend.xp
-        if self.interacting:
-            for p in touched:
-                self._z[int(p), :] = xp.sum(self.inv[int(p), :, :], axis=1)
-                self._reach[int(p), :] = xp.sum(xp.abs(self.inv[int(p), :, :]), axis=1)
-                if self._far:
-                    self._tilt[int(p), :, :] = self.inv[int(p), :, :] @ self._tilt_basis[int(p), :, :]
+    def _refresh_rows(self, p: Any, g: Any) -> None:
+        """Coarse vectors, reach and tilts of pillars p (device) from their
+        new inverses g (t, m, m)."""
+        if not self.interacting:
+            return
+        xp, be = self.backend.xp, self.backend
+        be.put_rows(self._z, p, xp.sum(g, axis=2))
+        be.put_rows(self._reach, p, xp.sum(xp.abs(g), axis=2))
+        if self._far:
+            be.put_rows(self._tilt, p, g @ xp.take(self._tilt_basis, p, axis=0))
+
+    def _note_coarse_drift(self, touched: np.ndarray) -> None:
+        """The coarse factor's drift check (`BlockInverse._note_drift`) for the touched pillars."""
         if self.coarse:
-            idx = self.backend.asarray(touched.astype(np.int64))
-            self._note_drift(touched, self.backend.to_host(
-                xp.sum(xp.take(self._z, idx, axis=0), axis=1)))
+            xp, be = self.backend.xp, self.backend
+            z = xp.take(self._z, be.asarray(touched.astype(np.int64)), axis=0)
+            self._note_drift(touched, be.to_host(xp.sum(z, axis=1)))
 
     def reach(self) -> Any:
         """See `BlockInverse.reach` (kept up to date by `_refresh` here)."""
