@@ -152,6 +152,31 @@ def test_strict_namespace_runs_the_pull_off_like_numpy(name):
     assert want.attrs["device_name"] == "cpu" and want.attrs["device_memory_bytes"] == 0
 
 
+def test_batched_downdate_matches_the_per_pillar_one():
+    """`DeviceBlocks.detach` removes slots from every touched pillar in one
+    batched Schur complement (pillars losing 1, 2 and 3 slots padded to 1,
+    2 and 4, and one pillar letting go whole); the inverses and the local
+    responses must be `BlockInverse`'s per-pillar ones to round-off."""
+    from brushcore.model.layout import build_labels
+    params = BrushParams("regular", 16, 1e-2, 64)
+    flat = build_labels(params).ravel()
+    elements = np.flatnonzero(flat >= 0)
+    pillar_of = flat[elements].astype(np.intp)
+    compliance = np.full(16, 0.3)
+    args = (elements, pillar_of, 64, compliance, params.h, params.e_star)
+    cpu = BlockInverse(*args)
+    strict = resolve_backend("strict")
+    dev = DeviceBlocks(*args, backend=strict)
+    gone = np.concatenate([np.flatnonzero(pillar_of == p)[:k] for p, k in ((0, 1), (5, 2), (6, 3))]
+                          + [np.flatnonzero(pillar_of == 9)])
+    stress = np.random.default_rng(3).random(elements.size)
+    want = cpu.detach(gone, stress.copy(), cpu.pos)
+    got = dev.detach(strict.asarray(gone), strict.asarray(stress), strict.asarray(cpu.pos))
+    np.testing.assert_allclose(strict.to_host(dev.inv), cpu.inv, rtol=0, atol=1e-12 * np.abs(cpu.inv).max())
+    np.testing.assert_allclose(strict.to_host(got), want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
+    assert not strict.to_host(dev.inv)[9].any() and dev.respond  # strict keeps the warm start
+
+
 def test_strict_matrix_free_path_when_blocks_do_not_fit(monkeypatch):
     """Without room for blocks the device takes the Sherman-Morrison diagonal,
     as the CPU does without room for blocks or tiles."""
