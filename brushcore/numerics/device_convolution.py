@@ -42,9 +42,10 @@ class DeviceConvolver:
         self.applications = 0
         self.array_backend = backend
         xp = backend.xp
-        # The wrapped kernel is even in both axes, so its spectrum is real.
-        spectrum = np.fft.rfft2(wrapped_kernel(n, h, e_star)).real
-        self.spectrum = backend.asarray(np.ascontiguousarray(spectrum))
+        # The wrapped kernel is even in both axes, so its spectrum is real;
+        # both are computed where the arrays live.
+        spectrum = xp.real(xp.fft.rfftn(wrapped_kernel(n, h, e_star, xp)))
+        self.spectrum = xp.asarray(spectrum, copy=True)
         self.flat_buffer = xp.zeros(n * n, dtype=xp.float64)
 
     def padded_index(self, flat: np.ndarray) -> np.ndarray:

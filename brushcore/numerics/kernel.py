@@ -13,20 +13,22 @@ asinh form avoids the cancellation of the usual log-ratio form far away.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
 
-def _f(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _f(x: Any, y: Any, xp: Any = np) -> Any:
+    asinh = np.arcsinh if xp is np else xp.asinh
     with np.errstate(divide="ignore", invalid="ignore"):
-        ax = np.abs(x)
-        ay = np.abs(y)
-        tx = np.where(ax > 0.0, x * np.arcsinh(y / np.where(ax > 0.0, ax, 1.0)), 0.0)
-        ty = np.where(ay > 0.0, y * np.arcsinh(x / np.where(ay > 0.0, ay, 1.0)), 0.0)
+        ax = xp.abs(x)
+        ay = xp.abs(y)
+        tx = xp.where(ax > 0.0, x * asinh(y / xp.where(ax > 0.0, ax, 1.0)), 0.0)
+        ty = xp.where(ay > 0.0, y * asinh(x / xp.where(ay > 0.0, ay, 1.0)), 0.0)
     return tx + ty
 
 
-def love_coefficient(x: np.ndarray, y: np.ndarray, h: float, e_star: float) -> np.ndarray:
+def love_coefficient(x: Any, y: Any, h: float, e_star: float, xp: Any = np) -> Any:
     """Displacement at offset (x, y) from the centre of a uniformly loaded square.
 
     Parameters
@@ -34,34 +36,44 @@ def love_coefficient(x: np.ndarray, y: np.ndarray, h: float, e_star: float) -> n
     x, y : offsets from the loaded element's centre [length]
     h : element side [length]
     e_star : effective modulus E* [stress]
+    xp : array namespace of x and y (NumPy, or a device's: see `wrapped_kernel`)
 
     Returns
     -------
     numpy.ndarray
         Displacement per unit pressure [length / stress].
     """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
+    if xp is np:
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
     a = 0.5 * h
-    u = _f(x + a, y + a) - _f(x + a, y - a) - _f(x - a, y + a) + _f(x - a, y - a)
+    u = (_f(x + a, y + a, xp) - _f(x + a, y - a, xp) - _f(x - a, y + a, xp)
+         + _f(x - a, y - a, xp))
     return u / (np.pi * e_star)
 
 
-def wrapped_kernel(n: int, h: float, e_star: float) -> np.ndarray:
+def wrapped_kernel(n: int, h: float, e_star: float, xp: Any = np) -> Any:
     """Influence coefficients on the 2n x 2n DC-FFT grid in wrap-around order.
 
     Row/column i holds offset i h for i < n and (i - 2n) h for i > n; the
     middle line i = n is never reached by a non-periodic n x n convolution
     and is set to zero (Liu, Wang & Liu, Wear 243 (2000) 101).
 
+    ``xp`` evaluates it in a device's namespace: a card computes the 4n^2
+    coefficients in milliseconds, where the host takes seconds at n = 2048.
+
     Returns
     -------
-    numpy.ndarray, shape (2n, 2n)
+    array of ``xp``, shape (2n, 2n)
         Kernel [length / stress].
     """
-    idx = np.arange(2 * n)
-    off = np.where(idx < n, idx, idx - 2 * n).astype(float) * h
-    kern = love_coefficient(off[:, None], off[None, :], h, e_star)
+    if xp is np:
+        idx = np.arange(2 * n)
+        off = np.where(idx < n, idx, idx - 2 * n).astype(float) * h
+    else:
+        idx = xp.arange(2 * n, dtype=xp.float64)
+        off = xp.where(idx < n, idx, idx - 2 * n) * h
+    kern = love_coefficient(off[:, None], off[None, :], h, e_star, xp)
     kern[n, :] = 0.0
     kern[:, n] = 0.0
     return kern
