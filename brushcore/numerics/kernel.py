@@ -113,6 +113,16 @@ def folded_coefficient(ya: np.ndarray, xa: np.ndarray, yb: np.ndarray, xb: np.nd
             + love_coefficient(dy, sx, h, e_star) + love_coefficient(sy, sx, h, e_star))
 
 
+def pillar_centroids(pillar_of: np.ndarray, iy: np.ndarray, ix: np.ndarray, h: float,
+                     n_pillars: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each pillar's centroid (y, x) [length] from its elements' grid rows
+    ``iy`` and columns ``ix`` (``pillar_of`` labels each element)."""
+    counts = np.bincount(pillar_of, minlength=n_pillars)
+    cy = np.bincount(pillar_of, weights=iy * h, minlength=n_pillars) / counts
+    cx = np.bincount(pillar_of, weights=ix * h, minlength=n_pillars) / counts
+    return cy, cx
+
+
 def pillar_influence(cy: np.ndarray, cx: np.ndarray, h: float, e_star: float,
                      mirrored: bool) -> np.ndarray:
     """Monopole influence between pillar centroids (cy, cx) [length], images

@@ -29,7 +29,7 @@ import scipy.fft as sfft
 from brushcore.numerics.cg import pcg
 from brushcore.numerics.convolution import HAVE_PYFFTW, planning
 from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import love_coefficient, self_compliance
+from brushcore.numerics.kernel import love_coefficient, pillar_centroids, self_compliance
 from brushcore.numerics.tiles import TileCoarse
 
 
@@ -79,9 +79,7 @@ class PillarSolver:
         for p, m in enumerate(self._members):
             self._in_box[m] = (iy[m] - y0[p]) * self._box[p, 1] + (ix[m] - x0[p])
         self._spectra: dict[int, np.ndarray] = {}
-        counts = np.bincount(pillar_of, minlength=n_pillars)
-        cy = np.bincount(pillar_of, weights=iy * h, minlength=n_pillars) / counts
-        cx = np.bincount(pillar_of, weights=ix * h, minlength=n_pillars) / counts
+        cy, cx = pillar_centroids(pillar_of, iy, ix, h, n_pillars)
         radius = np.zeros(n_pillars)
         np.maximum.at(radius, pillar_of, np.hypot(iy * h - cy[pillar_of], ix * h - cx[pillar_of]))
         self.bound = (FarFieldBound(near_influence(cy, cx, radius, h, e_star, mirrored))

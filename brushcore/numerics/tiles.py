@@ -54,7 +54,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import love_coefficient, pillar_influence, self_compliance
+from brushcore.numerics.kernel import (love_coefficient, pillar_centroids, pillar_influence,
+                                      self_compliance)
 from brushcore.numerics.precondition import BlockInverse, coarse_inverse
 from brushcore.numerics.threads import stacked_matmul
 
@@ -137,9 +138,7 @@ class TileCoarse:
         self.coarse = coarse and 1 < n_pillars <= BlockInverse.MAX_COARSE
         if not self.coarse:
             return
-        counts = np.bincount(self._pillar_of, minlength=n_pillars)
-        cy = np.bincount(self._pillar_of, weights=self._iy * h, minlength=n_pillars) / counts
-        cx = np.bincount(self._pillar_of, weights=self._ix * h, minlength=n_pillars) / counts
+        cy, cx = pillar_centroids(self._pillar_of, self._iy, self._ix, h, n_pillars)
         self._r = pillar_influence(cy, cx, h, e_star, mirrored)
         self._diag = self_compliance(e_star, h)
         self._coarse_vectors(np.arange(n_pillars))
