@@ -31,6 +31,9 @@ from brushcore.numerics.precondition import BlockInverse
 #: Fraction of the device's free memory the stacks may take: the FFT
 #: buffers, cuFFT work areas and CG vectors need the rest.
 DEVICE_MEMORY_FRACTION = 0.5
+#: ... and one batch of downdated blocks at most this fraction (a few
+#: temporaries of its size live at once).
+DOWNDATE_MEMORY_FRACTION = 0.05
 
 
 class DeviceBlocks(BlockInverse):
@@ -59,6 +62,9 @@ class DeviceBlocks(BlockInverse):
         self.pos = be.asarray(self.pos)
         self._work = xp.zeros(n_pillars * self.m, dtype=xp.float64)
         self._remaining = counts.copy()  # host: per-pillar counts are event data
+        # a smaller card takes smaller batches: their temporaries stay beside the stack
+        self._chunk_bytes = min(self.DOWNDATE_CHUNK_BYTES,
+                                DOWNDATE_MEMORY_FRACTION * be.free_memory())
         # The neighbours' first-order response to a detachment
         # (`BlockInverse._neighbour_response`, `_far_response`) saves
         # applications where one costs more than its host-side coefficient
@@ -85,7 +91,8 @@ class DeviceBlocks(BlockInverse):
         self._setup_far(counts)
 
     #: Bytes of touched blocks that one batched downdate takes at a time
-    #: (its temporaries are a few times this).
+    #: (its temporaries are a few times this), at most DOWNDATE_MEMORY_FRACTION
+    #: of the card's free memory.
     DOWNDATE_CHUNK_BYTES = 2e9
     #: Largest pillar (elements) with dense blocks on a device, where they
     #: fit DEVICE_MEMORY_FRACTION of its free memory: a card streams the
@@ -183,7 +190,7 @@ class DeviceBlocks(BlockInverse):
 
     def _chunks(self, items: np.ndarray) -> list[np.ndarray]:
         """``items`` in runs whose blocks take DOWNDATE_CHUNK_BYTES at most."""
-        size = max(1, int(self.DOWNDATE_CHUNK_BYTES // (8.0 * self.m * self.m)))
+        size = max(1, int(self._chunk_bytes // (8.0 * self.m * self.m)))
         return [items[i:i + size] for i in range(0, items.size, size)]
 
     def _downdate(self, pillars: np.ndarray, gone: np.ndarray, valid: np.ndarray,
