@@ -88,7 +88,10 @@ class DeviceBlocks(BlockInverse):
             self._factorise()
         self._neighbours = self._near_pillars(counts, n) if self.interacting else None
         self._near_blocks = {}
-        self._setup_far(counts)
+        if self.respond:
+            self._setup_far(counts)
+        else:  # its tilts serve the warm start alone
+            self._far = False
 
     #: Bytes of touched blocks that one batched downdate takes at a time
     #: (its temporaries are a few times this), at most DOWNDATE_MEMORY_FRACTION
