@@ -9,6 +9,11 @@ where the work happens:
   live in the backend's namespace, and are applied as one batched dense
   product (a GPU streams the (N, m, m) stack at memory bandwidth; the CPU
   class's packed BLAS path does not port);
+- a detachment downdates every touched pillar in one batched Schur
+  complement (a regular brush's event touches many pillars at once, and a
+  Python loop over them cost more than the downdates on a card), and on a
+  card the neighbours' first-order warm start is left to CG (see
+  ``respond``);
 - the coarse matrix E is inverted explicitly (the array API has no
   triangular solve) and applied as a matrix-vector product;
 - geometry (stack slots, coordinates, the coefficient table) is computed
@@ -44,6 +49,16 @@ class DeviceBlocks(BlockInverse):
     elements, pillar_of, n, compliance, h, e_star, coarse : as for `BlockInverse`
     backend : where the arrays live; mirrored grids are CPU-only
     """
+
+    #: Bytes of touched blocks that one batched downdate takes at a time
+    #: (its temporaries are a few times this), at most DOWNDATE_MEMORY_FRACTION
+    #: of the card's free memory.
+    DOWNDATE_CHUNK_BYTES = 2e9
+    #: Largest pillar (elements) with dense blocks on a device, where they
+    #: fit DEVICE_MEMORY_FRACTION of its free memory: a card streams the
+    #: stack at memory bandwidth, and the alternative (Sherman-Morrison,
+    #: `BrushOperator.precondition`) needs many times the applications.
+    DEVICE_MAX_BLOCK = 8192
 
     def __init__(self, elements: np.ndarray, pillar_of: np.ndarray, n: int,
                  compliance: np.ndarray, h: float, e_star: float, coarse: bool = True,
@@ -92,16 +107,6 @@ class DeviceBlocks(BlockInverse):
             self._setup_far(counts)
         else:  # its tilts serve the warm start alone
             self._far = False
-
-    #: Bytes of touched blocks that one batched downdate takes at a time
-    #: (its temporaries are a few times this), at most DOWNDATE_MEMORY_FRACTION
-    #: of the card's free memory.
-    DOWNDATE_CHUNK_BYTES = 2e9
-    #: Largest pillar (elements) with dense blocks on a device, where they
-    #: fit DEVICE_MEMORY_FRACTION of its free memory: a card streams the
-    #: stack at memory bandwidth, and the alternative (Sherman-Morrison,
-    #: `BrushOperator.precondition`) needs many times the applications.
-    DEVICE_MAX_BLOCK = 8192
 
     def _row(self, p: int) -> Any:
         return self._work[p * self.m:(p + 1) * self.m]
@@ -283,7 +288,7 @@ class DeviceBlocks(BlockInverse):
             self._note_drift(touched, be.to_host(xp.sum(z, axis=1)))
 
     def reach(self) -> Any:
-        """See `BlockInverse.reach` (kept up to date by `_refresh` here)."""
+        """See `BlockInverse.reach` (kept up to date by `_refresh_rows` here)."""
         return self._reach
 
     def far_field_uncertainty(self, pillar_change: Any, attached_pos: Any) -> Any:
