@@ -40,7 +40,7 @@ def love_coefficient(x: Any, y: Any, h: float, e_star: float, xp: Any = np) -> A
 
     Returns
     -------
-    numpy.ndarray
+    array of ``xp``
         Displacement per unit pressure [length / stress].
     """
     if xp is np:
