@@ -237,10 +237,15 @@ class BlockInverse:
         # Blocks look their coefficients up at integer offsets: evaluating Love's
         # formula for m^2 pairs per pillar costs more than inverting at m ~ 2000.
         off = np.arange(2 * n if mirrored else n) * h
-        self._table = love_coefficient(off[:, None], off[None, :], h, e_star)
+        self._table = self._coefficient_table(off, h, e_star)
         self._compliance = np.asarray(compliance, dtype=float)
         self._live = np.arange(self.m)[None, :] < counts[:, None]  # attached slots
         return counts
+
+    @staticmethod
+    def _coefficient_table(off: np.ndarray, h: float, e_star: float) -> np.ndarray:
+        """Love's coefficients at every pair of offsets ``off`` (rows y, columns x)."""
+        return love_coefficient(off[:, None], off[None, :], h, e_star)
 
     def _shape_groups(self, counts: np.ndarray) -> list[list[int]]:
         """Pillars with the same footprint up to translation (and the same
