@@ -71,7 +71,7 @@ class DeviceBlocks(BlockInverse):
         self.inv = xp.zeros((n_pillars, self.m, self.m), dtype=xp.float64)
         for group in self._shape_groups(counts):
             k = int(counts[group[0]])
-            block = xp.linalg.inv(be.asarray(self._block(group[0], np.arange(k))))
+            block = xp.linalg.inv(self._device_block(group[0], k))
             for p in group:  # one inversion per shape, on the device
                 self.inv[p, :k, :k] = block
         self._pos_host = self.pos
@@ -111,11 +111,23 @@ class DeviceBlocks(BlockInverse):
 
     def _coefficient_table(self, off: np.ndarray, h: float, e_star: float) -> np.ndarray:
         """`BlockInverse._coefficient_table` evaluated on the device (n^2
-        coefficients: seconds on a host core at n = 2048), kept on the host
-        for the blocks' lookups."""
+        coefficients: seconds on a host core at n = 2048), kept there for
+        the initial blocks and copied to the host for later lookups."""
         xp, be = self.backend.xp, self.backend
         d = be.asarray(off)
-        return be.to_host(love_coefficient(d[:, None], d[None, :], h, e_star, xp))
+        self._table_device = love_coefficient(d[:, None], d[None, :], h, e_star, xp)
+        return be.to_host(self._table_device)
+
+    def _device_block(self, p: int, k: int) -> Any:
+        """`BlockInverse._block` over pillar p's first k slots, gathered on the
+        device from its copy of the table (random brushes have a shape per
+        pillar: m^2 host lookups each)."""
+        xp, be = self.backend.xp, self.backend
+        iy, ix = be.asarray(self._iyy[p, :k]), be.asarray(self._ixx[p, :k])
+        at = (xp.abs(iy[:, None] - iy[None, :]) * self._table_device.shape[1]
+              + xp.abs(ix[:, None] - ix[None, :]))
+        table = xp.reshape(self._table_device, (-1,))
+        return xp.reshape(xp.take(table, xp.reshape(at, (-1,))), (k, k)) + float(self._compliance[p])
 
     def _row(self, p: int) -> Any:
         return self._work[p * self.m:(p + 1) * self.m]
