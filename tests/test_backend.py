@@ -177,6 +177,33 @@ def test_batched_downdate_matches_the_per_pillar_one():
     assert not strict.to_host(dev.inv)[9].any() and dev.respond  # strict keeps the warm start
 
 
+def test_device_setup_computes_the_hosts_numbers():
+    """The kernel, its spectrum, the blocks' coefficient table and the initial
+    blocks, computed in the device's namespace (strict here), are the host's
+    numbers: the same formula, one namespace for both."""
+    from brushcore.model.layout import build_labels
+    from brushcore.numerics.kernel import wrapped_kernel
+    strict = resolve_backend("strict")
+    host = wrapped_kernel(48, 0.5, 2.0)
+    device = strict.to_host(wrapped_kernel(48, 0.5, 2.0, strict.xp))
+    np.testing.assert_allclose(device, host, rtol=1e-14, atol=0)
+    assert device[48].max() == 0.0 and device[:, 48].max() == 0.0  # the unreached middle lines
+    spectrum = strict.to_host(DeviceConvolver(48, 0.5, 2.0, strict).spectrum)
+    np.testing.assert_allclose(spectrum, np.fft.rfft2(host).real, rtol=0,
+                               atol=1e-13 * np.abs(spectrum).max())
+    params = BrushParams("random", 12, 1e-2, 64, seed=4)
+    flat = build_labels(params).ravel()
+    elements = np.flatnonzero(flat >= 0)
+    pillar_of = flat[elements].astype(np.intp)
+    args = (elements, pillar_of, 64, np.full(12, 0.3), params.h, params.e_star)
+    cpu, dev = BlockInverse(*args), DeviceBlocks(*args, backend=strict)
+    np.testing.assert_allclose(dev._table, cpu._table, rtol=1e-14, atol=0)
+    for p in range(12):
+        k = int(np.count_nonzero(pillar_of == p))
+        np.testing.assert_allclose(strict.to_host(dev._device_block(p, k)),
+                                   cpu._block(p, np.arange(k)), rtol=1e-14, atol=0)
+
+
 def test_strict_matrix_free_path_when_blocks_do_not_fit(monkeypatch):
     """Without room for blocks the device takes the Sherman-Morrison diagonal,
     as the CPU does without room for blocks or tiles."""
