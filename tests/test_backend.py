@@ -149,6 +149,7 @@ def test_strict_namespace_runs_the_pull_off_like_numpy(name):
     np.testing.assert_array_equal(got.detachment_step.values, want.detachment_step.values)
     assert got.attrs["parameter_hash"] == want.attrs["parameter_hash"]
     assert got.attrs["backend"] == "strict" and want.attrs["backend"] == "cpu"
+    assert got.attrs["preconditioner"] == want.attrs["preconditioner"] == "blocks"
     assert want.attrs["device_name"] == "cpu" and want.attrs["device_memory_bytes"] == 0
 
 
@@ -215,6 +216,7 @@ def test_strict_matrix_free_path_when_blocks_do_not_fit(monkeypatch):
     got = simulate(params, WHOLE_GRID, backend="strict")
     _assert_same_curve(got, want, STRICT_RTOL)
     np.testing.assert_array_equal(got.detachment_step.values, want.detachment_step.values)
+    assert got.attrs["preconditioner"] == want.attrs["preconditioner"] == "diagonal"
 
 
 def test_device_blocks_budget_reads_free_memory():

@@ -165,3 +165,4 @@ def test_pull_off_with_tiles_matches_exact(monkeypatch, kbar, stack):
     tiled = simulate(params)
     for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
         assert float(tiled[name]) == pytest.approx(float(exact[name]), rel=2e-4), name
+    assert (tiled.attrs["preconditioner"], exact.attrs["preconditioner"]) == ("tiles", "blocks")

@@ -71,6 +71,7 @@ SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "sy
 #: ... and those that may differ (numerics): kept as attributes, distinct values joined by "; ".
 SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "symmetry",
                      "precision", "fft_precision", "fft_library", "fft_library_used",
+                     "preconditioner",
                      "early_decisions",
                      "settle_decisions", "allow_coarse")
 #: Per-step curves, NaN-padded to the longest curve of the sweep.

@@ -260,11 +260,14 @@ def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
 def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
                area_total: float, *, events: int, steps: int, applications: int,
                cg_iterations: int, wall: float, title: str, references: str,
-               hashed: tuple[dict, ...] = (), symmetry_fold: int = 1) -> dict[str, object]:
+               preconditioner: str, hashed: tuple[dict, ...] = (),
+               symmetry_fold: int = 1) -> dict[str, object]:
     """Attributes every curve file carries: inputs, discretisation, cost, provenance.
 
     ``backend``, ``device_name`` and ``device_memory_bytes`` say where the
-    curve ran; they are not inputs (not in ``parameter_hash``).
+    curve ran, ``preconditioner`` which path its solves took (it follows the
+    pillar size, the memory budget and, on a device, the card); none of
+    them is an input (not in ``parameter_hash``).
     """
     backend = resolve_backend(params.backend)
     return {
@@ -284,6 +287,7 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "operator_applications": applications,
         "cg_iterations": cg_iterations,
         "wall_time_s": wall,
+        "preconditioner": preconditioner,
         "backend": backend.name,
         # what "auto" resolved to; a device is always double
         "fft_precision": ("single" if backend.on_host and single_transforms(
@@ -390,7 +394,8 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                        steps=int(curve.displacement.size), applications=applications,
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Adhesive pull-off of a spring-mounted pillar brush",
-                       references=REFERENCES, symmetry_fold=curve.symmetry_fold)
+                       references=REFERENCES, preconditioner=curve.preconditioner,
+                       symmetry_fold=curve.symmetry_fold)
     return xr.Dataset(data, coords={
         "step": var("step", np.arange(curve.displacement.size, dtype=np.int32),
                     "step of the pull-off (one per solve)", "1"),
@@ -545,7 +550,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Approach, preload and pull-off of a rough, graded pillar brush",
                        references=f"{REFERENCES}; He, Li & Popov, J. Adhesion (2021)",
-                       hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
+                       preconditioner=op.preconditioner, hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
     attrs.update({
         "displacement_unit_d_K": ds_,
         "force_unit_F_K": fs,

@@ -130,6 +130,15 @@ class BrushOperator:
             self._sm = (s / (self.diag + s * xp.astype(self.counts, xp.float64)))[self.pl]
 
     @property
+    def preconditioner(self) -> str:
+        """Which preconditioner runs: "blocks" (exact per-pillar inverses,
+        `BlockInverse` or `DeviceBlocks`), "tiles" (`TileCoarse`) or
+        "diagonal" (Sherman-Morrison on the springs alone)."""
+        if self.block is not None:
+            return "blocks"
+        return "tiles" if self.tiles is not None else "diagonal"
+
+    @property
     def size(self) -> int:
         """Number of attached elements."""
         return int(self.idx.shape[0])

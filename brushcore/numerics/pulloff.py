@@ -44,6 +44,7 @@ class PullOffCurve:
         (load sharing at F_ad)
     symmetry_fold : 4 when solved on one quadrant of a mirror-symmetric
         brush and unfolded (`brushcore.numerics.mirror`), else 1
+    preconditioner : `BrushOperator.preconditioner` of the run
     """
 
     displacement: np.ndarray
@@ -55,6 +56,7 @@ class PullOffCurve:
     cg_iterations: int
     pillar_force_at_peak: np.ndarray | None = None
     symmetry_fold: int = 1
+    preconditioner: str = ""
 
 
 Progress = Callable[[int, int, int], None]
@@ -365,4 +367,4 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     # The curve comes back to the host: the only per-element data to cross.
     return PullOffCurve(np.asarray(disp), np.asarray(force), np.asarray(n_el),
                         np.asarray(n_pil), be.to_host(detach_step), events, cg_iters,
-                        be.to_host(best[1]))
+                        be.to_host(best[1]), preconditioner=op.preconditioner)
