@@ -9,7 +9,7 @@ rigid 8 x 8 brush at 1024^2, 2048^2 (``--grid`` replaces the grids).  Per
 case: operator applications of the whole pull-off, ms of one application
 (the brush operator, timed alone), its ratio to a bare r2c + c2r pair of
 the padded 2n x 2n grid (cuFFT on the card, pyfftw on the CPU), wall time
-of the curve, F_ad / F_K and W / W_K.  Every curve is solved on the whole
+of the curve, F_ad / F_K, W / W_K and the preconditioner taken.  Every curve is solved on the whole
 grid (the device has no symmetry fold), so CPU and GPU rows compare.
 """
 
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"warm-up curve (16x16 at 256^2, kernels compiled): {time.perf_counter() - t:.1f} s",
           flush=True)
     print(f"{'case':>18} {'grid':>5} {'apps':>6} {'ms/app':>7} {'pair ms':>8} {'ratio':>6} "
-          f"{'wall s':>7} {'F_ad/F_K':>9} {'W/W_K':>8}", flush=True)
+          f"{'wall s':>7} {'F_ad/F_K':>9} {'W/W_K':>8} preconditioner", flush=True)
     for label, n_pillars, kbar, grids in cases:
         for grid in grids:
             params = BrushParams("regular", n_pillars, kbar, grid, backend=args.backend)
@@ -108,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{label:>18} {grid:5d} {ds.attrs['operator_applications']:6d} {app:7.2f} "
                   f"{pair:8.2f} {app / pair:6.2f} {wall:7.1f} "
                   f"{float(ds.adhesive_force_normalized):9.5f} "
-                  f"{float(ds.work_of_separation_normalized):8.5f}", flush=True)
+                  f"{float(ds.work_of_separation_normalized):8.5f} "
+                  f"{ds.attrs['preconditioner']}", flush=True)
     return 0
 
 
