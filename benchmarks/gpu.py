@@ -9,8 +9,9 @@ rigid 8 x 8 brush at 1024^2, 2048^2 (``--grid`` replaces the grids).  Per
 case: operator applications of the whole pull-off, ms of one application
 (the brush operator, timed alone), its ratio to a bare r2c + c2r pair of
 the padded 2n x 2n grid (cuFFT on the card, pyfftw on the CPU), wall time
-of the curve, F_ad / F_K, W / W_K and the preconditioner taken.  Every curve is solved on the whole
-grid (the device has no symmetry fold), so CPU and GPU rows compare.
+of the curve, F_ad / F_K, W / W_K and the preconditioner taken.  Every
+curve is solved on the whole grid (the device has no symmetry fold), so
+CPU and GPU rows compare.
 """
 
 from __future__ import annotations
