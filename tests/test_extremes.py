@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from brushcore import BrushParams, ParameterError, simulate, theory
-from brushcore.model.layout import build_labels
 
 
 def _fw(ds):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from brushcore import BrushParams, ParameterError, SolverOptions, simulate
+from brushcore import BrushParams, SolverOptions, simulate
 
 CASES = [("regular", 256, 0.455, 128), ("regular", 64, 1e-3, 128), ("regular", 64, 1e-4, 256),
          ("regular", 16, float("inf"), 128), ("random", 30, 0.01, 96),

@@ -345,7 +345,7 @@ def lattices(sweep: xr.Dataset) -> Figure:
                         label=f"{layout}, {_shape_text(shape)}")
         if math.isfinite(phi):
             ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
-                       label=rf"rigid limit $\varphi^{{-1/4}}$")
+                       label=r"rigid limit $\varphi^{-1/4}$")
             if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
                 ax.axhline(theory.rigid_limit(phi / hexagonal_fill(n)), color="C1", ls="--",
                            lw=0.8, label=r"hexagonal: $(\varphi/\mathrm{fill})^{-1/4}$")

@@ -439,7 +439,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
         params, waypoints, options, heights=inputs.heights, gap_map=inputs.gap_map,
         compliance=inputs.compliance, progress=progress, labels=labels)
     wall = time.perf_counter() - t0
-    h, es, dg = params.h, params.e_star, params.dgamma
+    h, dg = params.h, params.dgamma
     area_total = float(np.count_nonzero(labels >= 0)) * h * h
     ws = theory.work_scale(area_total, dg)
     d, f = curve.displacement, curve.force

@@ -142,7 +142,7 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
     if present.size != n_pillars:
         missing = np.setdiff1d(np.arange(n_pillars), present)
         shown = ", ".join(str(int(m)) for m in missing[:10])
-        raise _refuse(path, f"pillar labels 0 ... N-1 each on at least one element",
+        raise _refuse(path, "pillar labels 0 ... N-1 each on at least one element",
                       f"labels up to {n_pillars - 1}, but no element has label {shown}"
                       + (f" and {missing.size - 10} more" if missing.size > 10 else ""))
     check_not_touching(labels, _NAME, str(path))
