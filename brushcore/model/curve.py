@@ -550,7 +550,8 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Approach, preload and pull-off of a rough, graded pillar brush",
                        references=f"{REFERENCES}; He, Li & Popov, J. Adhesion (2021)",
-                       preconditioner=op.preconditioner, hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
+                       preconditioner=op.preconditioner,
+                       hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
     attrs.update({
         "displacement_unit_d_K": ds_,
         "force_unit_F_K": fs,

@@ -105,17 +105,11 @@ class Backend:
         return self.native.bincount(index, weights=weights, minlength=minlength)
 
     def put(self, target: Any, index: Any, values: Any) -> None:
-        """target[index] = values in place (1-D target, integer index)."""
+        """target[index] = values in place: an integer index along the first
+        axis (entries of a 1-D target, rows or blocks of a stacked one)."""
         if self.name == "strict":
             v = values._array if hasattr(values, "_array") else values
             target._array[index._array] = v
-            return
-        target[index] = values
-
-    def put_rows(self, target: Any, index: Any, values: Any) -> None:
-        """target[index] = values in place along the first axis (integer index)."""
-        if self.name == "strict":
-            target._array[index._array] = values._array
             return
         target[index] = values
 

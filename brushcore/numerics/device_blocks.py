@@ -252,7 +252,7 @@ class DeviceBlocks(BlockInverse):
         keep = be.asarray(self._live[pillars].astype(np.float64))  # after the detachment
         # zero rows and columns of D: exact, round-off removed
         g = (g - cols @ x[:, :, :m]) * keep[:, :, None] * keep[:, None, :]
-        be.put_rows(self.inv, p, g)
+        be.put(self.inv, p, g)
         if with_work:
             w = (w - (cols @ x[:, :, m:])[:, :, 0]) * keep
             be.put(self._work, self._stack_index(p), xp.reshape(w, (-1,)))
@@ -263,7 +263,7 @@ class DeviceBlocks(BlockInverse):
         xp, be, m = self.backend.xp, self.backend, self.m
         p = be.asarray(pillars.astype(np.int64))
         g = xp.zeros((pillars.size, m, m), dtype=xp.float64)
-        be.put_rows(self.inv, p, g)
+        be.put(self.inv, p, g)
         if with_work:
             be.put(self._work, self._stack_index(p), xp.zeros(pillars.size * m, dtype=xp.float64))
         self._refresh_rows(p, g)
@@ -296,10 +296,10 @@ class DeviceBlocks(BlockInverse):
         if not self.interacting:
             return
         xp, be = self.backend.xp, self.backend
-        be.put_rows(self._z, p, xp.sum(g, axis=2))
-        be.put_rows(self._reach, p, xp.sum(xp.abs(g), axis=2))
+        be.put(self._z, p, xp.sum(g, axis=2))
+        be.put(self._reach, p, xp.sum(xp.abs(g), axis=2))
         if self._far:
-            be.put_rows(self._tilt, p, g @ xp.take(self._tilt_basis, p, axis=0))
+            be.put(self._tilt, p, g @ xp.take(self._tilt_basis, p, axis=0))
 
     def _note_coarse_drift(self, touched: np.ndarray) -> None:
         """The coarse factor's drift check (`BlockInverse._note_drift`) for the touched pillars."""

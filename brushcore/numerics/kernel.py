@@ -67,12 +67,8 @@ def wrapped_kernel(n: int, h: float, e_star: float, xp: Any = np) -> Any:
     array of ``xp``, shape (2n, 2n)
         Kernel [length / stress].
     """
-    if xp is np:
-        idx = np.arange(2 * n)
-        off = np.where(idx < n, idx, idx - 2 * n).astype(float) * h
-    else:
-        idx = xp.arange(2 * n, dtype=xp.float64)
-        off = xp.where(idx < n, idx, idx - 2 * n) * h
+    idx = xp.arange(2 * n, dtype=xp.float64)  # whole numbers: exact in float64
+    off = xp.where(idx < n, idx, idx - 2 * n) * h
     kern = love_coefficient(off[:, None], off[None, :], h, e_star, xp)
     kern[n, :] = 0.0
     kern[:, n] = 0.0
