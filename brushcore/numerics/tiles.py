@@ -35,8 +35,9 @@ so the bound is where fewer bytes stop paying: on 1024^2, 517 tiles a
 pillar at a = 2 took 12.9 ms an application beside 20 ms of FFTs, 243 at
 a = 3 took 3.7 ms.
 
-K_c is kept exact as elements detach or attach (one row of K per changed
-element, aggregated by tile: m^2 over a whole curve), and its inverse is
+K_c is assembled once per pillar shape from whole boxes less their holes
+(`tile_block`), kept exact as elements detach or attach (one row of K per
+changed element, aggregated by tile: m^2 over a whole curve), and its inverse is
 refreshed when a pillar's attached count moved by REFRESH since the last
 inversion, or a tile empty then has elements again; between refreshes the
 stale inverse still gives an SPD M.
