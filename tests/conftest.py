@@ -22,6 +22,27 @@ def punch():
     return punch_params
 
 
+#: Most pytest-xdist workers `-n auto` starts: loadscope gives each a test
+#: module, and a few modules take most of the time, so more workers only add
+#: memory (each holds its modules' curves and sweeps).
+MAX_WORKERS = 8
+
+
+def pytest_xdist_auto_num_workers(config):
+    """Workers for `-n auto`: the CPUs this process may use, within a
+    container's CPU quota (cgroup v2 ``cpu.max``, which os.cpu_count() does
+    not see), at most MAX_WORKERS."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    try:
+        with open("/sys/fs/cgroup/cpu.max") as fh:
+            quota, period = fh.read().split()[:2]
+        if quota != "max":
+            cpus = min(cpus or 1, max(1, math.ceil(int(quota) / int(period))))
+    except (OSError, ValueError):
+        pass
+    return max(1, min(cpus or 1, MAX_WORKERS))
+
+
 #: The Slurm test installs Debian packages (slurm-wlm, munge) and starts daemons:
 #: it runs only when asked for (CI asks, see .ci/run).
 SLURM_OPT_IN = "BRUSHCORE_SLURM_TESTS"
