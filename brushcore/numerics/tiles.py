@@ -345,15 +345,19 @@ def tile_block(dy: np.ndarray, dx: np.ndarray, slot: np.ndarray, a: int, mc: int
     hole_tile, hu, hv = np.nonzero(~cells)
     hy, hx = a * ty[hole_tile] + hu, a * tx[hole_tile] + hv  # from the pillar's corner
     block = bb[a * (ty[:, None] - ty[None, :]) + g0, a * (tx[:, None] - tx[None, :]) + g0]
-    # hole (in tile s) against the full box of tile t
-    cross = g[hy[:, None] - a * ty[None, :] + g0, hx[:, None] - a * tx[None, :] + g0]
-    per_tile = np.zeros((used.size, used.size))
-    np.add.at(per_tile, hole_tile, cross)
+    per_tile = np.zeros((used.size, used.size))  # holes of tile s against tile t's box
+    pairs = np.zeros(used.size * used.size)  # holes of tile s against holes of tile t
+    # Rows of holes at a time: a ragged footprint (a layout file's) can have
+    # as many holes as elements, and the temporaries must stay bounded.
+    step = max(1, TileCoarse.CHUNK_ELEMENTS // max(hy.size, used.size, 1))
+    for lo in range(0, hy.size, step):
+        y, x, t = hy[lo:lo + step, None], hx[lo:lo + step, None], hole_tile[lo:lo + step]
+        np.add.at(per_tile, t, g[y - a * ty[None, :] + g0, x - a * tx[None, :] + g0])
+        both = k[y - hy[None, :] + reach, x - hx[None, :] + reach]
+        flat = (t[:, None] * used.size + hole_tile[None, :]).ravel()
+        pairs += np.bincount(flat, weights=both.ravel(), minlength=pairs.size)
     block -= per_tile + per_tile.T
-    both = k[hy[:, None] - hy[None, :] + reach, hx[:, None] - hx[None, :] + reach]
-    flat = (hole_tile[:, None] * used.size + hole_tile[None, :]).ravel()
-    block += np.bincount(flat, weights=both.ravel(),
-                         minlength=used.size * used.size).reshape(used.size, used.size)
+    block += pairs.reshape(used.size, used.size)
     out = np.zeros((mc, mc))
     out[used[:, None], used[None, :]] = block
     return out
