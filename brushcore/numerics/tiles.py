@@ -315,19 +315,17 @@ def tile_block(dy: np.ndarray, dx: np.ndarray, slot: np.ndarray, a: int, mc: int
     Parameters
     ----------
     dy, dx : the pillar's element offsets from its lower corner [elements]
-    slot : each element's tile slot (0 .. mc-1), tiles in (dy // a, dx // a) order
+    slot : each element's tile slot, 0 .. T-1 for the pillar's T tiles in
+        (dy // a, dx // a) order (as `TileCoarse` numbers them)
     a : tile side [elements]
     mc : tile slots a pillar (rows of the result)
     h : element side [length]
     e_star : effective modulus E* [stress]
     """
-    tiles = np.zeros(mc, dtype=bool)
-    tiles[slot] = True
-    ty = np.zeros(mc, dtype=np.intp)
-    tx = np.zeros(mc, dtype=np.intp)
+    n_tiles = int(slot.max()) + 1
+    ty = np.zeros(n_tiles, dtype=np.intp)
+    tx = np.zeros(n_tiles, dtype=np.intp)
     ty[slot], tx[slot] = dy // a, dx // a
-    used = np.flatnonzero(tiles)
-    ty, tx = ty[used], tx[used]
     span = int(max(ty.max(), tx.max())) + 1  # tiles along the longer side
     reach = a * span + a  # largest |offset| any sum below needs, plus a box
     ar = np.abs(np.arange(-reach, reach + 1)) * h
@@ -339,27 +337,26 @@ def tile_block(dy: np.ndarray, dx: np.ndarray, slot: np.ndarray, a: int, mc: int
     # Full box against full box at corner offset a (i, j): sum over both boxes.
     bb = _box_sums(g, a)  # index y + g0 (box start 0 of the first box)
     # Holes: cells of each tile's box that are not pillar elements.
-    cells = np.zeros((used.size, a, a), dtype=bool)
-    where = np.searchsorted(used, slot)
-    cells[where, dy % a, dx % a] = True
+    cells = np.zeros((n_tiles, a, a), dtype=bool)
+    cells[slot, dy % a, dx % a] = True
     hole_tile, hu, hv = np.nonzero(~cells)
     hy, hx = a * ty[hole_tile] + hu, a * tx[hole_tile] + hv  # from the pillar's corner
     block = bb[a * (ty[:, None] - ty[None, :]) + g0, a * (tx[:, None] - tx[None, :]) + g0]
-    per_tile = np.zeros((used.size, used.size))  # holes of tile s against tile t's box
-    pairs = np.zeros(used.size * used.size)  # holes of tile s against holes of tile t
+    per_tile = np.zeros((n_tiles, n_tiles))  # holes of tile s against tile t's box
+    pairs = np.zeros(n_tiles * n_tiles)  # holes of tile s against holes of tile t
     # Rows of holes at a time: a ragged footprint (a layout file's) can have
     # as many holes as elements, and the temporaries must stay bounded.
-    step = max(1, TileCoarse.CHUNK_ELEMENTS // max(hy.size, used.size, 1))
+    step = max(1, TileCoarse.CHUNK_ELEMENTS // max(hy.size, n_tiles))
     for lo in range(0, hy.size, step):
         y, x, t = hy[lo:lo + step, None], hx[lo:lo + step, None], hole_tile[lo:lo + step]
         np.add.at(per_tile, t, g[y - a * ty[None, :] + g0, x - a * tx[None, :] + g0])
         both = k[y - hy[None, :] + reach, x - hx[None, :] + reach]
-        flat = (t[:, None] * used.size + hole_tile[None, :]).ravel()
+        flat = (t[:, None] * n_tiles + hole_tile[None, :]).ravel()
         pairs += np.bincount(flat, weights=both.ravel(), minlength=pairs.size)
     block -= per_tile + per_tile.T
-    block += pairs.reshape(used.size, used.size)
+    block += pairs.reshape(n_tiles, n_tiles)
     out = np.zeros((mc, mc))
-    out[used[:, None], used[None, :]] = block
+    out[:n_tiles, :n_tiles] = block
     return out
 
 
