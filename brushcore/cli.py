@@ -111,7 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="filling factor (0, 0.5] (--layout file: the file's)")
     sim.add_argument("--seed", type=int, default=0, help="seed of the random layout")
     sim.add_argument("--min-gap", type=float, default=1.0,
-                     help="minimum gap between random pillars [elements]")
+                     help="minimum gap between random pillars [elements of the 512 x 512 "
+                          "grid, L/512, on every grid]")
     sim.add_argument("--e-star", type=float, default=1.0, help="effective modulus E* [Pa]")
     sim.add_argument("--dgamma", type=float, default=1.0, help="work of adhesion [J/m^2]")
     sim.add_argument("--h", type=float, default=1.0, help="element size [m]")

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from brushcore import BrushParams, ParameterError
-from brushcore.model.layout import build_labels, random_centres, regular_centres
+from brushcore.model.layout import (build_labels, generated_centres, random_centres,
+                                    regular_centres)
 
 
 @pytest.mark.parametrize("n_pillars", [64, 220, 425, 1620])
@@ -34,6 +35,25 @@ def test_random_layout_is_reproducible():
     assert np.array_equal(build_labels(p), build_labels(p))
     other = BrushParams("random", 220, 1.0, 256, seed=6)
     assert not np.array_equal(build_labels(p), build_labels(other))
+
+
+@pytest.mark.parametrize("n_pillars,grids", [(64, (128, 256, 1024, 2048)),
+                                             (220, (256, 1024, 2048)),
+                                             (1620, (1024, 4096))])
+def test_random_layout_is_one_brush_on_every_grid(n_pillars, grids):
+    """A seed names one brush: its centres, in units of L, are the 512^2
+    grid's on every grid (with the gap in the run grid's elements they
+    left it at the 31st, 45th and 80th pillar on 1024^2), and at 512^2
+    they are those of a gap of one element, the paper's brush."""
+    def params(grid):
+        return BrushParams("random", n_pillars, 1.0, grid, seed=0, allow_coarse=True)
+    base = params(512)
+    paper = random_centres(n_pillars, base.side, base.pillar_radius, 1.0 * base.h, 0)
+    assert np.array_equal(generated_centres(base), paper)
+    for grid in grids:
+        p = params(grid)
+        np.testing.assert_allclose(generated_centres(p) / p.side, paper / base.side,
+                                   rtol=0, atol=1e-12)
 
 
 def test_regular_layout_geometry():

@@ -56,7 +56,9 @@ class BrushParams:
     grid : elements per side n of the square L x L holding the pillars.
     phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
     seed : seed of numpy's Generator for "random" (ignored for "regular").
-    min_gap : minimum gap between pillar edges for "random" [elements], >= 1.
+    min_gap : minimum gap between pillar edges for "random", in elements
+        of the 512 x 512 grid (L / 512 each, whatever ``grid``, so that a
+        seed names one brush on every grid), in [1, 512).
     e_star : effective modulus E* [stress].
     dgamma : work of adhesion [energy / area].
     h : element size [length].
@@ -159,8 +161,8 @@ class BrushParams:
                  "a number in (0, 0.5]")
         require(is_integer(self.seed) and self.seed >= 0, "seed", self.seed,
                  "an integer >= 0")
-        require(is_real(self.min_gap) and 1.0 <= self.min_gap < self.grid,
-                 "min_gap", self.min_gap, f"a number of elements in [1, {self.grid})")
+        require(is_real(self.min_gap) and 1.0 <= self.min_gap < 512,
+                 "min_gap", self.min_gap, "a number of L / 512 lengths in [1, 512)")
         for name in ("e_star", "dgamma", "h"):
             value = getattr(self, name)
             require(is_real(value) and math.isfinite(value) and value > 0, name, value,
