@@ -24,19 +24,10 @@ import numpy as np
 from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
 from brushcore.model.labelmap import check_not_touching
 from brushcore.model.layout_file import read_label_map
-from brushcore.model.params import FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, BrushParams
+from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_PHI_ERROR, RANDOM_GAP_GRID,
+                                    BrushParams)
 from brushcore.validation import ParameterError
 from brushcore.model.shapes import PillarShape
-
-
-#: The grid whose element sets a random layout's gap on every grid: the
-#: paper's 512 x 512.  A gap of ``min_gap`` elements of the run's own grid
-#: would make the layout depend on the mesh (random sequential addition
-#: rejects other candidates), so a seed would name another brush on every
-#: grid and a refinement study would compare different brushes; measured
-#: before: random 64, 220, 425 and 1620 at 1024^2 left the 512^2 layout at
-#: their 31st, 45th, 133rd and 80th pillar.
-RANDOM_GAP_GRID = 512
 
 
 def random_gap(params: BrushParams) -> float:
