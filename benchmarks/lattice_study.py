@@ -14,13 +14,15 @@ which the rigid-limit marker of that curve uses.
 Measured (N = 64, phi = 0.12, grid 256, pillar radius 3.9 elements; copy in
 docs/lattice_study.png and .csv): rigid F_ad/F_K 1.726 regular, 1.592
 hexagonal (= (phi / 0.767)^-1/4 = 1.591: its 8 x 8 lattice covers 77 % of
-the square), 1.524-1.574 random; soft plateau (kbar 1e-4) 2.475, 2.313,
-2.02-2.18 (re-run after the rigorous cascade bound and settled decisions;
-random seed 1 was 2.037 before).  Part of the soft-plateau gap is the grid, not the lattice: soft
-pillars let go weakest first at equal load, and pillars at different
+the square), 1.516-1.567 random; soft plateau (kbar 1e-4) 2.475, 2.313,
+2.01-2.18 (re-run 2026-12-04 after random layouts became one brush on
+every grid: seeds 1 and 2 are other brushes on 256^2 than before).
+Part of the soft-plateau gap is the grid, not the lattice: soft pillars
+let go weakest first at equal load, and pillars at different
 sub-element offsets (hexagonal, random) differ by up to 7 % in their
 single-pillar force at this resolution, while the regular lattice's are
-identical; isolated pillars would give 2.84, 2.77, 2.76.
+identical; isolated pillars would give 2.84, 2.77, 2.76 (random: the
+layouts before 2026-12-04, not re-measured).
 """
 
 from __future__ import annotations
