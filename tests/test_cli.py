@@ -34,7 +34,9 @@ def test_rigid_kbar_inf(tmp_path):
     out = tmp_path / "rigid.nc"
     assert main(["simulate", "--layout", "random", "--pillars", "5", "--kbar", "inf",
                  "--grid", "48", "--seed", "2", "--out", str(out), "--quiet"]) == 0
-    assert np.isinf(read_curve(out).attrs["kbar"])
+    attrs = read_curve(out).attrs
+    assert np.isinf(attrs["kbar"])
+    assert attrs["random_gap"] == 48 / 512  # min_gap 1 of L / 512 (h = 1): the 512^2 brush
 
 
 BAD = [

@@ -21,7 +21,7 @@ from brushcore.numerics.device_convolution import cached_device_convolver
 from brushcore.numerics.fft_choice import faster_library
 from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
-from brushcore.model.layout import build_labels
+from brushcore.model.layout import build_labels, random_gap
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.precondition import BlockInverse
 from brushcore.model.params import BrushParams
@@ -73,13 +73,16 @@ def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
 
 
 def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float | int | str]:
-    """What the layout realised: pillar count, hexagonal rows x columns and fill, file digest.
+    """What the layout realised: pillar count, hexagonal rows x columns and fill,
+    a random layout's gap [length] (`layout.random_gap`), file digest.
 
     ``shape``, ``aspect``, ``orientation`` and ``layout_file`` themselves are
     parameters (see `BrushParams.as_attrs`); ``pillar_radius`` is the
     equal-area radius for every shape.
     """
     attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1}
+    if params.layout == "random":  # the rule that drew it: L min_gap / 512 since 9695874
+        attrs["random_gap"] = random_gap(params)
     if params.layout == "hexagonal":
         attrs["lattice_rows"], attrs["lattice_columns"] = hexagonal_lattice(params.n_pillars)
         attrs["lattice_fill"] = hexagonal_fill(params.n_pillars)
