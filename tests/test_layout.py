@@ -9,7 +9,7 @@ import pytest
 
 from brushcore import BrushParams, ParameterError
 from brushcore.model.layout import (build_labels, generated_centres, random_centres,
-                                    regular_centres)
+                                    random_gap, regular_centres)
 
 
 @pytest.mark.parametrize("n_pillars", [64, 220, 425, 1620])
@@ -20,10 +20,10 @@ def test_random_layout_counts_gaps_phi(n_pillars):
     assert np.unique(labels[labels >= 0]).size == n_pillars
     phi = np.count_nonzero(labels >= 0) / labels.size
     assert abs(phi / 0.12 - 1) < 0.03, f"phi = {phi:.4f}"
-    c = random_centres(n_pillars, p.side, p.pillar_radius, p.min_gap * p.h, p.seed)
+    c = random_centres(n_pillars, p.side, p.pillar_radius, random_gap(p), p.seed)
     dist = np.hypot(*(c[:, None, :] - c[None, :, :]).transpose(2, 0, 1))
     np.fill_diagonal(dist, np.inf)
-    assert dist.min() >= 2 * p.pillar_radius + p.min_gap * p.h
+    assert dist.min() >= 2 * p.pillar_radius + random_gap(p)
     assert np.all((c >= p.pillar_radius) & (c <= p.side - p.pillar_radius))
     # on the grid no two pillars share an element edge
     for a, b in ((labels[1:], labels[:-1]), (labels[:, 1:], labels[:, :-1])):
