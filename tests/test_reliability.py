@@ -264,6 +264,27 @@ def test_aggregation_refuses_a_bad_curve_file(cli_curves: list[Path], tmp_path: 
     assert bad.name in str(info.value), f"error does not name the file: {info.value}"
 
 
+def test_aggregation_refuses_a_random_brush_of_the_old_gap_rule(cli_curves: list[Path],
+                                                               tmp_path: Path) -> None:
+    """A random curve off 512^2 without ``random_gap`` was drawn with a gap of
+    min_gap elements of its own grid (before 2026-12-04): another brush than
+    its seed names now, so it must not join today's curves along ``grid``."""
+    random_curve = cli_curves[-1]
+    ds = read_curve(random_curve)
+    assert ds.attrs["layout"] == "random" and ds.attrs["grid"] == 32
+    del ds.attrs["random_gap"]
+    old = tmp_path / "random_before_the_rule.nc"
+    write_curve(ds, old)
+    read_curve(old)  # a valid file on its own
+    with pytest.raises(AggregationError, match=r"random_before_the_rule\.nc.*grid 32.*"
+                                               r"seed 1 names another brush"):
+        build_sweep([*cli_curves[:-1], old])
+    ds.attrs["grid"] = 512  # where both rules draw the same brush: accepted
+    at_512 = tmp_path / "random_512.nc"
+    write_curve(ds, at_512)
+    assert "random" in build_sweep([*cli_curves[:-1], at_512])["layout"].values
+
+
 def test_aggregate_rule_fails_on_a_truncated_curve(clean_run: Path, tmp_path: Path) -> None:
     work = tmp_path / "repo"
     shutil.copytree(clean_run, work, symlinks=True)  # results and .snakemake included

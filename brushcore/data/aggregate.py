@@ -29,6 +29,7 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import provenance
+from brushcore.model.params import RANDOM_GAP_GRID
 from brushcore.model.shapes import shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
 
@@ -145,8 +146,9 @@ def load_curves(paths: Iterable[str | Path]) -> dict[CaseKey, tuple[Path, xr.Dat
     Raises
     ------
     AggregationError
-        If a file cannot be read (the message names it) or two files hold the
-        same case (the message names both).
+        If a file cannot be read (the message names it), two files hold the
+        same case (the message names both), or a random layout off the
+        512^2 grid was drawn under the rule before 2026-12-04 (`_check_brush`).
     """
     curves: dict[CaseKey, tuple[Path, xr.Dataset]] = {}
     for raw in paths:
@@ -156,6 +158,7 @@ def load_curves(paths: Iterable[str | Path]) -> dict[CaseKey, tuple[Path, xr.Dat
             key = case_key(curve)
         except Exception as exc:  # CurveFileError, missing attribute, bad value
             raise AggregationError(f"cannot aggregate curve file {path}: {exc}") from exc
+        _check_brush(path, curve, key)
         if key in curves:
             raise AggregationError(
                 f"curve files {curves[key][0]} and {path} hold the same case {key}"
@@ -164,6 +167,25 @@ def load_curves(paths: Iterable[str | Path]) -> dict[CaseKey, tuple[Path, xr.Dat
     if not curves:
         raise AggregationError("no curve files to aggregate")
     return curves
+
+
+def _check_brush(path: Path, curve: xr.Dataset, key: CaseKey) -> None:
+    """Refuse a random layout whose seed names another brush than today's.
+
+    Before 2026-12-04 a random layout kept a gap of ``min_gap`` elements of
+    its own grid, so off the `RANDOM_GAP_GRID` grid it drew other pillars
+    than the same seed draws now (`brushcore.model.layout.random_gap`), and
+    beside today's curves it would pass for the same brush along ``grid``.
+    Such files lack the ``random_gap`` attribute that every random curve
+    records since; on the 512^2 grid both rules draw the same brush.
+    """
+    if (key.layout == "random" and key.grid != RANDOM_GAP_GRID
+            and "random_gap" not in curve.attrs):
+        raise AggregationError(
+            f"curve file {path} is a random layout at grid {key.grid} written before "
+            f"2026-12-04, when a random brush kept a gap of min_gap elements of its own "
+            f"grid: seed {key.seed} names another brush there today. Delete the file "
+            f"and rerun its job to get the brush that seed {key.seed} draws on every grid")
 
 
 def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:
