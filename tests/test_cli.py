@@ -12,7 +12,10 @@ import time
 import numpy as np
 import pytest
 
+from brushcore import BrushParams
 from brushcore.cli import main
+from brushcore.model.labelmap import count_touching_pairs
+from brushcore.model.layout import build_labels
 from brushcore.data.io import CurveFileError, read_curve, write_curve
 
 
@@ -37,6 +40,8 @@ def test_rigid_kbar_inf(tmp_path):
     attrs = read_curve(out).attrs
     assert np.isinf(attrs["kbar"])
     assert attrs["random_gap"] == 48 / 512  # min_gap 1 of L / 512 (h = 1): the 512^2 brush
+    assert attrs["touching_pillar_pairs"] == count_touching_pairs(
+        build_labels(BrushParams("random", 5, np.inf, 48, seed=2)))
 
 
 BAD = [

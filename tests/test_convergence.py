@@ -224,6 +224,22 @@ def test_sweep_dataset_round_trip(tmp_path):
     assert csv.read_text().count("\n") == 9
 
 
+def test_table_flags_touching_pillars():
+    """A case whose pillars share an element edge on some grid (random discs
+    coarser than 512^2) is flagged; a count of 0 or a grid not run is not."""
+    sweep = _sweep()
+    touching = xr.zeros_like(sweep["adhesive_force_normalized"])
+    touching.loc[dict(n_pillars=64, kbar=1e-6, grid=128)] = 3
+    touching.loc[dict(n_pillars=256, kbar=np.inf)] = np.nan  # written before the count
+    conv = extrapolate_sweep(sweep.assign(touching_pillar_pairs=touching))
+    assert conv["touching_pillar_pairs"].dims[-1] == "grid"
+    table = convergence_table(conv)
+    flagged = table[table["flags"].str.contains("touching_pillars")]
+    assert set(zip(flagged["n_pillars"], flagged["kbar"])) == {(64, 1e-6)}
+    assert len(flagged) == 2  # both quantities
+    assert "touching_pillars" not in convergence_table(extrapolate_sweep(sweep))["flags"].sum()
+
+
 def test_sweep_uses_recorded_radius_and_needs_grid():
     sweep = _sweep()
     rad = xr.full_like(sweep["adhesive_force_normalized"], 7.0)

@@ -76,3 +76,35 @@ def test_radius_follows_phi():
 def test_random_layout_that_cannot_fit_fails_fast():
     with pytest.raises(ParameterError, match="n_pillars=400 .*fewer pillars, a smaller phi"):
         build_labels(BrushParams("random", 400, 1.0, 256, phi=0.5, seed=0))
+
+
+def test_count_touching_pairs_counts_pairs_sharing_an_edge() -> None:
+    """Pairs, not contacts: two edges between pillars 0 and 1 are one pair; a
+    shared corner (pillars 2 and 3) is none; checked by brute force."""
+    from brushcore.model.labelmap import count_touching_pairs
+
+    labels = np.full((6, 7), -1)
+    labels[1, 1:3] = 0
+    labels[1, 3] = 1
+    labels[2, 2] = 1  # below an element of 0: a second edge of the same pair
+    labels[3, 4] = 2
+    labels[4, 5] = 3  # corner only
+    labels[5, 0:2] = 4
+    assert count_touching_pairs(labels) == 1
+    brute = {tuple(sorted((labels[i, j], labels[i + di, j + dj])))
+             for i in range(6) for j in range(7) for di, dj in ((0, 1), (1, 0))
+             if i + di < 6 and j + dj < 7 and labels[i, j] >= 0
+             and labels[i + di, j + dj] >= 0 and labels[i, j] != labels[i + di, j + dj]}
+    assert brute == {(0, 1)}
+    assert count_touching_pairs(np.full((4, 4), -1)) == 0
+
+
+def test_random_discs_touch_only_below_the_gap_grid() -> None:
+    """The gap L / 512 is under an element on coarser grids, where random discs
+    may share an edge (recorded per curve as ``touching_pillar_pairs``); on
+    512^2 and finer they never do."""
+    from brushcore.model.labelmap import count_touching_pairs
+
+    counts = {grid: count_touching_pairs(build_labels(BrushParams("random", 220, 1.0, grid)))
+              for grid in (256, 512, 1024)}
+    assert counts[256] > 0 and counts[512] == counts[1024] == 0, counts

@@ -66,6 +66,7 @@ ATTRIBUTE_SCALARS = {
     "phi_actual": ("1", "filling factor A / L^2 realised on the grid"),
     "real_contact_area": ("m2", "real contact area A"),
     "pillar_radius_elements": ("1", "pillar radius a_p / h (elements a radius spans)"),
+    "touching_pillar_pairs": ("1", "pillar pairs whose footprints share an element edge"),
 }
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
 SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols")

@@ -81,6 +81,9 @@ QUANTITIES = ("adhesive_force_normalized", "work_of_separation_normalized")
 GRID_DIM = "grid"
 #: Under this many elements per pillar radius a result is marked under-resolved.
 UNDER_RESOLVED_RADIUS = 4.0
+#: Sweep variable counting pillar pairs that share an element edge on a grid
+#: (`brushcore.model.labelmap.count_touching_pairs`): flagged in the table.
+TOUCHING = "touching_pillar_pairs"
 
 
 @dataclass(frozen=True)
@@ -390,7 +393,8 @@ def extrapolate_sweep(
         ``{q}_n_grids`` and the int8 flags ``{q}_non_monotone``,
         ``{q}_poor_fit``, ``{q}_too_few_grids``; the raw values ``{q}`` on
         (cases..., grid); ``finest_grid`` and ``pillar_radius_elements_finest``
-        of the finest grid run; ``h`` = 1/n on ``grid``.
+        of the finest grid run; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs``
+        on (cases..., grid) where the sweep has it.
 
     Raises
     ------
@@ -442,6 +446,8 @@ def extrapolate_sweep(
     else:
         phi = sweep["phi"] if "phi" in sweep.coords else float(sweep.attrs.get("phi", np.nan))
         rad = finest_n * np.sqrt(phi / (np.pi * sweep["n_pillars"].astype(np.float64)))
+    if TOUCHING in sweep:  # random discs on grids coarser than 512: a mesh error to see
+        out[TOUCHING] = sweep[TOUCHING].copy()
     out["pillar_radius_elements_finest"] = rad.assign_attrs(
         units="1", long_name="pillar radius a_p / h on the finest grid run [elements]")
     ds = xr.Dataset(out).assign_coords(h=h)
@@ -486,7 +492,9 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
     pandas.DataFrame
         Case columns, the quantity, one column ``n=<grid>`` per grid with the
         raw value, the finest radius in elements, extrapolated value, error,
-        order and the flags (as a comma-separated ``flags`` column).
+        order and the flags (as a comma-separated ``flags`` column; besides
+        the fit's, ``under_resolved`` and ``touching_pillars``, see
+        `write_tables`).
     """
     import pandas as pd
 
@@ -511,6 +519,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
                      if int(one[f"{q}_{f}"])]
             if row["radius_elements_finest"] < UNDER_RESOLVED_RADIUS:
                 flags.append("under_resolved")
+            if TOUCHING in one and np.nanmax(one[TOUCHING].values, initial=0.0) > 0:
+                flags.append("touching_pillars")
             row["flags"] = ",".join(flags)
             rows.append(row)
     return pd.DataFrame(rows)
@@ -545,5 +555,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
     header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
               "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
               "uncertainty (>= 4 grids). "
-              f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements.\n\n")
+              f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements; "
+              "touching_pillars: on some grid two pillars' footprints share an element "
+              "edge (random discs on grids coarser than 512).\n\n")
     Path(md_path).write_text(header + to_markdown(table))

@@ -20,6 +20,7 @@ from brushcore.numerics.convolution import HAVE_PYFFTW, cached_convolver
 from brushcore.numerics.device_convolution import cached_device_convolver
 from brushcore.numerics.fft_choice import faster_library
 from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
+from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap
 from brushcore.numerics.operator import BrushOperator
@@ -73,14 +74,18 @@ def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
 
 
 def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float | int | str]:
-    """What the layout realised: pillar count, hexagonal rows x columns and fill,
-    a random layout's gap [length] (`layout.random_gap`), file digest.
+    """What the layout realised: pillar count, pillar pairs whose footprints
+    share an element edge (`labelmap.count_touching_pairs`: 0 but for random
+    discs on grids coarser than 512, where the gap is under an element),
+    hexagonal rows x columns and fill, a random layout's gap [length]
+    (`layout.random_gap`), file digest.
 
     ``shape``, ``aspect``, ``orientation`` and ``layout_file`` themselves are
     parameters (see `BrushParams.as_attrs`); ``pillar_radius`` is the
     equal-area radius for every shape.
     """
-    attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1}
+    attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1,
+                                           "touching_pillar_pairs": count_touching_pairs(labels)}
     if params.layout == "random":  # the rule that drew it: L min_gap / 512 since 9695874
         attrs["random_gap"] = random_gap(params)
     if params.layout == "hexagonal":

@@ -26,6 +26,17 @@ def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int,
     return sorted(found)[:limit]
 
 
+def count_touching_pairs(labels: np.ndarray) -> int:
+    """How many pairs of different pillars share at least one element edge
+    (4-neighbour adjacency; a shared corner does not count)."""
+    keys = []
+    for a, b in ((labels[:-1, :], labels[1:, :]), (labels[:, :-1], labels[:, 1:])):
+        touch = (a >= 0) & (b >= 0) & (a != b)
+        lo, hi = np.minimum(a[touch], b[touch]), np.maximum(a[touch], b[touch])
+        keys.append(lo.astype(np.int64) * (int(labels.max()) + 1) + hi)
+    return int(np.unique(np.concatenate(keys)).size)
+
+
 def check_not_touching(labels: np.ndarray, name: str, value: object) -> None:
     """Refuse a label map whose pillars touch, naming pillars and elements.
 
