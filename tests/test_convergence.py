@@ -239,6 +239,14 @@ def test_table_flags_touching_pillars():
     assert len(flagged) == 2  # both quantities
     assert "touching_pillars" not in convergence_table(extrapolate_sweep(sweep))["flags"].sum()
 
+    from brushcore.data import figures
+    fig = figures.convergence(conv)
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert sum("touching pillars (n = 128)" in t for t in texts) == 2  # F_ad and W panels
+    hollow = [line for ax in fig.axes for line in ax.lines
+              if line.get_markerfacecolor() == "none" and len(line.get_xdata())]
+    assert [float(x) for line in hollow for x in line.get_xdata()] == [1 / 128, 1 / 128]
+
 
 def test_sweep_uses_recorded_radius_and_needs_grid():
     sweep = _sweep()

@@ -28,7 +28,7 @@ from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM, finest_grid, shape_slice, snapshots
-from brushcore.data.convergence import QUANTITIES, UNDER_RESOLVED_RADIUS
+from brushcore.data.convergence import QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS
 from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
 
 F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
@@ -560,8 +560,10 @@ def convergence(
     -------
     matplotlib.figure.Figure
         Rows: cases (layout, N, kbar, seed); columns: quantities.  Dots are
-        the grids run, the dashed line f0 + C h^p, the bar at h = 0 the
-        extrapolated value with its error; flags are written in red.
+        the grids run (open where two pillars' footprints share an element
+        edge, ``touching_pillar_pairs``), the dashed line f0 + C h^p, the bar
+        at h = 0 the extrapolated value with its error; flags are written in
+        red.
     """
     cases = _convergence_cases(conv, quantities[0])
     n_rows, n_cols = max(len(cases), 1), len(quantities)
@@ -582,7 +584,10 @@ def convergence(
             ax = axes[row][col]
             values = conv[q].sel(case).values
             ok = np.isfinite(values)
-            ax.plot(h_all[ok], values[ok], "o", color="C0")
+            touch = ok & (np.nan_to_num(conv[TOUCHING].sel(case).values) > 0
+                          if TOUCHING in conv else False)
+            ax.plot(h_all[ok & ~touch], values[ok & ~touch], "o", color="C0")
+            ax.plot(h_all[touch], values[touch], "o", mfc="none", color="C0")
             f0 = float(conv[f"{q}_extrapolated"].sel(case))
             p = float(conv[f"{q}_order"].sel(case))
             c = float(conv[f"{q}_coefficient"].sel(case))
@@ -596,6 +601,9 @@ def convergence(
                      if int(conv[f"{q}_{f}"].sel(case))]
             if math.isfinite(radius) and radius < UNDER_RESOLVED_RADIUS:
                 flags.append(f"under-resolved ({radius:.1f} el./radius)")
+            if touch.any():
+                grids = ", ".join(str(int(g)) for g in conv["grid"].values[touch])
+                flags.append(f"touching pillars (n = {grids})")
             if flags:
                 ax.text(0.97, 0.05, ", ".join(flags), color="tab:red", ha="right",
                         va="bottom", transform=ax.transAxes, fontsize="small")
@@ -609,7 +617,11 @@ def convergence(
         Line2D([], [], ls="--", color="C1", label=r"fit $f_0 + C h^p$"),
         Line2D([], [], marker="s", ls="", color="C1", label=r"$f_0$ ± error at $h = 0$"),
     ]
-    fig.legend(handles=handles, loc="outside upper center", ncols=3, fontsize="small")
+    if TOUCHING in conv and bool((conv[TOUCHING] > 0).any()):
+        handles.append(Line2D([], [], marker="o", mfc="none", ls="", color="C0",
+                              label="grid where pillars touch"))
+    fig.legend(handles=handles, loc="outside upper center", ncols=len(handles),
+               fontsize="small")
     return fig
 
 
