@@ -19,6 +19,7 @@ from pathlib import Path
 
 from brushcore.numerics.cg import ConvergenceError
 from brushcore.data.joblog import EXIT_INTERRUPTED, INTERRUPTED
+from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.params import LAYOUTS, MAX_ASPECT, BrushParams
 from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
@@ -288,10 +289,14 @@ def _simulate(args: argparse.Namespace) -> int:
         check_output_path(args.out)
         labels = build_labels(params)  # layout and discretisation checked before any solve
         area = int((labels >= 0).sum())
+        touching = count_touching_pairs(labels)  # random discs on grids coarser than 512
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements,"
               f" phi realised {area / labels.size:.4g} (requested {params.phi:g}), "
               f"{int(labels.max()) + 1} pillars"
-              + ("" if backend.on_host else f", on {backend.device_name}"), file=sys.stderr)
+              + ("" if backend.on_host else f", on {backend.device_name}")
+              + (f"; {touching} pillar pairs share an element edge (their gap is under "
+                 f"an element on this grid; a finer grid separates them)" if touching else ""),
+              file=sys.stderr)
         pin_threads(args.threads)
         ds = simulate(params, options, progress=progress, labels=labels)
         write_curve(ds, args.out)

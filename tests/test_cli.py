@@ -146,6 +146,21 @@ def test_every_run_reports_its_discretisation(tmp_path):
     assert abs(read_curve(tmp_path / "c.nc").attrs["pillar_radius_elements"] - 4.69) < 0.01
 
 
+def test_run_reports_random_discs_that_touch(tmp_path):
+    """On grids coarser than 512 random discs may share an element edge (their
+    gap is L / 512): the run says how many pairs, and the file records it."""
+    args = ["simulate", "--layout", "random", "--pillars", "10", "--kbar", "1.0", "--grid",
+            "48", "--seed", "1", "--quiet"]
+    res = _cli(*args, "--out", str(tmp_path / "c.nc"))
+    assert res.returncode == 0, res.stderr
+    expected = count_touching_pairs(build_labels(BrushParams("random", 10, 1.0, 48, seed=1)))
+    assert expected > 0
+    assert f"; {expected} pillar pairs share an element edge" in res.stderr, res.stderr
+    assert read_curve(tmp_path / "c.nc").attrs["touching_pillar_pairs"] == expected
+    quiet = _cli(*SMALL, "--out", str(tmp_path / "d.nc"), "--quiet")
+    assert "share an element edge" not in quiet.stderr
+
+
 def test_allow_coarse_runs_what_is_refused_by_default(tmp_path):
     args = ["simulate", "--layout", "regular", "--pillars", "256", "--kbar", "0.455",
             "--grid", "64", "--out", str(tmp_path / "c.nc"), "--quiet"]
