@@ -7,6 +7,13 @@ import numpy as np
 from brushcore.validation import ParameterError
 
 
+def _edge_neighbours(labels: np.ndarray):
+    """Per axis, the element pairs (a, b) that share an edge, b below or to
+    the right of a, and where both are of different pillars."""
+    for a, b in ((labels[:-1, :], labels[1:, :]), (labels[:, :-1], labels[:, 1:])):
+        yield a, b, (a >= 0) & (b >= 0) & (a != b)
+
+
 def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int, int, int]]:
     """Pairs of different pillars sharing an element edge (4-neighbour adjacency).
 
@@ -16,10 +23,8 @@ def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int,
     element (row, column) of p and its neighbour below or to the right.
     """
     found: list[tuple[int, int, int, int]] = []
-    for axis in (0, 1):
-        a = labels[:-1, :] if axis == 0 else labels[:, :-1]
-        b = labels[1:, :] if axis == 0 else labels[:, 1:]
-        rows, cols = np.nonzero((a >= 0) & (b >= 0) & (a != b))
+    for a, b, touch in _edge_neighbours(labels):
+        rows, cols = np.nonzero(touch)
         for r, c in zip(rows[:limit], cols[:limit]):
             p, q = sorted((int(a[r, c]), int(b[r, c])))
             found.append((p, q, int(r), int(c)))
@@ -29,11 +34,8 @@ def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int,
 def count_touching_pairs(labels: np.ndarray) -> int:
     """How many pairs of different pillars share at least one element edge
     (4-neighbour adjacency; a shared corner does not count)."""
-    keys = []
-    for a, b in ((labels[:-1, :], labels[1:, :]), (labels[:, :-1], labels[:, 1:])):
-        touch = (a >= 0) & (b >= 0) & (a != b)
-        lo, hi = np.minimum(a[touch], b[touch]), np.maximum(a[touch], b[touch])
-        keys.append(lo.astype(np.int64) * (int(labels.max()) + 1) + hi)
+    keys = [np.minimum(a[touch], b[touch]).astype(np.int64) * (int(labels.max()) + 1)
+            + np.maximum(a[touch], b[touch]) for a, b, touch in _edge_neighbours(labels)]
     return int(np.unique(np.concatenate(keys)).size)
 
 
