@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 from brushcore.validation import ParameterError
 
 
-def _edge_neighbours(labels: np.ndarray):
+def _edge_neighbours(labels: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per axis, the element pairs (a, b) that share an edge, b below or to
     the right of a, and where both are of different pillars."""
     for a, b in ((labels[:-1, :], labels[1:, :]), (labels[:, :-1], labels[:, 1:])):
@@ -34,7 +36,8 @@ def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int,
 def count_touching_pairs(labels: np.ndarray) -> int:
     """How many pairs of different pillars share at least one element edge
     (4-neighbour adjacency; a shared corner does not count)."""
-    keys = [np.minimum(a[touch], b[touch]).astype(np.int64) * (int(labels.max()) + 1)
+    stride = int(labels.max()) + 1  # a pair (p, q), p < q, as the key p * stride + q
+    keys = [np.minimum(a[touch], b[touch]).astype(np.int64) * stride
             + np.maximum(a[touch], b[touch]) for a, b, touch in _edge_neighbours(labels)]
     return int(np.unique(np.concatenate(keys)).size)
 
