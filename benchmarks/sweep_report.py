@@ -2,10 +2,19 @@
 
     python benchmarks/sweep_report.py                 # results/benchmarks of this checkout
     python benchmarks/sweep_report.py path/to/results/benchmarks --top 15
+    python benchmarks/sweep_report.py --floor       # + the transforms' share
 
 Prints the jobs' summed wall time, the span from the first job's start to
 the last job's end (from file times: each benchmark file is written when its
-job ends), the wall time per layout and N, and the slowest jobs.  Run the
+job ends), the wall time per layout and N, and the slowest jobs.  With
+``--floor`` it also reads the curve files beside the benchmark folder
+(``results/curves``) and prints, per layout and N, what the curves'
+operator applications would cost as bare transforms alone: each curve's
+applications times one application's pruned transform pair, timed here on
+one thread for the grid, mirror fold, precision and FFT library the curve
+records.  That is the floor of today's algorithm (one residual per cascade
+round, one per CG iteration); the rest of a curve's time is bookkeeping,
+setup and the job's start.  Run the
 sweep on an otherwise idle machine: anything else running stretches the jobs'
 wall times.  Snakemake's `cpu_time` column is not used: it is sampled every
 30 s (snakemake.benchmark.BENCHMARK_INTERVAL), so it misses up to the last
@@ -46,6 +55,60 @@ def read_jobs(root: Path) -> list[dict]:
     return jobs
 
 
+def pair_ms(grid: int, fold: int, single: bool, library: str, repeats: int = 30) -> float:
+    """ms of one application's transform pair (whole grid or mirror
+    quadrant), one thread, on this machine; the median of three timings."""
+    from threadpoolctl import threadpool_limits
+
+    from bench_speed import _ms
+    from brushcore.numerics.convolution import Convolver
+    from brushcore.numerics.mirror import MirrorConvolver
+    with threadpool_limits(1):
+        if fold == 4:
+            conv, fill = MirrorConvolver(grid, single=single), grid // 2
+        else:
+            conv, fill = Convolver(grid, single=single, library=library), grid
+        return sorted(_ms(conv, fill, repeats) for _ in range(3))[1]
+
+
+def transform_floor(curves: Path) -> None:
+    """Print, per layout and N, the curves' applications priced at
+    `pair_ms` against their recorded wall time."""
+    import xarray as xr
+    rows = []
+    for path in sorted(curves.rglob("*.nc")):
+        with xr.open_dataset(path) as ds:
+            a = ds.attrs
+            if "operator_applications" not in a or a.get("backend", "cpu") != "cpu":
+                continue
+            key = (int(a["grid"]), int(a.get("symmetry_fold", 1)),
+                   a.get("fft_precision") == "single", str(a.get("fft_library_used", "fftw")))
+            rows.append((f"{a['layout']}/N{int(a['n_pillars'])}", key,
+                         int(a["operator_applications"]), float(a["wall_time_s"])))
+    if not rows:
+        raise SystemExit(f"no curve files under {curves}")
+    prices = {key: pair_ms(*key) for key in sorted({r[1] for r in rows})}
+    print("\none application's transform pair, one thread, here: " + "; ".join(
+        f"{g}^2 {'quadrant' if f == 4 else 'whole grid'} {'float32' if s else 'float64'} "
+        f"{lib} {ms:.2f} ms" for (g, f, s, lib), ms in prices.items()))
+    groups: dict[str, list[float]] = defaultdict(lambda: [0, 0, 0.0, 0.0])
+    for group, key, apps, wall in rows:
+        g = groups[group]
+        g[0] += 1
+        g[1] += apps
+        g[2] += wall
+        g[3] += apps * prices[key] / 1e3
+    print(f"{'layout/N':<16} {'curves':>6} {'apps':>8} {'curve s':>8} "
+          f"{'transforms s':>12} {'share %':>8}")
+    for name, (count, apps, wall, floor) in sorted(groups.items(), key=lambda kv: -kv[1][2]):
+        print(f"{name:<16} {count:>6} {apps:>8} {wall:>8.0f} {floor:>12.0f} "
+              f"{100 * floor / wall:>8.1f}")
+    wall = sum(g[2] for g in groups.values())
+    floor = sum(g[3] for g in groups.values())
+    print(f"{'all':<16} {len(rows):>6} {sum(g[1] for g in groups.values()):>8} "
+          f"{wall:>8.0f} {floor:>12.0f} {100 * floor / wall:>8.1f}")
+
+
 def group_of(name: str) -> str:
     """'simulate/random/N1620_kbar0.1_seed0' -> 'simulate/random/N1620'."""
     return re.sub(r"_kbar.*$", "", name)
@@ -55,6 +118,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("root", nargs="?", default="results/benchmarks", type=Path)
     parser.add_argument("--top", type=int, default=10, help="slowest jobs to list")
+    parser.add_argument("--floor", action="store_true",
+                        help="also price the curves' applications as bare transforms")
     args = parser.parse_args()
     jobs = read_jobs(args.root)
     if not jobs:
@@ -75,6 +140,8 @@ def main() -> None:
     print(f"\n{'slowest jobs':<42} {'wall s':>8} {'RSS MB':>7}")
     for j in sorted(jobs, key=lambda j: -j["wall"])[: args.top]:
         print(f"{j['name']:<42} {j['wall']:>8.1f} {j['rss_mb']:>7.0f}")
+    if args.floor:
+        transform_floor(args.root.parent / "curves")
 
 
 if __name__ == "__main__":
