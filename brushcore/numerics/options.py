@@ -59,7 +59,13 @@ class SolverOptions:
         another path (regular 576 at kbar 1e-6: W 0.8 % off).  "auto" is
         therefore "mixed" only for layouts without exact symmetries (random
         ones) at rtol >= 1e-6, and "double" otherwise; "mixed" needs rtol
-        >= 1e-6.  GPU runs are always double.
+        >= 1e-6.  GPU runs are always double.  What CG's error estimate
+        cannot see (it converges on the float32 operator): the round-off
+        moves a solution by up to 1.45e-5 of its largest stress (measured
+        on random brushes at 512^2), enough to reorder soft random pillars
+        that reach sigma_c closer together than that: random 1620 at kbar
+        1e-5 ends at W 3.4e-4 off `exact()` under "mixed", 1.6e-7 under
+        "double" (41 % slower on that curve).
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
         `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
@@ -90,10 +96,11 @@ class SolverOptions:
         so curves agree to round-off and not to the bit (over the default
         sweep F_ad within 3.8e-6, W within 5.0e-5 but on one soft random
         curve, whose near-ties give it two W 3.4e-4 apart between two sets
-        of FFTW plans as well).  The mirror quadrant's DCTs (regular
-        brushes) stay on FFTW, a GPU on CuPy, and the tiles' local pillar
-        solves run on planned FFTW whatever the choice (3.4x faster than
-        MKL there, `brushcore.numerics.pillar_solve.BoxTransforms`).
+        of FFTW plans as well: float32's error, see ``precision``).  The
+        mirror quadrant's DCTs (regular brushes) stay on FFTW, a GPU on
+        CuPy, and the tiles' local pillar solves run on planned FFTW
+        whatever the choice (3.4x faster than MKL there,
+        `brushcore.numerics.pillar_solve.BoxTransforms`).
     """
 
     rtol: float = 1e-4
