@@ -105,6 +105,33 @@ def test_single_precision_transforms_round_at_float32(mirrored):
     assert 1e-9 < err < 1e-6, f"relative error {err:.2e}"
 
 
+@pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")
+def test_single_precision_moves_a_solution_more_than_cg_can_see():
+    """CG converges on the float32 operator, so its error estimate cannot
+    see what single-precision transforms do to a solution (README, "Mixed
+    precision"): for a soft random brush that is a few 1e-6 of the peak
+    stress, tens of times a transform's ~1e-7 and of CG's tolerance here
+    (measured up to 1.45e-5 at 512^2; 5e-5 bounds it), and `refined`
+    (double-precision transforms) removes it.  Random 220 at kbar 1e-5 on
+    256^2, A x = 1 from zero: float32 CG to 1e-7 against double to 1e-11."""
+    from brushcore import BrushParams
+    from brushcore.model.curve import spring_compliance
+    from brushcore.model.layout import build_labels
+    params = BrushParams("random", 220, 1e-5, 256)
+    labels, compliance = build_labels(params), spring_compliance(params, 220)
+    single = BrushOperator(Convolver(256, single=True), labels, compliance, params.h,
+                           params.e_star, precise=lambda: Convolver(256))
+    double = BrushOperator(Convolver(256), labels, compliance, params.h, params.e_star)
+    b = np.ones(single.size)
+    x32, _ = pcg(single.apply, single.precondition, b, np.zeros_like(b), 1e-7, 500)
+    x64, _ = pcg(double.apply, double.precondition, b, np.zeros_like(b), 1e-11, 500)
+    err = np.abs(x32 - x64).max() / x64.max()
+    assert 1e-6 < err < 5e-5, f"float32 moved the solution by {err:.2e} of its peak"
+    with single.refined():
+        x, _ = pcg(single.apply, single.precondition, b, x32, 1e-11, 500)
+    assert np.abs(x - x64).max() / x64.max() < 1e-9
+
+
 def _dense_operator(labels, compliance, attached):
     n = labels.shape[0]
     flat = labels.ravel()
