@@ -13,8 +13,9 @@ operator applications would cost as bare transforms alone: each curve's
 applications times one application's pruned transform pair, timed here on
 one thread for the grid, mirror fold, precision and FFT library the curve
 records.  That is the floor of today's algorithm (one residual per cascade
-round, one per CG iteration); the rest of a curve's time is bookkeeping,
-setup and the job's start.  Run the
+round, one per CG iteration); the rest of a curve's time is bookkeeping
+and setup, and what a job takes beyond its curve's own wall time (the
+process's start, imports, writing the file) is printed beside it.  Run the
 sweep on an otherwise idle machine: anything else running stretches the jobs'
 wall times.  Snakemake's `cpu_time` column is not used: it is sampled every
 30 s (snakemake.benchmark.BENCHMARK_INTERVAL), so it misses up to the last
@@ -71,9 +72,10 @@ def pair_ms(grid: int, fold: int, single: bool, library: str, repeats: int = 30)
         return sorted(_ms(conv, fill, repeats) for _ in range(3))[1]
 
 
-def transform_floor(curves: Path) -> None:
+def transform_floor(curves: Path, jobs: list[dict]) -> None:
     """Print, per layout and N, the curves' applications priced at
-    `pair_ms` against their recorded wall time."""
+    `pair_ms` against their recorded wall time, and the jobs' time beyond
+    it (``jobs`` from `read_jobs`, matched by the curve's path)."""
     import xarray as xr
     rows = []
     for path in sorted(curves.rglob("*.nc")):
@@ -84,15 +86,18 @@ def transform_floor(curves: Path) -> None:
             key = (int(a["grid"]), int(a.get("symmetry_fold", 1)),
                    a.get("fft_precision") == "single", str(a.get("fft_library_used", "fftw")))
             rows.append((f"{a['layout']}/N{int(a['n_pillars'])}", key,
-                         int(a["operator_applications"]), float(a["wall_time_s"])))
+                         int(a["operator_applications"]), float(a["wall_time_s"]),
+                         str(Path("simulate") / path.relative_to(curves).with_suffix(""))))
     if not rows:
         raise SystemExit(f"no curve files under {curves}")
     prices = {key: pair_ms(*key) for key in sorted({r[1] for r in rows})}
     print("\none application's transform pair, one thread, here: " + "; ".join(
         f"{g}^2 {'quadrant' if f == 4 else 'whole grid'} {'float32' if s else 'float64'} "
         f"{lib} {ms:.2f} ms" for (g, f, s, lib), ms in prices.items()))
+    job_wall = {j["name"]: j["wall"] for j in jobs}
+    beyond = [job_wall[name] - wall for *_, wall, name in rows if name in job_wall]
     groups: dict[str, list[float]] = defaultdict(lambda: [0, 0, 0.0, 0.0])
-    for group, key, apps, wall in rows:
+    for group, key, apps, wall, _ in rows:
         g = groups[group]
         g[0] += 1
         g[1] += apps
@@ -107,6 +112,9 @@ def transform_floor(curves: Path) -> None:
     floor = sum(g[3] for g in groups.values())
     print(f"{'all':<16} {len(rows):>6} {sum(g[1] for g in groups.values()):>8} "
           f"{wall:>8.0f} {floor:>12.0f} {100 * floor / wall:>8.1f}")
+    if beyond:
+        print(f"the {len(beyond)} simulate jobs beyond their curves' wall time: "
+              f"{sum(beyond):.0f} s in all, median {sorted(beyond)[len(beyond) // 2]:.2f} s a job")
 
 
 def group_of(name: str) -> str:
@@ -141,7 +149,7 @@ def main() -> None:
     for j in sorted(jobs, key=lambda j: -j["wall"])[: args.top]:
         print(f"{j['name']:<42} {j['wall']:>8.1f} {j['rss_mb']:>7.0f}")
     if args.floor:
-        transform_floor(args.root.parent / "curves")
+        transform_floor(args.root.parent / "curves", jobs)
 
 
 if __name__ == "__main__":
