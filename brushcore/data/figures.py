@@ -28,7 +28,8 @@ from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM, finest_grid, shape_slice, snapshots
-from brushcore.data.convergence import QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS
+from brushcore.data.convergence import (QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
+                                        touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
 
 F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
@@ -584,7 +585,7 @@ def convergence(
             ax = axes[row][col]
             values = conv[q].sel(case).values
             ok = np.isfinite(values)
-            touch = ok & (np.nan_to_num(conv[TOUCHING].sel(case).values) > 0
+            touch = ok & (touching_grids(conv[TOUCHING].sel(case).values)
                           if TOUCHING in conv else False)
             ax.plot(h_all[ok & ~touch], values[ok & ~touch], "o", color="C0")
             ax.plot(h_all[touch], values[touch], "o", mfc="none", color="C0")
@@ -617,7 +618,7 @@ def convergence(
         Line2D([], [], ls="--", color="C1", label=r"fit $f_0 + C h^p$"),
         Line2D([], [], marker="s", ls="", color="C1", label=r"$f_0$ ± error at $h = 0$"),
     ]
-    if TOUCHING in conv and bool((conv[TOUCHING] > 0).any()):
+    if TOUCHING in conv and bool(touching_grids(conv[TOUCHING].values).any()):
         handles.append(Line2D([], [], marker="o", mfc="none", ls="", color="C0",
                               label="grid where pillars touch"))
     fig.legend(handles=handles, loc="outside upper center", ncols=len(handles),
