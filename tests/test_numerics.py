@@ -220,8 +220,9 @@ def test_single_precision_blocks_round_at_float32_with_exact_pillar_totals(packe
     """An operator with single-precision transforms applies float32 blocks:
     ~1e-7 off the exact block inverse, except each pillar's total, which a
     soft spring makes ~1e-6 of the rest here (G_p is nearly singular along
-    1) and float32 round-off alone gets wrong by 25-40 %; its `refined`
-    solves apply the float64 blocks."""
+    1) and float32 round-off alone gets wrong by a median 20 % (3.3 % at
+    the least over 400 seeds); its `refined` solves apply the float64
+    blocks."""
     from brushcore.numerics.precondition import BlockInverse, _stack_times
 
     rng, labels, _ = _random_problem(seed, n=12)
@@ -247,13 +248,17 @@ def test_single_precision_blocks_round_at_float32_with_exact_pillar_totals(packe
     with op.refined():
         assert np.allclose(op.precondition(r), exact, rtol=1e-9, atol=1e-9 * scale)
     assert op.block.single
-    # what the exact totals mend: plain float32 blocks miss the uniform mode
+    # What the exact totals mend: plain float32 blocks miss the uniform
+    # mode.  Relative to the totals, not to the mended error: the ratio of
+    # the two fell to 730 for one seed (392547584), and round-off can make
+    # it anything.  The worst pillar's float32 total is off by 3.3 % at the
+    # least over 400 seeds, 33 times the bound asserted.
     block = op.block
     w = np.zeros((block.inv.shape[0], block.m))
     w.ravel()[op._bpos] = r
     plain = _stack_times(block.inv.astype(np.float32), False, w.astype(np.float32),
                          block._remaining).sum(axis=1)
-    assert np.abs(plain - totals).max() > 1e3 * np.abs(np.bincount(pl, weights=z) - totals).max()
+    assert np.abs(plain - totals).max() > 1e-3 * np.abs(totals).max()
 
 
 @pytest.mark.parametrize("single", [False, True])
