@@ -6,8 +6,18 @@ import math
 import os
 
 import pytest
+from hypothesis import settings
 
 from brushcore import BrushParams
+
+# Property tests draw new seeds on every run, which is how they found brushes
+# and round-off that broke two assertions.  Under CI (the CI variable, which
+# .ci/run sets) they draw the same ones every time: a seed that breaks a test
+# should be found by a developer's run and fixed, not fail someone's merge at
+# random.
+settings.register_profile("ci", derandomize=True)
+if os.environ.get("CI", "").lower() not in ("", "0", "false"):
+    settings.load_profile("ci")
 
 
 def punch_params(radius: float, kbar: float = math.inf, **kw) -> BrushParams:

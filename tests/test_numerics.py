@@ -275,7 +275,10 @@ def test_two_level_preconditioner_is_spd_and_the_balancing_formula(single, seed)
     from brushcore.numerics.precondition import BlockInverse
 
     rng = np.random.default_rng(seed)
-    labels = build_labels(BrushParams("random", 6, 1.0, 32, phi=0.2, seed=seed % 1000))
+    # allow_coarse: 3 of the 1,000 brushes (seeds 235, 548, 715) realise phi
+    # 5.3 % low on this grid, which the solver refuses; irrelevant here.
+    labels = build_labels(BrushParams("random", 6, 1.0, 32, phi=0.2, seed=seed % 1000,
+                                      allow_coarse=True))
     compliance = rng.uniform(0.0, 50.0, 6)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(BlockInverse, "COUPLING_PER_PILLAR", 0.0)  # on whatever the springs
