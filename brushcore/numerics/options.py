@@ -67,8 +67,8 @@ class SolverOptions:
         1e-5 ended at W 3.4e-4 off `exact()` under "mixed", 1.6e-7 under
         "double" (41 % slower on that curve), with the decision margins
         before 2026-12-05 (`brushcore.numerics.pulloff.DECISION_SAFETY`);
-        today's reach 1.4e-7 under "mixed" on another path through the
-        same near-ties, which is luck, not a fix.
+        today's margins reach 1.4e-7 under "mixed" on another path
+        through the same near-ties, which is luck, not a fix.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
         `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
