@@ -45,7 +45,7 @@ Across pillars, M is balanced with the block path's pillar-level coarse
 space (`brushcore.numerics.precondition`), one vector z_p = M_p^-1 1 a
 pillar: it carries the pillars' forces acting on each other, about 40 %
 of what the tiles missed against dense blocks (random 64 rigid on 1024^2:
-9,749 against 11,115 applications; README, "Speed and memory").
+9,749 against 11,115 applications; docs/SPEED.md).
 Images of the mirrored quadrant are left out of K_c: they are neighbour
 coupling, which block preconditioners leave to CG anyway, and leaving them
 out lets equal pillars share one assembly.
