@@ -64,11 +64,10 @@ class SolverOptions:
         moves a solution by up to 1.45e-5 of its largest stress (measured
         on random brushes at 512^2), enough to reorder soft random pillars
         that reach sigma_c closer together than that: random 1620 at kbar
-        1e-5 ended at W 3.4e-4 off `exact()` under "mixed", 1.6e-7 under
-        "double" (41 % slower on that curve), with the decision margins
-        before 2026-12-05 (`brushcore.numerics.pulloff.DECISION_SAFETY`);
-        today's margins reach 1.4e-7 under "mixed" on another path
-        through the same near-ties, which is luck, not a fix.
+        1e-5 ends at W 3.4e-4 off `exact()` under "mixed" with some sets
+        of FFTW plans and 1.4e-7 with others (two sweeps with today's
+        `brushcore.numerics.pulloff.DECISION_SAFETY`, 2026-12-05), and
+        1.6e-7 under "double" (41 % slower on that curve).
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
         `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
