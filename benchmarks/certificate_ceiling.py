@@ -6,8 +6,8 @@
 A soft random brush spends most of its time in cascade rounds, each a
 global solve whose first application only computes the warm start's
 residual (docs/SPEED.md, "Where a random brush's time goes").  A round
-may skip its solve when `pulloff._certain_detachments` proves that no decision
-could flip; its rigorous far-field bound rarely can.  This script runs one
+may skip its solve when `pulloff._certain_detachments` proves that no
+decision could flip; its rigorous far-field bound rarely can.  This script runs one
 curve with a certificate tried in every round (the run itself takes every
 round's global solve, so its curve is the global cascade's) and, after
 each round's solve, re-solves to rtol 1e-10 for the round's exact stresses

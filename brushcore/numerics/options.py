@@ -65,8 +65,8 @@ class SolverOptions:
         on random brushes at 512^2), enough to reorder soft random pillars
         that reach sigma_c closer together than that: random 1620 at kbar
         1e-5 ends at W 3.4e-4 off `exact()` under "mixed" with some sets
-        of FFTW plans and 1.4e-7 with others (two sweeps with today's
-        `brushcore.numerics.pulloff.DECISION_SAFETY`, 2026-12-05), and
+        of FFTW plans and 1.4e-7 with others (two sweeps with
+        `brushcore.numerics.pulloff.DECISION_SAFETY` 3, 2026-12-05), and
         1.6e-7 under "double" (41 % slower on that curve).
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
