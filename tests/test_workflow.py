@@ -200,6 +200,20 @@ def test_convergence_config_plans_the_study(repo_copy: Path) -> None:
     assert "_grid2048_" in text and "N64_kbar1e-06_seed0_grid2048" not in text
 
 
+def test_random_convergence_config_plans_the_study(repo_copy: Path) -> None:
+    config = yaml.safe_load((repo_copy / "config/convergence_random.yaml").read_text())
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile",
+                     "config/convergence_random.yaml")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    # 3 brushes x 3 kbar x 3 grids, N = 1620 on its own 2 grids, the Fig. 5 brush on 3
+    kbar = len(config["kbar"])
+    assert planned_simulations(text) == 3 * kbar * 3 + kbar * 2 + 3, text
+    assert re.search(r"^convergence\s+1\s*$", text, flags=re.MULTILINE), text
+    assert "random/N1620_kbar1e-06_seed0_grid1024" in text
+    assert "random/N1620_kbar1e-06_seed0_grid256" not in text
+
+
 def test_lint(repo_copy: Path) -> None:
     """No lint but the conda/container one: software is pip-installed (README)."""
     proc = snakemake(repo_copy, "--lint")
