@@ -23,7 +23,8 @@ from brushcore.model.curve import run, run_protocol_curve
 from brushcore.model.layout import build_labels
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.protocol import (Waypoint, loop_energy, positive_work, preload_protocol)
+from brushcore.numerics.protocol import (Waypoint, dispatches, loop_energy, positive_work,
+                                         preload_protocol)
 
 EXACT = SolverOptions.exact()  # CG to 1e-8, global cascades: reference results
 
@@ -59,6 +60,27 @@ def test_flat_brush_with_preload_is_todays_pull_off(preload):
     assert curve.force[curve.waypoint_step[0]] == pytest.approx(-preload, abs=1e-12)
     # all energy is dissipated: the approach is returned on the way back
     assert loop_energy(curve.displacement, curve.force) == pytest.approx(w0, rel=1e-9)
+
+
+def test_flat_brush_takes_the_pull_offs_preconditioner():
+    """A flat brush under the standard protocol is today's pull-off, so it
+    takes the pull-off's limit on dense blocks too: one pillar of 1,965
+    elements (between `BlockInverse.MAX_BLOCK` and `MAX_BLOCK_PROTOCOL`)
+    gets the tiles, as `run` does, and the same curve at the same cost
+    (before: dense blocks, 3.2 GB for a graded random 8 x 8 brush at
+    1024^2).  The general engine, which a rough brush or a cycle needs,
+    keeps them."""
+    params = BrushParams("random", 1, 0.455, 128)
+    _, today, apps0 = run(params)
+    _, op, curve, apps = run_protocol_curve(params, preload_protocol(0.0))
+    assert BlockInverse.MAX_BLOCK < op.elements.size < BlockInverse.MAX_BLOCK_PROTOCOL
+    assert op.preconditioner == "tiles"
+    assert np.array_equal(curve.force, today.force) and apps == apps0
+    flat, rough = np.zeros(3), np.array([0.0, 0.0, 1e-3])
+    assert dispatches(flat, preload_protocol(2.0))
+    assert not dispatches(rough, preload_protocol(2.0))
+    assert not dispatches(flat, (Waypoint("force", -2.0), Waypoint("force", 1.0),
+                                 Waypoint("separation")))
 
 
 @pytest.mark.parametrize("preload", [0.0, 400.0])

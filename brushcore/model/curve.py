@@ -29,8 +29,8 @@ from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
 from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.numerics.cg import ConvergenceError
-from brushcore.numerics.protocol import (APPROACH, RETRACT, START, ProtocolCurve, Waypoint, loop_energy,
-                       positive_work, preload_protocol, run_protocol)
+from brushcore.numerics.protocol import (APPROACH, RETRACT, START, ProtocolCurve, Waypoint, dispatches,
+                       loop_energy, positive_work, preload_protocol, run_protocol)
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.numerics.pulloff import Progress, PullOffCurve, SolverError, pull_off
 from brushcore.numerics.threads import fft_threads
@@ -243,13 +243,20 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     before = conv.applications
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)
-    op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
-                       params.e_star, max_block=BlockInverse.MAX_BLOCK_PROTOCOL)
-    z = np.zeros(op.size)
+    # Element offsets in operator order (`BrushOperator.elements`).
+    flat_labels = labels.ravel()
+    elements = np.flatnonzero(flat_labels >= 0)
+    z = np.zeros(elements.size)
     if heights is not None:
-        z += np.asarray(heights, dtype=float)[backend.to_host(op.pillar_of)]
+        z += np.asarray(heights, dtype=float)[flat_labels[elements]]
     if gap_map is not None:
-        z -= np.asarray(gap_map, dtype=float).ravel()[op.elements]
+        z -= np.asarray(gap_map, dtype=float).ravel()[elements]
+    # A run that goes to the pull-off solver takes its block limit: its
+    # cascades are local, where the tiles win from 1,500 elements a pillar.
+    max_block = (BlockInverse.MAX_BLOCK if dispatch and dispatches(z, protocol)
+                 else BlockInverse.MAX_BLOCK_PROTOCOL)
+    op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
+                       params.e_star, max_block=max_block)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         with threadpool_limits(limits=1, user_api="blas"):

@@ -277,7 +277,9 @@ class BlockInverse:
 
     #: Largest pillar (elements) with a dense inverse in a pull-off (`fits`).
     MAX_BLOCK = 1500
-    #: ... and in a protocol run, whose cascades are all global solves, so
+    #: ... and in a protocol run that the general engine takes (a flat brush
+    #: under the standard protocol goes to the pull-off, with MAX_BLOCK),
+    #: whose cascades are all global solves, so
     #: the tiles' extra applications are not won back by cheaper local
     #: rounds (rough 4 x 4 brush, preload 0.5, at 256^2 with the tiles
     #: forced on pillars of 491 elements: 93,619 applications and 158 s

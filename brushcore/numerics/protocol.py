@@ -161,6 +161,13 @@ def is_flat(offsets: np.ndarray) -> bool:
     return bool(offsets.shape[0] == 0 or xp.all(offsets == offsets[0]))
 
 
+def dispatches(offsets: np.ndarray, protocol: tuple[Waypoint, ...]) -> bool:
+    """Whether `run_protocol` sends this run to `pulloff.pull_off`: a flat
+    brush (every offset equal) under the standard protocol (approach to a
+    preload, retract to separation)."""
+    return _standard_preload(protocol) is not None and is_flat(offsets)
+
+
 def _standard_preload(protocol: tuple[Waypoint, ...]) -> float | None:
     """The preload of an (approach to force <= 0, separation) protocol, else None."""
     if (len(protocol) == 2 and protocol[0].kind == "force" and protocol[0].value <= 0
@@ -203,10 +210,9 @@ def run_protocol(op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: floa
                          "pillar element")
     if not bool(xp.all(xp.isfinite(offsets))):
         raise ValueError("offsets must be finite")
-    preload = _standard_preload(protocol)
-    if dispatch and preload is not None and is_flat(offsets):
-        return _flat(op, float(offsets[0]) if offsets.shape[0] else 0.0, preload,
-                     sigma_c, h, options, progress)
+    if dispatch and dispatches(offsets, protocol):
+        return _flat(op, float(offsets[0]) if offsets.shape[0] else 0.0,
+                     _standard_preload(protocol), sigma_c, h, options, progress)
     return _Engine(op, offsets, sigma_c, h, options, progress).run(protocol)
 
 
