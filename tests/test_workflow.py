@@ -313,6 +313,27 @@ def test_rough_keys_plan_suffixed_curves_and_leave_flat_names(repo_copy: Path,
     }, names
 
 
+def test_rough_curves_get_the_time_their_approach_takes(repo_copy: Path,
+                                                       tmp_path: Path) -> None:
+    """A rough brush's approach is one event per element touching down, so
+    its time limit grows as n^5 where a flat pull-off's grows as n^3: on
+    1024^2, 485 min against 125 (the rough 8 x 8 brush needs about 6 h
+    there, README); a flat preload or a stiffness spread is a flat pull-off."""
+    config = tmp_path / "rough.yaml"
+    config.write_text(yaml.safe_dump({"regular": [16], "random": [], "kbar": [0.01],
+                                      "grid": 1024, "fig5": {"n_pillars": 16, "kbar": [0.01]},
+                                      "roughness": [0.0, 0.5], "preload": [1.0]}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config), "--forceall")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    jobs = re.findall(r"^rule simulate:\n\s*output: results/curves/regular/(\S+)\.nc"
+                      r".*?^( *resources: [^\n]*)$", text, flags=re.MULTILINE | re.DOTALL)
+    limits = {name: _simulate_resources(line)[0]["runtime"] for name, line in jobs}
+    assert limits == {"N16_kbar0.01_seed0_grid1024_phi0.12_S0.0_P1.0_C0.0": "125",
+                      "N16_kbar0.01_seed0_grid1024_phi0.12_S0.5_P1.0_C0.0": "485"}, limits
+
+
 def _simulate_resources(text: str) -> list[dict[str, str]]:
     """The resources of every planned simulate job (the only rule with `gres`)."""
     lines = re.findall(r"^\s*resources: (.*gres=.*)$", text, flags=re.MULTILINE)

@@ -240,10 +240,17 @@ def simulate_runtime(wildcards, attempt):
     """Wall-time limit of one simulation [min], doubled on a retry.
 
     Measured at grid 512 on one core: 2-150 s per curve; the cost grows
-    about as n^3 (solves ~ n, each ~ n^2 log n).
+    about as n^3 (solves ~ n, each ~ n^2 log n).  A rough brush (roughness
+    > 0) makes contact element by element on its way to the preload, one
+    event each, so it grows about as n^5: the rough 8 x 8 brush (S 0.5,
+    P 1, kbar 1e-3) took 7 min at 512 and needs about 6 h at 1024 by the
+    rate of its first 12 min (README, "Rough, graded and preloaded
+    brushes"): 20 and 485 min granted.
     """
-    grid = int(wildcards.grid)
-    return int(5 + 15 * (grid / 512) ** 3) * attempt
+    scale = (int(wildcards.grid) / 512) ** 3
+    if parse_rough_tag(wildcards.rough).get("roughness", 0.0) > 0:
+        scale *= (int(wildcards.grid) / 512) ** 2
+    return int(5 + 15 * scale) * attempt
 
 
 ROUGH_FIGURES = ("rough_roughness", "rough_preload")
