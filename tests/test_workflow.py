@@ -206,9 +206,10 @@ def test_random_convergence_config_plans_the_study(repo_copy: Path) -> None:
                      "config/convergence_random.yaml")
     text = output(proc)
     assert proc.returncode == 0, text
-    # 3 brushes x 3 kbar x 3 grids, N = 1620 on its own 2 grids, the Fig. 5 brush on 3
-    kbar = len(config["kbar"])
-    assert planned_simulations(text) == 3 * kbar * 3 + kbar * 2 + 3, text
+    # brushes on `grid`'s 3 grids, N = 1620 on its own 2, the Fig. 5 brush on 3
+    kbar, own = len(config["kbar"]), len(config["grid_by_n"])
+    assert planned_simulations(text) == (len(config["random"]) - own) * kbar * 3 \
+        + own * kbar * 2 + 3, text
     assert re.search(r"^convergence\s+1\s*$", text, flags=re.MULTILINE), text
     assert "random/N1620_kbar1e-06_seed0_grid1024" in text
     assert "random/N1620_kbar1e-06_seed0_grid256" not in text

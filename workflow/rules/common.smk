@@ -247,10 +247,8 @@ def simulate_runtime(wildcards, attempt):
     rate of its first 12 min (README, "Rough, graded and preloaded
     brushes"): 20 and 485 min granted.
     """
-    scale = (int(wildcards.grid) / 512) ** 3
-    if parse_rough_tag(wildcards.rough).get("roughness", 0.0) > 0:
-        scale *= (int(wildcards.grid) / 512) ** 2
-    return int(5 + 15 * scale) * attempt
+    rough = parse_rough_tag(wildcards.rough).get("roughness", 0.0) > 0
+    return int(5 + 15 * (int(wildcards.grid) / 512) ** (5 if rough else 3)) * attempt
 
 
 ROUGH_FIGURES = ("rough_roughness", "rough_preload")
