@@ -3,6 +3,7 @@
     python benchmarks/sweep_report.py                 # results/benchmarks of this checkout
     python benchmarks/sweep_report.py path/to/results/benchmarks --top 15
     python benchmarks/sweep_report.py --floor       # + the transforms' share
+    python benchmarks/sweep_report.py new/results/benchmarks --against old/results/benchmarks
 
 Prints the jobs' summed wall time, the span from the first job's start to
 the last job's end (from file times: each benchmark file is written when its
@@ -17,7 +18,12 @@ round, one per CG iteration); the rest of a curve's time is bookkeeping
 and setup, and what a job takes beyond its curve's own wall time (the
 process's start, imports, writing the file) is printed beside it.  Run the
 sweep on an otherwise idle machine: anything else running stretches the jobs'
-wall times.  Snakemake's `cpu_time` column is not used: it is sampled every
+wall times.  With ``--against`` it sets another sweep's benchmark
+folder beside this one (another version's, run side by side): job time per
+layout, N and in all for the curves both ran, with the ratio, and from the
+curve files beside the two folders how many F_ad and W agree within
+``--within`` (default 2e-4, the project's rule for a change that is not
+meant to change physics) and where they differ most.  Snakemake's `cpu_time` column is not used: it is sampled every
 30 s (snakemake.benchmark.BENCHMARK_INTERVAL), so it misses up to the last
 30 s of each job.
 """
@@ -117,6 +123,83 @@ def transform_floor(curves: Path, jobs: list[dict]) -> None:
               f"{sum(beyond):.0f} s in all, median {sorted(beyond)[len(beyond) // 2]:.2f} s a job")
 
 
+def curve_key(name: str) -> tuple:
+    """(group, kbar, seed, rest) of a simulate job's name, whatever the
+    version's file naming: 'simulate/random/N1620_kbar1e-05_seed0' and
+    'simulate/random/N1620_kbar1e-05_seed0_grid512_phi0.12' differ only in
+    ``rest``, which `compare_times` drops where one sweep's names lack it."""
+    match = re.match(r"(.*)_kbar([^_]+)_seed(\d+)(.*)$", name)
+    if match is None:
+        return (name, math.nan, -1, "")
+    group, kbar, seed, rest = match.groups()
+    return (group, float(kbar), int(seed), rest)
+
+
+def compare_times(jobs: list[dict], other: list[dict]) -> dict[str, tuple[int, float, float]]:
+    """Per simulate group and in all ('all'): (curves both sweeps ran, job
+    wall time here [s], there [s]).  Curves are matched by layout, N, kbar
+    and seed, and by grid and phi where both sweeps' names carry them."""
+    def keyed(records: list[dict], plain: bool) -> dict[tuple, float]:
+        out = {}
+        for j in records:
+            if not j["name"].startswith("simulate/"):
+                continue
+            key = curve_key(j["name"])
+            out[key[:3] if plain else key] = j["wall"]
+        return out
+    plain = not all(curve_key(j["name"])[3] for j in jobs + other
+                    if j["name"].startswith("simulate/"))
+    here, there = keyed(jobs, plain), keyed(other, plain)
+    table: dict[str, list] = defaultdict(lambda: [0, 0.0, 0.0])
+    for key in set(here) & set(there):
+        for group in (key[0], "all"):
+            row = table[group]
+            row[0] += 1
+            row[1] += here[key]
+            row[2] += there[key]
+    return {group: tuple(row) for group, row in table.items()}
+
+
+def compare_results(curves: Path, other: Path) -> list[tuple]:
+    """(|dF_ad| / F_ad, |dW| / W, key) of every curve in both folders, by
+    the curve files' layout, N, kbar, seed and grid; largest |dW| first."""
+    import xarray as xr
+
+    def load(root: Path) -> dict[tuple, tuple[float, float]]:
+        out = {}
+        for path in sorted(root.rglob("*.nc")):
+            with xr.open_dataset(path) as ds:
+                a = ds.attrs
+                if "adhesive_force_normalized" not in ds:
+                    continue
+                key = (str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]),
+                       int(a["seed"]), int(a["grid"]))
+                out[key] = (float(ds.adhesive_force_normalized),
+                            float(ds.work_of_separation_normalized))
+        return out
+    here, there = load(curves), load(other)
+    rows = [(abs(here[k][0] / there[k][0] - 1.0), abs(here[k][1] / there[k][1] - 1.0), k)
+            for k in set(here) & set(there)]
+    return sorted(rows, key=lambda row: -row[1])
+
+
+def print_comparison(root: Path, other: Path, jobs: list[dict], within: float) -> None:
+    """The ``--against`` report (see the module docstring)."""
+    table = compare_times(jobs, read_jobs(other))
+    if not table:
+        raise SystemExit(f"no simulate job in both {root} and {other}")
+    print(f"\nagainst {other}: job wall time of the curves both ran")
+    print(f"{'group':<28} {'curves':>6} {'here s':>8} {'there s':>8} {'there/here':>10}")
+    for name, (count, here, there) in sorted(table.items(), key=lambda kv: -kv[1][2]):
+        print(f"{name:<28} {count:>6} {here:>8.0f} {there:>8.0f} {there / here:>10.2f}")
+    rows = compare_results(root.parent / "curves", other.parent / "curves")
+    if rows:
+        print(f"F_ad within {within:g} on {sum(r[0] <= within for r in rows)} of {len(rows)} "
+              f"curves, W on {sum(r[1] <= within for r in rows)}; largest differences:")
+        for df, dw, key in rows[:5]:
+            print(f"  W {dw:.2e}  F_ad {df:.2e}  {key}")
+
+
 def group_of(name: str) -> str:
     """'simulate/random/N1620_kbar0.1_seed0' -> 'simulate/random/N1620'."""
     return re.sub(r"_kbar.*$", "", name)
@@ -128,6 +211,10 @@ def main() -> None:
     parser.add_argument("--top", type=int, default=10, help="slowest jobs to list")
     parser.add_argument("--floor", action="store_true",
                         help="also price the curves' applications as bare transforms")
+    parser.add_argument("--against", type=Path, metavar="OTHER",
+                        help="another sweep's benchmark folder: time ratios and result agreement")
+    parser.add_argument("--within", type=float, default=2e-4,
+                        help="relative difference counted as agreement with --against")
     args = parser.parse_args()
     jobs = read_jobs(args.root)
     if not jobs:
@@ -150,6 +237,8 @@ def main() -> None:
         print(f"{j['name']:<42} {j['wall']:>8.1f} {j['rss_mb']:>7.0f}")
     if args.floor:
         transform_floor(args.root.parent / "curves", jobs)
+    if args.against is not None:
+        print_comparison(args.root, args.against, jobs, args.within)
 
 
 if __name__ == "__main__":
