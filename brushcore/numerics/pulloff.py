@@ -181,7 +181,7 @@ def _margins(safety: float, z, zmax: float, xp):
     return safety * xp.abs(z) + DECISION_FLOOR * zmax
 
 
-def _decides(threshold: float, xp, stopped: list[float]):
+def _decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     """CG early exit for a cascade round: stop once the iterate detaches at
     least one element and every element clears the threshold by its margin
     (DECISION_SAFETY times its own error estimate plus DECISION_FLOOR times
@@ -196,10 +196,11 @@ def _decides(threshold: float, xp, stopped: list[float]):
     recorded that enters F_ad or W (the cascade's last round, where nothing
     exceeds the threshold, always runs to the tolerance, and forces recorded
     inside a cascade lie on a vertical drop).  The largest error estimate it
-    stopped at is appended to ``stopped``.
+    stopped at is appended to ``stopped``.  Every margin also holds ``band``
+    times max|x| (`PRECISION_BAND` while the transforms are float32).
     """
     def decided(x, z, zmax: float) -> bool:
-        margin = _margins(DECISION_SAFETY, z, zmax, xp)
+        margin = _margins(DECISION_SAFETY, z, zmax, xp) + band * float(xp.max(xp.abs(x)))
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
@@ -214,9 +215,21 @@ SETTLE_SAFETY = 3.0
 #: this are ties.  Single-precision transforms stop at
 #: `SolverOptions.MIXED_MIN_RTOL` and hand over to double (`BrushOperator.refined`).
 SETTLE_FLOOR = 1e-9
+#: Error, relative to the largest stress, that float32 transforms leave in
+#: a converged solution and CG's error estimate cannot see (it converges on
+#: the float32 operator): up to 1.45e-5 (README, "Mixed precision"; float32
+#: CG to 1e-7 against double to 1e-11 on six random curves, 512^2).  While
+#: the transforms are float32 every decision margin holds this much more,
+#: and a solve that only this band leaves unsettled is handed to double at
+#: once.  Measured (2026-12-05, 512^2, one thread, FFTW plans that put it
+#: on its other branch without the band): random 1620 at kbar 1e-5 W
+#: 801.36279 -> 801.09197 (exact mode 801.09192), 10,558 -> 12,012
+#: applications; with 5e-6 it stayed on the other branch (801.36268).
+PRECISION_BAND = 1.5e-5
 
 
-def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool]):
+def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
+             band: float = 0.0):
     """Condition on CG's tolerance: no decision that the error could flip.
 
     At the tolerance CG's error is still ~rtol of the largest stress, and a
@@ -230,10 +243,12 @@ def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool]):
     when none exceeds it, farther from the cut below the largest stress
     (which elements the next event detaches; those within ``tie`` of the
     largest go together) than its margin and the largest's together.  Each
-    verdict is appended to ``verdicts``.
+    verdict is appended to ``verdicts``.  Margins also hold ``band`` times
+    max|x| (`PRECISION_BAND` while the transforms are float32); a solve
+    unsettled only by the band stops there (more float32 iterations cannot
+    settle it) with its verdict False, which hands it to double.
     """
-    def settled(x, z, zmax: float) -> bool:
-        margin = _margins(SETTLE_SAFETY, z, zmax, xp)
+    def clear(x, margin) -> bool:
         verdict = True
         if threshold is not None:
             verdict = not bool(xp.any(xp.abs(x - threshold) < margin))
@@ -242,8 +257,15 @@ def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool]):
             peak = float(x[top])
             verdict = (int(xp.count_nonzero(x >= peak - margin - float(margin[top])))
                        == int(xp.count_nonzero(x >= peak * (1.0 - tie))))
-        verdicts.append(verdict)
         return verdict
+
+    def settled(x, z, zmax: float) -> bool:
+        margin = _margins(SETTLE_SAFETY, z, zmax, xp)
+        if not band:
+            verdicts.append(clear(x, margin))
+            return verdicts[-1]
+        verdicts.append(clear(x, margin + band * float(xp.max(xp.abs(x)))))
+        return verdicts[-1] or clear(x, margin)
     return settled
 
 
@@ -280,18 +302,22 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         b = xp.ones(op.size, dtype=xp.float64)
         stopped: list[float] = []
         verdicts: list[bool] = []
-        decided = (_decides(threshold, xp, stopped)
-                   if threshold is not None and options.early_decisions else None)
-        settled = (_settles(threshold, options.tie_rtol + options.lookahead, xp, verdicts)
-                   if options.settle_decisions else None)
+        tie = options.tie_rtol + options.lookahead
+
+        def conditions(band: float) -> tuple:
+            return ((_decides(threshold, xp, stopped, band)
+                     if threshold is not None and options.early_decisions else None),
+                    _settles(threshold, tie, xp, verdicts, band) if options.settle_decisions
+                    else None)
+        band = PRECISION_BAND if op.can_refine else 0.0  # float32 transforms
         floor = SolverOptions.MIXED_MIN_RTOL if op.can_refine else SETTLE_FLOOR
         try:
             x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter,
-                        decided, settled, floor)
+                        *conditions(band), floor)
             if verdicts and not verdicts[-1] and not stopped and op.can_refine:
                 with op.refined():  # unsettled at float32's digits
                     x, more = pcg(op.apply, op.precondition, b, x, options.rtol,
-                                  options.max_iter, decided, settled, SETTLE_FLOOR)
+                                  options.max_iter, *conditions(0.0), SETTLE_FLOOR)
                 it += more
         except ConvergenceError as exc:
             raise ConvergenceError(f"{exc} at event {events}, d = {d:.6g}, "
