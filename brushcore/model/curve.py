@@ -5,10 +5,11 @@ from __future__ import annotations
 import datetime as dt
 import hashlib
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, replace
 from functools import partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -128,8 +129,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     if quadrant is None:
         conv = grid_convolver(params, backend, options)
         grid_labels = labels
-        double = partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
-                         False, host_library(params, options))
+        double = whole_grid_double(params, options)
     else:  # a quarter of the unknowns, quarter-size transforms
         conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
                                        single_transforms(params, options, folded=True))
@@ -138,10 +138,9 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
                          fft_threads(), False)
         if progress is not None:
             progress = _scaled_progress(progress, 4)
-    single = getattr(conv, "real_dtype", "float64") == "float32"
     before = conv.applications
     op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star,
-                       precise=double if single else None)
+                       precise=double if is_single(conv) else None)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
@@ -155,6 +154,19 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     if quadrant is not None:
         detach, curve = quadrant.unfold_field(detach), quadrant.unfold_curve(curve)
     return detach, curve, conv.applications - before + op.refined_applications
+
+
+def whole_grid_double(params: BrushParams, options: SolverOptions) -> Callable[[], Any]:
+    """The double-precision twin of a run's whole-grid convolver, on the same
+    library: what a solve handed over to double precision applies
+    (`BrushOperator.refined`)."""
+    return partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
+                   False, host_library(params, options))
+
+
+def is_single(conv: Any) -> bool:
+    """Whether a convolver transforms in single precision."""
+    return getattr(conv, "real_dtype", "float64") == "float32"
 
 
 def single_transforms(params: BrushParams, options: SolverOptions, folded: bool) -> bool:
@@ -255,8 +267,10 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     # cascades are local, where the tiles win from 1,500 elements a pillar.
     max_block = (BlockInverse.MAX_BLOCK if dispatch and dispatches(z, protocol)
                  else BlockInverse.MAX_BLOCK_PROTOCOL)
+    # A dispatched run is today's pull-off, whose float32 solves may go on in double.
     op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
-                       params.e_star, max_block=max_block)
+                       params.e_star, max_block=max_block,
+                       precise=whole_grid_double(params, options) if is_single(conv) else None)
     sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
     try:
         with threadpool_limits(limits=1, user_api="blas"):
@@ -264,7 +278,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
                                  dispatch=dispatch)
     except (ConvergenceError, SolverError) as exc:
         raise type(exc)(f"{exc}; problem: {params}; options: {options}") from None
-    return labels, op, curve, conv.applications - before
+    return labels, op, curve, conv.applications - before + op.refined_applications
 
 
 def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
