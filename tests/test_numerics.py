@@ -514,6 +514,35 @@ def test_decided_weighs_each_element_by_its_own_error():
     assert not _decides(1.0, np, stopped)(np.array([0.5, 0.9]), np.zeros(2), 0.0)
 
 
+def test_float32_band_hands_near_ties_to_double():
+    """While the transforms are float32 a decision must also clear a band of
+    the largest stress that CG's error estimate cannot see: a solve that
+    only the band leaves unsettled stops at once (verdict False: refined in
+    double), one the estimate itself leaves unsettled iterates on, and the
+    early exit of a cascade round waits until the band is clear."""
+    from brushcore.numerics.pulloff import _decides, _settles
+
+    verdicts: list[bool] = []
+    z = np.full(3, 1e-6)  # margins 3.3e-6
+    near = np.array([1.0, 0.9, 0.5])  # 0.9 lies 1e-4 from the threshold 0.8999
+    assert _settles(0.8999, 1e-7, np, verdicts)(near, z, 1e-6)  # no band: clear
+    assert _settles(0.8999, 1e-7, np, verdicts, band=1e-3)(near, z, 1e-6)  # stops ...
+    assert verdicts == [True, False]  # ... unsettled: to double
+    # the runner-up within the band of the leader: the next event is unsure too
+    assert _settles(None, 1e-7, np, verdicts, band=1e-3)(np.array([1.0, 0.9995, 0.5]), z, 1e-6)
+    assert verdicts[-1] is False
+    # within the error estimate itself: not settled, float32 iterates on
+    assert not _settles(0.8999, 1e-7, np, verdicts, band=1e-3)(near, np.full(3, 1e-4), 1e-4)
+    # far from every cut: settled with the band
+    assert _settles(0.7, 1e-7, np, verdicts, band=1e-3)(near, z, 1e-6)
+    assert verdicts[-2:] == [False, True]
+    stopped: list[float] = []
+    over = np.array([1.2, 0.5, 0.9])  # threshold 0.9001: the first element goes
+    assert _decides(0.9001, np, stopped)(over, z, 1e-6)
+    assert not _decides(0.9001, np, stopped, band=1e-3)(over, z, 1e-6)  # 0.9 in the band
+    assert _decides(0.95, np, stopped, band=1e-3)(over, z, 1e-6)
+
+
 @pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")
 def test_refined_applies_in_double_and_counts_its_applications():
     rng, labels, compliance = _random_problem(5, n=12)

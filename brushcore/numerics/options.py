@@ -63,11 +63,14 @@ class SolverOptions:
         cannot see (it converges on the float32 operator): the round-off
         moves a solution by up to 1.45e-5 of its largest stress (measured
         on random brushes at 512^2), enough to reorder soft random pillars
-        that reach sigma_c closer together than that: random 1620 at kbar
-        1e-5 ends at W 3.4e-4 off `exact()` under "mixed" with some sets
-        of FFTW plans and 1.4e-7 with others (two sweeps with
-        `brushcore.numerics.pulloff.DECISION_SAFETY` 3, 2026-12-05), and
-        1.6e-7 under "double" (41 % slower on that curve).
+        that reach sigma_c closer together than that, so while the
+        transforms are float32 every decision margin holds
+        `brushcore.numerics.pulloff.PRECISION_BAND` (1.5e-5 of the largest
+        stress) more, and a solve unsettled only by it goes on in double:
+        random 1620 at kbar 1e-5 ended 3.4e-4 off `exact()` in W under
+        "mixed" with some sets of FFTW plans before, 6e-8 with the band;
+        the sweep's random curves all lie within 8.1e-6 of "double" in W,
+        at 10.8 % more job time ("double": 45 %).
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
         `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
@@ -97,8 +100,8 @@ class SolverOptions:
         The two round differently,
         so curves agree to round-off and not to the bit (over the default
         sweep F_ad within 3.8e-6, W within 5.0e-5 but on one soft random
-        curve, whose near-ties give it two W 3.4e-4 apart between two sets
-        of FFTW plans as well: float32's error, see ``precision``).  The
+        curve, whose near-ties gave it two W 3.4e-4 apart between two sets
+        of FFTW plans as well before the float32 band, see ``precision``).  The
         mirror quadrant's DCTs (regular brushes) stay on FFTW, a GPU on
         CuPy, and the tiles' local pillar solves run on planned FFTW
         whatever the choice (3.4x faster than MKL there,
