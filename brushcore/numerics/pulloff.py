@@ -181,6 +181,11 @@ def _margins(safety: float, z, zmax: float, xp):
     return safety * xp.abs(z) + DECISION_FLOOR * zmax
 
 
+def _band(band: float, x, xp) -> float:
+    """``band`` times max|x|: the float32 part of every margin (0 in double)."""
+    return band * float(xp.max(xp.abs(x))) if band else 0.0
+
+
 def _decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     """CG early exit for a cascade round: stop once the iterate detaches at
     least one element and every element clears the threshold by its margin
@@ -200,7 +205,7 @@ def _decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     times max|x| (`PRECISION_BAND` while the transforms are float32).
     """
     def decided(x, z, zmax: float) -> bool:
-        margin = _margins(DECISION_SAFETY, z, zmax, xp) + band * float(xp.max(xp.abs(x)))
+        margin = _margins(DECISION_SAFETY, z, zmax, xp) + _band(band, x, xp)
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
@@ -261,11 +266,8 @@ def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
 
     def settled(x, z, zmax: float) -> bool:
         margin = _margins(SETTLE_SAFETY, z, zmax, xp)
-        if not band:
-            verdicts.append(clear(x, margin))
-            return verdicts[-1]
-        verdicts.append(clear(x, margin + band * float(xp.max(xp.abs(x)))))
-        return verdicts[-1] or clear(x, margin)
+        verdicts.append(clear(x, margin + _band(band, x, xp)))
+        return verdicts[-1] or (band > 0.0 and clear(x, margin))
     return settled
 
 
