@@ -69,8 +69,9 @@ class SolverOptions:
         stress) more, and a solve unsettled only by it goes on in double:
         random 1620 at kbar 1e-5 ended 3.4e-4 off `exact()` in W under
         "mixed" with some sets of FFTW plans before, 6e-8 with the band;
-        the sweep's random curves all lie within 8.1e-6 of "double" in W,
-        at 10.8 % more job time ("double": 45 %).
+        the sweep's random curves lie within 8.1e-6 of "double" in W on
+        one set of plans and within 9.5e-5 on another, at 10.8 % more job
+        time ("double": 45 %).
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round (see
         `brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose stresses
