@@ -20,6 +20,7 @@ from brushcore.model import theory
 from brushcore.model.curve import simulate
 from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.protocol import Waypoint
 from brushcore.validation import ParameterError
 
-__all__ = ["BrushParams", "ParameterError", "SolverOptions", "simulate", "theory"]
+__all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "simulate", "theory"]

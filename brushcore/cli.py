@@ -79,10 +79,11 @@ class _Given(argparse.Action):
 
 
 class _DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows defaults, except for required flags and store_true switches."""
+    """Shows defaults, except for required flags and on/off switches (whose
+    default is a bool: a zero default, ``0 == False``, is still shown)."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.required or action.default in (None, False):
+        if action.required or action.default is None or isinstance(action.default, bool):
             return action.help
         return super()._get_help_string(action)
 
@@ -185,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
                           "pip install 'brushcore[gpu]' and a CUDA 12 card; whole grid, "
                           "no symmetry fold)")
-    sim.add_argument("--out", type=Path, required=True, help="output netCDF file")
+    sim.add_argument("--out", required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return parser
 

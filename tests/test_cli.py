@@ -107,6 +107,7 @@ SMALL = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01", 
 @pytest.mark.parametrize("out,reason", [
     ("a.nc/fig5a.nc", "a.nc is a file, not a folder"),
     (".", "it is a folder"),
+    ("newdir/sub/", "it names a folder (ends with a separator)"),
     ("/proc/x.nc", "cannot create a file in /proc"),
 ])
 def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
@@ -118,7 +119,7 @@ def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
     assert res.stderr.startswith("brushcore: error: --out ") and reason in res.stderr, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
     assert time.perf_counter() - t0 < 20  # the 256-pillar pull-off (~5 s) never started
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc"]  # no folder made either
 
 
 def test_files_respect_the_umask(tmp_path):
@@ -134,8 +135,16 @@ def test_files_respect_the_umask(tmp_path):
 def test_version_and_defaults_in_help():
     res = _cli("--version")
     assert res.returncode == 0 and re.fullmatch(r"brushcore \S+\n", res.stdout), res
+    package = subprocess.run([sys.executable, "-m", "brushcore", "--version"],
+                             capture_output=True, text=True, timeout=120)
+    assert package.returncode == 0 and package.stdout == res.stdout, package
     text = _cli("simulate", "--help").stdout
     assert "(default: 0.12)" in text and "(default: local)" in text
+    # zero defaults are defaults too (0 == False once hid them) ...
+    assert re.search(r"--seed SEED\s+seed of the random layout \(default: 0\)", text), text
+    assert re.search(r"--preload PRELOAD\s+[^-]*\(default: 0\.0\)", text), text
+    # ... while an on/off switch has no value to show
+    assert "(default: True)" not in text and "(default: False)" not in text
 
 
 def test_every_run_reports_its_discretisation(tmp_path):

@@ -336,8 +336,11 @@ def test_cli_runs_shapes_and_file_layouts_and_records_them(tmp_path):
     (["--layout", "file", "--layout-file", "LABELS", "--pillars", "11"],
      "--pillars 11 is invalid: allowed 12"),
     (["--layout", "file", "--layout-file", "TOUCH"], r"--layout-file .*t\.npy is invalid "
-                                                     r"\(pillars 0 and 1 at element"),
-    (["--layout", "file", "--layout-file", "LABELS", "--shape", "square"], "--shape square"),
+                                                     r"\(pillars 0 and 1 at element.*allowed pillars "
+                                                     r"at least one element apart"),
+    # the flag replaces a parameter's name, not the same word in prose
+    (["--layout", "file", "--layout-file", "LABELS", "--shape", "square"],
+     "--shape square is invalid: allowed the default 'disc' with --layout 'file'"),
     (["--layout", "hexagonal", "--pillars", "7", "--grid", "128"], "--pillars 7 .*6 or 9"),
     (["--layout", "regular", "--pillars", "16", "--grid", "128", "--aspect", "2"],
      "--aspect 2.0 is invalid: allowed 1 unless --shape is 'ellipse'"),

@@ -202,3 +202,21 @@ def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
                         layout="hexagonal", shape="square")
     figures.save(fig5, tmp_path / "fig5.png")
     assert "square" in fig5.get_suptitle()
+
+
+def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> None:
+    """The summary's Fig. 5a row is the brush the config's `fig5` names (layout
+    and shape), as the Fig. 5 figure draws it; the paper's value is quoted
+    only beside the paper's brush."""
+    from brushcore.data.io import read_curve
+    from brushcore.data.summary import headline_rows
+
+    def force(layout: str, kbar: float, shape: str) -> str:
+        curve = read_curve(shape_curves[CASES.index((layout, kbar, shape))])
+        return f"{float(curve['adhesive_force_normalized']):.3g}"
+
+    for layout, kbar, shape in [("hexagonal", 1e-3, "square"), ("regular", 1.0, "disc")]:
+        row = headline_rows(shape_sweep, fig5_layout=layout, fig5_n_pillars=4, fig5_kbar=kbar,
+                            fig5_shape=shape)[0]
+        assert (row.layout, row.value) == (layout, force(layout, kbar, shape)), row
+        assert (row.paper == "~1.8") == (layout == "regular" and shape == "disc"), row

@@ -17,14 +17,13 @@ import numpy as np
 import pytest
 from conftest import punch_params
 
-from brushcore import BrushParams, SolverOptions, simulate, theory
+from brushcore import BrushParams, SolverOptions, Waypoint, simulate, theory  # the public API
 from brushcore.numerics.convolution import Convolver
 from brushcore.model.curve import run, run_protocol_curve
 from brushcore.model.layout import build_labels
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.protocol import (Waypoint, dispatches, loop_energy, positive_work,
-                                         preload_protocol)
+from brushcore.numerics.protocol import dispatches, loop_energy, positive_work, preload_protocol
 
 EXACT = SolverOptions.exact()  # CG to 1e-8, global cascades: reference results
 

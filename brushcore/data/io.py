@@ -83,14 +83,17 @@ def check_output_path(path: str | os.PathLike) -> Path:
     ParameterError
         Named ``out``, saying what is wrong with the path.
     """
+    text = os.fspath(path)
     path = Path(path)
 
     def refuse(reason: str) -> ParameterError:
-        return ParameterError("out", str(path), "a file path in a writable folder "
+        return ParameterError("out", text, "a file path in a writable folder "
                               "(missing folders are created)", reason)
 
     if path.is_dir():
         raise refuse("it is a folder")
+    if text.endswith((os.sep, "/")):  # Path() would drop the slash and write a file there
+        raise refuse("it names a folder (ends with a separator)")
     ancestor = path.parent
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent

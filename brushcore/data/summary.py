@@ -21,7 +21,7 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import theory
-from brushcore.data.aggregate import GRID_DIM, finest_grid
+from brushcore.data.aggregate import GRID_DIM, finest_grid, flat_slice
 from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
@@ -141,24 +141,33 @@ def _brushes(sweep: xr.Dataset) -> list[tuple[str, int]]:
 
 
 def headline_rows(
-    sweep: xr.Dataset, *, fig5_n_pillars: int = 256, fig5_kbar: float = 0.455
+    sweep: xr.Dataset, *, fig5_layout: str = "regular", fig5_n_pillars: int = 256,
+    fig5_kbar: float = 0.455, fig5_shape: str = "disc"
 ) -> list[Row]:
     """The paper's headline numbers and ours, one `Row` each.
 
     Parameters
     ----------
-    sweep : dataset from `brushcore.data.aggregate.build_sweep`.
-    fig5_n_pillars, fig5_kbar : the Fig. 5a case quoted in the text (16 x 16, 0.455).
+    sweep : dataset from `brushcore.data.aggregate.build_sweep`; its flat
+        brushes enter (`brushcore.data.aggregate.flat_slice`), discs except
+        for the Fig. 5a row.
+    fig5_layout, fig5_n_pillars, fig5_kbar, fig5_shape : the config's Fig. 5
+        brush at its first kbar (a `shape_label` for the shape); the
+        paper's, quoted in its text, is regular 16 x 16 discs at 0.455.
     """
     phi = float(sweep.attrs.get("phi", math.nan))
     scalars = [v for v in sweep.data_vars if "step" not in sweep[v].dims and "case" not in
                sweep[v].dims]
-    sweep = finest_grid(sweep[scalars])
+    fig5 = finest_grid(flat_slice(sweep[scalars], fig5_shape))
+    sweep = finest_grid(flat_slice(sweep[scalars]))
     rigid_theory = theory.rigid_limit(phi) if math.isfinite(phi) else math.nan
+    papers = fig5_layout == "regular" and fig5_shape == "disc"
     rows = [
-        Row("F_ad (normalised), Fig. 5a", "regular", str(fig5_n_pillars), _fmt(fig5_kbar),
-            _fmt(value_at(sweep, "adhesive_force_normalized", "regular", fig5_n_pillars,
-                          fig5_kbar)), "~1.8", "close to the rigid limit"),
+        Row("F_ad (normalised), Fig. 5a", fig5_layout, str(fig5_n_pillars), _fmt(fig5_kbar),
+            _fmt(value_at(fig5, "adhesive_force_normalized", fig5_layout, fig5_n_pillars,
+                          fig5_kbar)), "~1.8" if papers else "",
+            "close to the rigid limit" if papers else
+            f"the config's Fig. 5 brush ({fig5_shape} pillars); the paper's is regular discs"),
         Row("rigid limit phi^-1/4 (eq. 5)", "", "", "", _fmt(rigid_theory), "1.7",
             f"phi = {_fmt(phi)} requested"),
     ]

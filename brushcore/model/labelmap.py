@@ -55,5 +55,5 @@ def check_not_touching(labels: np.ndarray, name: str, value: object) -> None:
     if pairs:
         where = "; ".join(f"pillars {p} and {q} at element (row {r}, column {c})"
                           for p, q, r, c in pairs)
-        raise ParameterError(name, value, "a layout whose pillars are at least one element "
-                             "apart (no shared element edge)", f"{where}")
+        raise ParameterError(name, value, "pillars at least one element apart (no shared "
+                             "element edge)", f"{where}")

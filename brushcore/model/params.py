@@ -206,7 +206,7 @@ class BrushParams:
                      "no layout file unless layout is 'file'")
         require(self.shape in SHAPES, "shape", self.shape, f"one of {SHAPES}")
         require(self.layout != "file" or self.shape == "disc", "shape", self.shape,
-                 "the default 'disc' for the file layout (its shapes come from the file)")
+                 "the default 'disc' with layout 'file' (its shapes come from the file)")
         require(is_real(self.aspect) and 1.0 <= self.aspect <= MAX_ASPECT, "aspect",
                  self.aspect, f"a number in [1, {MAX_ASPECT:g}]")
         require(self.shape == "ellipse" or self.aspect == 1.0, "aspect", self.aspect,

@@ -36,6 +36,6 @@ rule summary:
         mem_mb=2000,
         runtime=10,
     params:
-        fig5=config["fig5"],
+        fig5=fig5_options(config),  # its shape as a label, as the Fig. 5 figure takes it
     script:
         "../scripts/summary.py"

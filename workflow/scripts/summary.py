@@ -2,7 +2,6 @@
 
 import xarray as xr
 
-from brushcore.data.aggregate import flat_slice
 from brushcore.data.summary import headline_rows, write_summary
 from brushcore.data.joblog import logged
 
@@ -11,7 +10,8 @@ def main(smk) -> None:
     fig5 = smk.params.fig5
     with xr.open_dataset(smk.input[0]) as sweep:
         rows = headline_rows(
-            flat_slice(sweep), fig5_n_pillars=int(fig5["n_pillars"]), fig5_kbar=float(fig5["kbar"][0])
+            sweep, fig5_layout=fig5["layout"], fig5_n_pillars=int(fig5["n_pillars"]),
+            fig5_kbar=float(fig5["kbar"][0]), fig5_shape=fig5["shape"],
         )
     write_summary(rows, smk.output.csv, smk.output.md)
     print(open(smk.output.md).read())
