@@ -139,6 +139,26 @@ def test_figures_and_summary(test_run: Path) -> None:
     assert summary.startswith("quantity,") and "n/a" in summary  # 2304 pillars not in test sweep
 
 
+def test_readme_reads_the_sweep(test_run: Path, test_config: dict, monkeypatch) -> None:
+    """The README's "Reading `results/sweep.nc`" code runs on a sweep the
+    workflow made, with the test config's Fig. 5 brush in place of 16 x 16."""
+    text = (REPO / "README.md").read_text()
+    section = text[text.index("## Reading `results/sweep.nc`"):]
+    code = section[section.index("```python") + len("```python"):]
+    code = code[:code.index("```")]
+    n = test_config["fig5"]["n_pillars"]
+    assert code.count("256") == 3, code  # the Fig. 5 brush, as the README names it
+    code = code.replace("n_pillars=256", f"n_pillars={n}").replace('"regular", 256', f'"regular", {n}')
+    monkeypatch.chdir(test_run)
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - the README's own snippet
+    table = scope["table"]  # N x kbar, random brushes
+    for n_random in test_config["random"]:
+        assert np.isfinite(table.loc[n_random, test_config["kbar"]].to_numpy()).all(), table
+    assert scope["curve"].sizes["step"] == int(scope["run"].n_steps) > 2
+    assert tuple(scope["snaps"].dims) == ("snapshot", "y", "x")
+
+
 def test_second_run_does_nothing(test_run: Path) -> None:
     proc = snakemake(test_run, "--cores", "2", "--configfile", "config/test.yaml")
     assert proc.returncode == 0, output(proc)
@@ -160,6 +180,20 @@ def test_default_config_plans_paper_grid(repo_copy: Path) -> None:
     assert config["regular"] == [64, 256, 576, 2304] and config["random"] == [64, 220, 425, 1620]
     decades = np.floor(np.log10(config["kbar"]) + 1e-9)
     assert all((decades == d).sum() >= 2 for d in range(-6, 2))
+
+
+def test_readme_example_sweep_plans(repo_copy: Path, tmp_path: Path) -> None:
+    """The README's "Editing a sweep" file plans, merged over the default config,
+    exactly the cases it names (the default's kbar and Fig. 5 brush kept)."""
+    text = (REPO / "README.md").read_text()
+    start = text.index("cat > my-sweep.yaml <<'EOF'\n") + len("cat > my-sweep.yaml <<'EOF'\n")
+    example = text[start:text.index("EOF\n", start)]
+    (tmp_path / "my-sweep.yaml").write_text(example)
+    proc = snakemake(repo_copy, "-n", "--configfile", str(tmp_path / "my-sweep.yaml"))
+    assert proc.returncode == 0, output(proc)[-3000:]
+    merged = {**yaml.safe_load((REPO / "config/config.yaml").read_text()),
+              **yaml.safe_load(example)}
+    assert planned_simulations(output(proc)) == len(expected_cases(merged))
 
 
 def test_default_config_makes_no_convergence_study(repo_copy: Path) -> None:

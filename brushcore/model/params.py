@@ -64,7 +64,9 @@ class BrushParams:
     kbar : normalised spring stiffness k / (E* L) in (0, inf]; inf = rigid.
     grid : elements per side n of the square L x L holding the pillars.
     phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
-    seed : seed of numpy's Generator for "random" (ignored for "regular").
+    seed : seed of numpy's Generator for "random", and for the heights and
+        stiffnesses of rough or graded lattices (roughness, kbar_spread);
+        ignored for flat lattices.
     min_gap : minimum gap between pillar edges for "random", in elements
         of the 512 x 512 grid (L / 512 each, whatever ``grid``, so that a
         seed names one brush on every grid), in [1, 512).

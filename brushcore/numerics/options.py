@@ -50,9 +50,9 @@ class SolverOptions:
         False solves the whole grid (a check, or a reference).  Protocol
         runs (preload, rough or graded brushes) always solve the whole grid.
     precision : "auto" (default), "mixed" or "double".  "mixed" runs the
-        host's FFTs in single precision (1.4-1.8x faster) and everything
-        else, CG's vectors and dot products, springs and block inverses, in
-        double.  The transforms' relative error, ~1e-7, lies three orders
+        host's FFTs in single precision (1.4-1.8x faster) and applies the
+        block inverses from a float32 copy; CG's vectors and dot products,
+        springs and the inverses' downdates stay in double.  The transforms' relative error, ~1e-7, lies three orders
         below the default CG tolerance, but it is not symmetric: mirror
         images no longer tie (tie_rtol), and soft symmetric brushes, whose
         cascades depend on the order of near-equal pillars, then take
