@@ -220,3 +220,18 @@ def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> Non
                             fig5_shape=shape)[0]
         assert (row.layout, row.value) == (layout, force(layout, kbar, shape)), row
         assert (row.paper == "~1.8") == (layout == "regular" and shape == "disc"), row
+
+
+def test_snapshots_pick_the_shape_asked_for(shape_sweep) -> None:
+    """Disc and square snapshots of one (layout, N, kbar, seed) are told apart:
+    discs unless a shape is named."""
+    from brushcore.data.aggregate import snapshots
+
+    disc = snapshots(shape_sweep, "regular", 4, 1.0)
+    square = snapshots(shape_sweep, "regular", 4, 1.0, shape="square")
+    assert disc is not None and square is not None
+    pillars = [int((s["contact_snapshot"].isel(snapshot=0) >= 0).sum()) for s in (disc, square)]
+    assert pillars[0] != pillars[1], pillars  # 4 x 4-element squares against discs
+    assert snapshots(shape_sweep, "hexagonal", 4, 1.0, shape="square") is None  # never ran
+    with pytest.raises(TypeError, match="unknown case keys"):
+        snapshots(shape_sweep, "regular", 4, 1.0, rougness=0.3)

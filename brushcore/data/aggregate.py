@@ -522,8 +522,18 @@ def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
     return out
 
 
-def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0):
+def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0,
+              *, shape: str = "disc", **rough: float):
     """Contact snapshots of one case, or None when the sweep did not keep them.
+
+    Parameters
+    ----------
+    sweep : dataset of `build_sweep`
+    layout, n_pillars, kbar, seed : the case
+    shape : its pillars' `brushcore.model.shapes.shape_label` (where the
+        sweep holds several shapes)
+    rough : its ``roughness``, ``preload`` and ``kbar_spread`` (each 0, the
+        flat brush, unless given; where the sweep holds rough cases)
 
     Returns
     -------
@@ -531,6 +541,10 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         ``contact_snapshot(snapshot, y, x)`` (1 attached, 0 detached, -1 no
         pillar), ``snapshot_step`` and ``snapshot_label`` of that case.
     """
+    unknown = set(rough) - set(ROUGH_DIMS)
+    if unknown:
+        raise TypeError(f"snapshots: unknown case keys {sorted(unknown)}; "
+                        f"allowed shape and {', '.join(ROUGH_DIMS)}")
     if "contact_snapshot" not in sweep:
         return None
     hit = (
@@ -539,6 +553,12 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         & np.isclose(sweep["case_kbar"], kbar, rtol=1e-9, atol=0.0)
         & (sweep["case_seed"] == seed)
     )
+    if f"case_{SHAPE_DIM}" in sweep.variables:
+        hit = hit & (sweep[f"case_{SHAPE_DIM}"] == shape)
+    for name in ROUGH_DIMS:
+        if f"case_{name}" in sweep.variables:
+            hit = hit & np.isclose(sweep[f"case_{name}"], float(rough.get(name, 0.0)),
+                                   rtol=1e-9, atol=0.0)
     idx = np.flatnonzero(hit.values)
     if idx.size == 0:
         return None
