@@ -23,6 +23,7 @@ from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.params import LAYOUTS, MAX_ASPECT, BrushParams
 from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.threads import MAX_THREADS
 from brushcore.validation import ParameterError
 from brushcore.model.provenance import version
 from brushcore.numerics.pulloff import SolverError
@@ -48,7 +49,7 @@ def _kbar(text: str) -> float:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"{text!r} is not a number; allowed a number in (0, inf], 'inf' means rigid"
+            f"{text!r} is not a number; allowed a number in [1e-10, inf], 'inf' means rigid"
         ) from None
 
 
@@ -149,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     rough.add_argument("--heights", type=Path, default=None, metavar="FILE",
                        help="pillar heights [d_K], one per pillar")
     rough.add_argument("--kbar-file", type=Path, default=None, metavar="FILE",
-                       help="pillar kbar in (0, inf], one per pillar")
+                       help="pillar kbar in [1e-10, inf], one per pillar")
     rough.add_argument("--gap-map", type=Path, default=None, metavar="FILE",
                        help="extra gap of every element [d_K], grid x grid (rows y)")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
@@ -287,8 +288,8 @@ def _simulate(args: argparse.Namespace) -> int:
                                 early_decisions=args.early_decisions,
                                 settle_decisions=args.settle_decisions,
                                 fft_library=args.fft_library)
-        if args.threads < 1:
-            raise ParameterError("threads", args.threads, "an integer >= 1")
+        if not 1 <= args.threads <= MAX_THREADS:
+            raise ParameterError("threads", args.threads, f"an integer in [1, {MAX_THREADS}]")
         check_output_path(args.out)
         labels = build_labels(params)  # layout and discretisation checked before any solve
         area = int((labels >= 0).sum())

@@ -39,13 +39,22 @@ class ParameterError(ValueError):
         label = names.get(self.name, self.name)
 
         def translate(text: str) -> str:
+            # A name with an underscore is always a parameter; a plain word
+            # ("layout", "shape", "grid") only where a value or a verb
+            # follows it, so that "an array of shape (5,)" stays prose.
             for api, user in names.items():
-                text = re.sub(rf"(?<![\w-]){re.escape(api)}(?![\w-])", user, text)
+                after = "" if "_" in api else _REFERENCE
+                text = re.sub(rf"(?<![\w-]){re.escape(api)}(?![\w-]){after}", user, text)
             return text
 
         reason = f" ({translate(self.reason)})" if self.reason else ""
         value = self.value if isinstance(self.value, str) and sep != "=" else repr(self.value)
         return f"{label}{sep}{value} is invalid{reason}: allowed {translate(self.allowed)}"
+
+
+#: What follows a plain-word parameter name where the text refers to the
+#: parameter: a comparison, a quoted or numeric value, or "is"/"are"/"must".
+_REFERENCE = r"(?=\s*(?:[=<>'\"]|\d|-\d|\b(?:is|are|must)\b))"
 
 
 def require(ok: bool, name: str, value: object, allowed: str, reason: str = "") -> None:

@@ -58,7 +58,12 @@ BAD = [
     (["--grid", "128", "--pillars", "256"], "--grid 128 .*--grid >= 164"),
     (["--layout", "hex"], "invalid choice: 'hex'"),
     (["--layout", "random", "--pillars", "60", "--phi", "0.5"], "--pillars 60 .*fewer"),
-    (["--threads", "0"], "--threads 0 .*>= 1"),
+    (["--threads", "0"], r"--threads 0 .*\[1, 256\]"),
+    (["--threads", "100000"], r"--threads 100000 .*\[1, 256\]"),  # crashed FFTW's planner
+    (["--kbar", "1e-18"], r"--kbar 1e-18 is invalid: allowed a number in \[1e-10, inf\]"),
+    (["--seed", str(2**64)], r"--seed 18446744073709551616 .*\[0, 2\*\*63 - 1\]"),
+    (["--roughness", "1e30"], r"--roughness 1e\+30 .*\[0, 1000\]"),  # hung the approach
+    (["--h", "1e-200"], r"--h 1e-200 .*\[1e-30, 1e\+30\]"),
     (["--n-pillars", "16"], "unknown argument --n-pillars .*did you mean --pillars"),
     (["--k", "0.1"], "unknown argument --k "),
     (["--ou", "x.nc"], "unknown argument --ou "),
@@ -108,10 +113,12 @@ SMALL = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01", 
     ("a.nc/fig5a.nc", "a.nc is a file, not a folder"),
     (".", "it is a folder"),
     ("newdir/sub/", "it names a folder (ends with a separator)"),
+    ("pipe", "it exists and is not a regular file"),  # the rename would replace it
     ("/proc/x.nc", "cannot create a file in /proc"),
 ])
 def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
     (tmp_path / "a.nc").write_text("not a folder")
+    os.mkfifo(tmp_path / "pipe")
     t0 = time.perf_counter()
     res = _cli(*SMALL, "--grid", "256", "--pillars", "256", "--kbar", "0.455", "--out", out,
                cwd=tmp_path)
@@ -119,7 +126,8 @@ def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
     assert res.stderr.startswith("brushcore: error: --out ") and reason in res.stderr, res.stderr
     assert len(res.stderr.strip().splitlines()) == 1
     assert time.perf_counter() - t0 < 20  # the 256-pillar pull-off (~5 s) never started
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc"]  # no folder made either
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc", "pipe"]  # nothing made
+    assert not (tmp_path / "pipe").is_file()
 
 
 def test_files_respect_the_umask(tmp_path):

@@ -78,3 +78,33 @@ def test_floor_even_when_coarse_is_allowed():
     assert suggested == math.ceil(41 * math.sqrt(0.5) / (41 * math.sqrt(0.12 / (math.pi * 256))))
     for grid in range(suggested, suggested + 12):  # every pillar covers an element
         build_labels(BrushParams("regular", 256, 1.0, grid, allow_coarse=True))
+
+
+# Values that once ran into the solver (singular blocks, a hang, overflow, a
+# crash on writing) are refused up front, naming the field and the range.
+@pytest.mark.parametrize("field,value,allowed", [
+    ("kbar", 1e-12, r"\[1e-10, inf\]"),
+    ("seed", 2**64, r"\[0, 2\*\*63 - 1\]"),
+    ("e_star", 1e308, r"\[1e-30, 1e\+30\]"),
+    ("h", 1e-200, r"\[1e-30, 1e\+30\]"),
+    ("dgamma", 1e31, r"\[1e-30, 1e\+30\]"),
+    ("roughness", 1e30, r"\[0, 1000\]"),
+    ("preload", 1e200, r"\[0, 1000\]"),
+    ("kbar_spread", 1e300, r"\[0, 100\]"),
+    ("heights", np.array([0.0, 0.0, 0.0, 1e4]), r"each in \[-1000, 1000\]"),
+    ("heights", np.array([0.0, 0.0, 0.0, 1j]), "real numbers"),
+    ("kbar_values", np.array([0.1, 0.1, 0.1, 1e-30]), r"each in \[1e-10, inf\]"),
+])
+def test_values_beyond_what_can_run_are_refused(field, value, allowed):
+    args = {"layout": "regular", "n_pillars": 4, "kbar": 0.1, "grid": 32, field: value}
+    with pytest.raises(ParameterError, match=rf"^{field}=.*allowed .*{allowed}"):
+        BrushParams(**args)
+    BrushParams("regular", 4, 1e-10, 32, seed=2**63 - 1, roughness=1e3, preload=1e3,
+                kbar_spread=100.0, e_star=1e30, h=1e-30)  # the ends themselves run
+
+
+def test_rtol_has_a_floor():
+    with pytest.raises(ParameterError, match=r"rtol=1e-13 is invalid: allowed a number in "
+                                             r"\[1e-12, 1e-3\]"):
+        SolverOptions(rtol=1e-13)
+    assert SolverOptions(rtol=1e-12, precision="double").rtol == 1e-12

@@ -189,7 +189,7 @@ def test_readme_example_sweep_plans(repo_copy: Path, tmp_path: Path) -> None:
     start = text.index("cat > my-sweep.yaml <<'EOF'\n") + len("cat > my-sweep.yaml <<'EOF'\n")
     example = text[start:text.index("EOF\n", start)]
     (tmp_path / "my-sweep.yaml").write_text(example)
-    proc = snakemake(repo_copy, "-n", "--configfile", str(tmp_path / "my-sweep.yaml"))
+    proc = snakemake(repo_copy, "-n", "--forceall", "--configfile", str(tmp_path / "my-sweep.yaml"))
     assert proc.returncode == 0, output(proc)[-3000:]
     merged = {**yaml.safe_load((REPO / "config/config.yaml").read_text()),
               **yaml.safe_load(example)}
@@ -261,7 +261,12 @@ def test_lint(repo_copy: Path) -> None:
 @pytest.mark.parametrize(
     ("bad", "message"),
     [
-        ({"kbar": [-1.0e-3, 1.0]}, "config key 'kbar.0': -0.001 is less than or equal to"),
+        ({"kbar": [-1.0e-3, 1.0]}, "config key 'kbar.0': -0.001 is less than the minimum"),
+        ({"kbar": [float("nan"), 1.0]}, "config key 'kbar.0': nan is not a number"),
+        ({"solver": {"rtol": 1.0e-8, "precision": "mixed"}},
+         "config: solver.rtol = 1e-08 is invalid: allowed a number >= 1e-06 with "
+         "solver.precision 'mixed'"),
+        ({"threads": 100000}, "config key 'threads': 100000 is greater than the maximum of 256"),
         ({"colour": "red"}, "config key 'colour' is unknown"),
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),
         ({"solver": {"rtoll": 1e-5}}, "config key 'solver.rtoll' is unknown; did you mean"),
@@ -292,6 +297,17 @@ def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict,
     assert re.search(message, text), f"error does not say {message!r}:\n{text}"
     assert len(text.strip().splitlines()) <= 6, text  # no schema dump, no long traceback
     assert "Job stats" not in text and "rule simulate" not in text, text
+
+
+def test_integral_float_grid_plans_as_its_integer(repo_copy: Path, tmp_path: Path,
+                                                  test_config: dict) -> None:
+    """JSON Schema counts 64.0 as an integer; the plan must too (it once crashed)."""
+    config = tmp_path / "float.yaml"
+    config.write_text(yaml.safe_dump({"grid": float(test_config["grid"])}))
+    proc = snakemake(repo_copy, "-n", "--forceall", "--configfile", "config/test.yaml",
+                     str(config))  # --forceall: the test sweep may have run here already
+    assert proc.returncode == 0, output(proc)[-3000:]
+    assert planned_simulations(output(proc)) == len(expected_cases(test_config))
 
 
 def test_allow_coarse_key_runs_what_is_refused(repo_copy: Path, tmp_path: Path) -> None:

@@ -92,6 +92,8 @@ def check_output_path(path: str | os.PathLike) -> Path:
 
     if path.is_dir():
         raise refuse("it is a folder")
+    if path.exists() and not path.is_file():  # a device or a pipe: the rename would replace it
+        raise refuse("it exists and is not a regular file")
     if text.endswith((os.sep, "/")):  # Path() would drop the slash and write a file there
         raise refuse("it names a folder (ends with a separator)")
     ancestor = path.parent

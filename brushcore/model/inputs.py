@@ -43,9 +43,8 @@ def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
 def _check_values(path: Path, name: str, where: str, values, positive: bool) -> None:
     for value in values:
         if math.isnan(value) or (math.isinf(value) and not (positive and value > 0)):
-            raise ParameterError(name, str(path), "finite numbers"
-                                 + (" in (0, inf]" if positive else ""),
-                                 f"{where} holds {value!r}")
+            raise ParameterError(name, str(path), "stiffness values in (0, inf]" if positive
+                                 else "finite numbers", f"{where} holds {value!r}")
         if positive and value <= 0:
             raise ParameterError(name, str(path), "stiffness values in (0, inf]",
                                  f"{where} holds {value!r}")

@@ -47,6 +47,18 @@ FLOOR_RADIUS_ELEMENTS = math.sqrt(0.5)
 #: their 31st, 45th, 133rd and 80th pillar.
 RANDOM_GAP_GRID = 512
 
+#: Ranges beyond which a run cannot mean anything and fails deep inside the
+#: solver (measured 2026-12-05): kbar 1e-14 left CG at 99 % error on random
+#: 16 (64^2) and 1e-18 made the pillar blocks singular, while 1e-10 to 1e-13
+#: run and agree on the soft plateau (the sweep goes down to 1e-6);
+#: roughness 1e30 d_K hung the approach (1e3 runs at once, each pillar then
+#: separate); e_star, dgamma or h beyond 1e+-100 overflowed.
+MIN_KBAR = 1e-10
+MAX_ROUGH = 1e3  # roughness and |heights| [d_K], preload [F_K]
+MAX_KBAR_SPREAD = 100.0  # coefficient of variation
+UNIT_RANGE = (1e-30, 1e30)  # e_star, dgamma, h in the inputs' units
+MAX_SEED = 2**63 - 1  # a file attribute is an int64
+
 
 @dataclass(frozen=True)
 class BrushParams:
@@ -61,18 +73,18 @@ class BrushParams:
     n_pillars : number of pillars N >= 1 (a perfect square for "regular",
         rows x columns near the hexagonal aspect for "hexagonal", the
         file's count for "file").
-    kbar : normalised spring stiffness k / (E* L) in (0, inf]; inf = rigid.
+    kbar : normalised spring stiffness k / (E* L) in [1e-10, inf] (`MIN_KBAR`); inf = rigid.
     grid : elements per side n of the square L x L holding the pillars.
     phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
     seed : seed of numpy's Generator for "random", and for the heights and
         stiffnesses of rough or graded lattices (roughness, kbar_spread);
-        ignored for flat lattices.
+        ignored for flat lattices; in [0, 2**63 - 1].
     min_gap : minimum gap between pillar edges for "random", in elements
         of the 512 x 512 grid (L / 512 each, whatever ``grid``, so that a
         seed names one brush on every grid), in [1, 512).
-    e_star : effective modulus E* [stress].
-    dgamma : work of adhesion [energy / area].
-    h : element size [length].
+    e_star : effective modulus E* [stress], in [1e-30, 1e30] (`UNIT_RANGE`).
+    dgamma : work of adhesion [energy / area], in [1e-30, 1e30].
+    h : element size [length], in [1e-30, 1e30].
     allow_coarse : run even when the grid resolves the pillars poorly (a
         pillar radius under MIN_RADIUS_ELEMENTS elements, or a realised
         filling factor more than MAX_PHI_ERROR off the requested one);
@@ -87,18 +99,18 @@ class BrushParams:
     layout_file : path of the ``.npy`` label map or ``.png`` image of a
         "file" layout ("" otherwise).  Its n_pillars, grid and phi must be
         the file's; `layout_file.file_params` fills them in.
-    roughness : standard deviation S >= 0 of Gaussian pillar heights, in
+    roughness : standard deviation S in [0, 1e3] of Gaussian pillar heights, in
         units of d_K = sqrt(2 pi dgamma a0 / E*) (a0 = sqrt(A / pi), A the
         discretised pillar area), drawn from ``seed`` (also for regular
         brushes); 0 (default) is today's flat brush.
-    preload : compressive force P >= 0 the approach stops at, in units of
+    preload : compressive force P in [0, 1e3] the approach stops at, in units of
         F_K = sqrt(8 pi E* dgamma a0^3); 0 stops at first touch.
-    kbar_spread : coefficient of variation C >= 0 of a lognormal per-pillar
+    kbar_spread : coefficient of variation C in [0, 100] of a lognormal per-pillar
         kbar with mean ``kbar`` (finite kbar only), drawn from ``seed``.
-    heights : protrusion of each pillar in units of d_K, in label order
+    heights : protrusion of each pillar in units of d_K, each in [-1e3, 1e3], in label order
         (see `brushcore.model.layout.regular_centres`; larger reaches the
         substrate first); exclusive with ``roughness``.
-    kbar_values : kbar of each pillar in (0, inf], label order; exclusive
+    kbar_values : kbar of each pillar in [1e-10, inf], label order; exclusive
         with ``kbar_spread`` (``kbar`` then only names the brush).
     gap_map : extra gap of every element, shape (grid, grid), in units of
         d_K, added below the pillar heights: element offset z_i = z_p -
@@ -164,21 +176,22 @@ class BrushParams:
                      f"a hexagonal lattice needs rows x columns = N with rows/columns within "
                      f"a factor {HEX_ASPECT_TOLERANCE:g} of 2/sqrt(3)")
         self._check_shape()
-        require(is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar > 0,
-                 "kbar", self.kbar, "a number in (0, inf]; inf means rigid pillars")
+        require(is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar >= MIN_KBAR,
+                 "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars")
         require(is_integer(self.grid) and 4 <= self.grid <= 8192, "grid", self.grid,
                  "an integer in [4, 8192]")
         require(is_real(self.phi) and 0.0 < self.phi <= 0.5, "phi", self.phi,
                  "a number in (0, 0.5]")
-        require(is_integer(self.seed) and self.seed >= 0, "seed", self.seed,
-                 "an integer >= 0")
+        require(is_integer(self.seed) and 0 <= self.seed <= MAX_SEED, "seed", self.seed,
+                 "an integer in [0, 2**63 - 1]")
         require(is_real(self.min_gap) and 1.0 <= self.min_gap < RANDOM_GAP_GRID,
                  "min_gap", self.min_gap,
                  f"a number of L / {RANDOM_GAP_GRID} lengths in [1, {RANDOM_GAP_GRID})")
+        low, high = UNIT_RANGE
         for name in ("e_star", "dgamma", "h"):
             value = getattr(self, name)
-            require(is_real(value) and math.isfinite(value) and value > 0, name, value,
-                     "a finite number > 0")
+            require(is_real(value) and low <= value <= high, name, value,
+                     f"a number in [{low:g}, {high:g}]")
         require(isinstance(self.allow_coarse, (bool, np.bool_)), "allow_coarse",
                  self.allow_coarse, "True or False")
         object.__setattr__(self, "allow_coarse", bool(self.allow_coarse))
@@ -220,21 +233,24 @@ class BrushParams:
 
     def _check_rough(self) -> None:
         """Roughness, preload, stiffness spread and the per-pillar arrays."""
-        for name in ("roughness", "preload", "kbar_spread"):
+        for name, high in (("roughness", MAX_ROUGH), ("preload", MAX_ROUGH),
+                           ("kbar_spread", MAX_KBAR_SPREAD)):
             value = getattr(self, name)
-            require(is_real(value) and math.isfinite(value) and value >= 0, name, value,
-                     "a finite number >= 0")
+            require(is_real(value) and 0 <= value <= high, name, value,
+                     f"a number in [0, {high:g}]")
         require(self.kbar_spread == 0 or math.isfinite(self.kbar), "kbar_spread",
                  self.kbar_spread, "0 for rigid pillars (kbar = inf)")
         n = self.n_pillars
         digest = hashlib.sha256()
-        for name, shape, low in (("heights", (n,), None), ("kbar_values", (n,), 0.0),
+        for name, shape, low in (("heights", (n,), None), ("kbar_values", (n,), MIN_KBAR),
                                  ("gap_map", (self.grid, self.grid), None)):
             value = getattr(self, name)
             if value is None:
                 continue
             what = (f"an array of shape {shape}" if name == "gap_map" else
                     f"one value per pillar ({n}), in label order")
+            if np.iscomplexobj(value):  # float() would drop the imaginary part
+                raise ParameterError(name, "<complex array>", what + ", real numbers")
             try:
                 arr = np.array(value, dtype=float)
             except (TypeError, ValueError):
@@ -242,13 +258,17 @@ class BrushParams:
             require(arr.shape == shape, name, f"<array of shape {arr.shape}>", what)
             ok = np.isfinite(arr) if low is None else (np.isfinite(arr) | (arr == np.inf))
             if low is not None:
-                ok &= ~(arr <= low)
+                ok &= ~(arr < low)
+            elif name == "heights":
+                ok &= np.abs(arr) <= MAX_ROUGH
             bad = np.argwhere(~ok)
             if bad.size:
                 where = ", ".join(str(int(i)) for i in bad[0])
                 kind = "element (y, x)" if name == "gap_map" else "pillar"
+                allowed = {"heights": f", each in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}]",
+                           "kbar_values": f", each in [{MIN_KBAR:g}, inf]"}
                 require(False, name, f"<array with {len(bad)} invalid values>",
-                         what + (", each in (0, inf]" if low is not None else ", all finite"),
+                         what + allowed.get(name, ", all finite"),
                          f"{kind} {where} is {float(arr[tuple(bad[0])])!r}")
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)

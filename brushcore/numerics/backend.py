@@ -145,26 +145,30 @@ class Backend:
         return int(self.native.cuda.runtime.memGetInfo()[1])
 
 
+#: What a refused "gpu" allows: the choice holds only where a card is usable.
+_GPU_ALLOWED = "'cpu' here; 'gpu' where CuPy and a CUDA device are"
+
+
 def _import_cupy() -> tuple[ModuleType, ModuleType]:
     """CuPy and its array-API view, with a usable card, or ParameterError
     naming what is missing."""
     try:
         cupy = importlib.import_module("cupy")
     except ImportError:
-        raise ParameterError("backend", "gpu", "'cpu' (the default) or 'gpu'",
+        raise ParameterError("backend", "gpu", _GPU_ALLOWED,
                              f"CuPy is not installed: {GPU_INSTALL}") from None
     try:
         count = int(cupy.cuda.runtime.getDeviceCount())
     except Exception:  # CUDARuntimeError without a driver
         count = 0
     if count < 1:
-        raise ParameterError("backend", "gpu", "'cpu' (the default) or 'gpu'",
+        raise ParameterError("backend", "gpu", _GPU_ALLOWED,
                              "no CUDA device visible (check nvidia-smi and "
                              "CUDA_VISIBLE_DEVICES)")
     try:
         compat = importlib.import_module("array_api_compat.cupy")
     except ImportError:
-        raise ParameterError("backend", "gpu", "'cpu' (the default) or 'gpu'",
+        raise ParameterError("backend", "gpu", _GPU_ALLOWED,
                              f"array-api-compat is not installed: {GPU_INSTALL}") from None
     return compat, cupy
 

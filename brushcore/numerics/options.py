@@ -15,7 +15,7 @@ class SolverOptions:
     Parameters
     ----------
     rtol : CG stops when its error estimate (the preconditioned residual) is
-        below rtol times the largest stress, in (0, 1e-3], and, with
+        below rtol times the largest stress, in [1e-12, 1e-3], and, with
         ``settle_decisions``, no decision it leads to could flip.  The
         default 1e-4 moves F_ad and W by < 1e-4 against 1e-8 (measured and
         tested); use `SolverOptions.exact()` for reference results.
@@ -120,6 +120,10 @@ class SolverOptions:
     settle_decisions: bool = True
     fft_library: str = "auto"
 
+    #: Tightest tolerance: double precision's round-off (~1e-16 a product,
+    #: grown by the operator's condition) leaves CG nothing to converge to
+    #: below it (rtol 1e-300 broke CG down: p.Ap = 0).
+    MIN_RTOL = 1e-12
     #: Below this rtol single-precision transforms would limit the accuracy.
     MIXED_MIN_RTOL = 1e-6
 
@@ -131,8 +135,8 @@ class SolverOptions:
 
     def __post_init__(self) -> None:
         normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"))
-        require(is_real(self.rtol) and 0 < self.rtol <= 1e-3, "rtol", self.rtol,
-                 "a number in (0, 1e-3]")
+        require(is_real(self.rtol) and self.MIN_RTOL <= self.rtol <= 1e-3, "rtol", self.rtol,
+                 f"a number in [{self.MIN_RTOL:g}, 1e-3]")
         require(is_integer(self.max_iter) and self.max_iter >= 1, "max_iter",
                  self.max_iter, "an integer >= 1")
         require(is_real(self.tie_rtol) and 0 <= self.tie_rtol <= 1e-6, "tie_rtol",

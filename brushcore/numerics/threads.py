@@ -18,6 +18,10 @@ from functools import lru_cache
 
 import numpy as np
 
+#: Most threads a job may ask for (the workflow's schema says the same): far
+#: beyond any node, and 100,000 crashed FFTW's planner.
+MAX_THREADS = 256
+
 _VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
          "NUMEXPR_NUM_THREADS", "BRUSHCORE_THREADS")
 

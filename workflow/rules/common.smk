@@ -8,6 +8,7 @@ import yaml
 
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels
+from brushcore.numerics.options import SolverOptions
 from brushcore.model.shapes import parse_shape_label, shape_label
 
 
@@ -24,6 +25,10 @@ def check_config(config, schema_path):
         jsonschema.Draft202012Validator(schema).iter_errors(config)
     )
     if error is None:
+        where = _first_nan(config)
+        if where is not None:
+            raise ConfigError(f"config key '{where}': nan is not a number; allowed a number "
+                              "in the range the schema gives")
         return
     where = ".".join(str(p) for p in error.absolute_path)
     if error.validator == "additionalProperties":
@@ -34,6 +39,21 @@ def check_config(config, schema_path):
         prefix = f"{where}." if where else ""
         raise ConfigError(f"config key '{prefix}{extra[0]}' is unknown{hint}")
     raise ConfigError(f"config key '{where}': {error.message}")
+
+
+def _first_nan(value, where=""):
+    """The key of the first NaN in the config, or None: JSON Schema's ranges
+    let NaN through (every comparison with it is false), and a NaN kbar
+    would only fail as missing files at the end of planning."""
+    if isinstance(value, float) and math.isnan(value):
+        return where
+    items = (value.items() if isinstance(value, dict) else
+             enumerate(value) if isinstance(value, (list, tuple)) else ())
+    for key, item in items:
+        found = _first_nan(item, f"{where}.{key}" if where else str(key))
+        if found is not None:
+            return found
+    return None
 
 
 class ConfigError(ValueError):
@@ -50,6 +70,11 @@ def check_cases(config):
     Random layouts are packed in their jobs (seconds each); a packing failure
     fails that job.  The geometry does not depend on kbar: checked once.
     """
+    try:  # the solver options every job will build
+        SolverOptions(**config["solver"])
+    except ParameterError as exc:
+        keys = {k: f"solver.{k}" for k in config["solver"]}
+        raise ConfigError(f"config: {exc.in_terms_of(keys, sep=' = ')}") from None
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -166,7 +191,8 @@ def sweep_cases(config):
 
 def grid_list(value):
     """A config grid (an integer or a list of integers) as a sorted list."""
-    return sorted({int(value)} if isinstance(value, int) else {int(g) for g in value})
+    values = value if isinstance(value, (list, tuple)) else [value]  # 64.0 is an integer too
+    return sorted({int(g) for g in values})
 
 
 def case_grids(config, n_pillars):
