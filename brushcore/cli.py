@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 from brushcore.numerics.cg import ConvergenceError
 from brushcore.data.joblog import EXIT_INTERRUPTED, INTERRUPTED
@@ -53,8 +54,22 @@ def _kbar(text: str) -> float:
         ) from None
 
 
+#: A whole negative number, as a value rather than a flag: argparse's own
+#: pattern takes -5 and -0.5 but not -1e1 or -inf.
+_NEGATIVE_VALUE = re.compile(r"^-(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?$|^-inf$", re.IGNORECASE)
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse that names unknown flags before complaining about missing ones."""
+    """argparse that names unknown flags before complaining about missing
+    ones, reads -1e1 and -inf as values, and says what is wrong in one line
+    (as the checks after parsing do), not under the whole usage text."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_VALUE
+
+    def error(self, message: str) -> NoReturn:  # noqa: D102 - argparse API
+        self.exit(2, f"brushcore: error: {message} (see '{self.prog} --help')\n")
 
     def parse_known_args(self, args=None, namespace=None):  # noqa: D102 - argparse API
         args = list(sys.argv[1:] if args is None else args)

@@ -65,6 +65,10 @@ BAD = [
     (["--roughness", "1e30"], r"--roughness 1e\+30 .*\[0, 1000\]"),  # hung the approach
     (["--h", "1e-200"], r"--h 1e-200 .*\[1e-30, 1e\+30\]"),
     (["--n-pillars", "16"], "unknown argument --n-pillars .*did you mean --pillars"),
+    (["--pillars", "abc"], r"argument --pillars: invalid int value: 'abc' \(see 'brushcore "
+                           r"simulate --help'\)"),
+    (["--kbar", "-inf"], r"--kbar -inf is invalid"),  # a value, not an unknown flag
+
     (["--k", "0.1"], "unknown argument --k "),
     (["--ou", "x.nc"], "unknown argument --ou "),
 ]
@@ -83,6 +87,7 @@ def test_bad_input_is_rejected_before_computing(tmp_path, extra, message):
     assert res.returncode == 2, res.stderr
     assert re.search(message, res.stderr), res.stderr
     assert "Traceback" not in res.stderr and "n_pillars" not in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr  # no usage text around it
     assert not out.exists() and not list(tmp_path.iterdir())
 
 
@@ -138,6 +143,15 @@ def test_files_respect_the_umask(tmp_path):
     finally:
         os.umask(old)
     assert out.stat().st_mode & 0o777 == 0o644
+
+
+def test_negative_numbers_in_any_notation_are_values(tmp_path):
+    """argparse alone takes -5 and -0.5 as values but -1e1 as a flag."""
+    out = tmp_path / "c.nc"
+    assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "1", "--grid",
+                 "32", "--shape", "square", "--orientation", "-1e1", "--allow-coarse",
+                 "--out", str(out), "--quiet"]) == 0
+    assert read_curve(out).attrs["orientation"] == -10.0
 
 
 def test_version_and_defaults_in_help():

@@ -108,3 +108,10 @@ def test_rtol_has_a_floor():
                                              r"\[1e-12, 1e-3\]"):
         SolverOptions(rtol=1e-13)
     assert SolverOptions(rtol=1e-12, precision="double").rtol == 1e-12
+
+
+def test_no_grid_suggested_past_the_largest():
+    """Where no allowed grid resolves the pillars, the hint says what to change."""
+    with pytest.raises(ParameterError, match=r"allowed none up to 8192 resolves these pillars: "
+                                             "fewer pillars or a larger filling factor$"):
+        BrushParams("regular", 4, 1.0, 32, phi=1e-300)

@@ -267,6 +267,10 @@ def test_lint(repo_copy: Path) -> None:
          "config: solver.rtol = 1e-08 is invalid: allowed a number >= 1e-06 with "
          "solver.precision 'mixed'"),
         ({"threads": 100000}, "config key 'threads': 100000 is greater than the maximum of 256"),
+        # the key the user wrote, not the parameter it becomes
+        ({"fig5": {"n_pillars": 5}}, "config: fig5.n_pillars = 5 is invalid: allowed a perfect"),
+        ({"grid_by_n": [{"n_pillars": 16, "grid": 16}]},
+         r"config: grid_by_n.grid = 16 is invalid .*allowed grid_by_n.grid >= 41"),
         ({"colour": "red"}, "config key 'colour' is unknown"),
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),
         ({"solver": {"rtoll": 1e-5}}, "config key 'solver.rtoll' is unknown; did you mean"),

@@ -54,6 +54,7 @@ RANDOM_GAP_GRID = 512
 #: roughness 1e30 d_K hung the approach (1e3 runs at once, each pillar then
 #: separate); e_star, dgamma or h beyond 1e+-100 overflowed.
 MIN_KBAR = 1e-10
+MAX_GRID = 8192
 MAX_ROUGH = 1e3  # roughness and |heights| [d_K], preload [F_K]
 MAX_KBAR_SPREAD = 100.0  # coefficient of variation
 UNIT_RANGE = (1e-30, 1e30)  # e_star, dgamma, h in the inputs' units
@@ -178,8 +179,8 @@ class BrushParams:
         self._check_shape()
         require(is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar >= MIN_KBAR,
                  "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars")
-        require(is_integer(self.grid) and 4 <= self.grid <= 8192, "grid", self.grid,
-                 "an integer in [4, 8192]")
+        require(is_integer(self.grid) and 4 <= self.grid <= MAX_GRID, "grid", self.grid,
+                 f"an integer in [4, {MAX_GRID}]")
         require(is_real(self.phi) and 0.0 < self.phi <= 0.5, "phi", self.phi,
                  "a number in (0, 0.5]")
         require(is_integer(self.seed) and 0 <= self.seed <= MAX_SEED, "seed", self.seed,
@@ -200,9 +201,13 @@ class BrushParams:
                  "'cpu' (the default) or 'gpu'")
         r = self.pillar_radius_elements
         floor = FLOOR_RADIUS_ELEMENTS if self.allow_coarse else MIN_RADIUS_ELEMENTS
+        needed = math.ceil(floor * self.grid / r)
         require(r >= floor, "grid", self.grid,
-                 f"grid >= {math.ceil(floor * self.grid / r)}"
-                 + ("" if self.allow_coarse else " (or allow_coarse to run it anyway)"),
+                 (f"grid >= {needed}"
+                  + ("" if self.allow_coarse else " (or allow_coarse to run it anyway)"))
+                 if needed <= MAX_GRID else
+                 f"none up to {MAX_GRID} resolves these pillars: fewer pillars or a larger "
+                 "filling factor",
                  f"a pillar radius spans {r:.3g} elements, under the {floor:.3g} "
                  + ("that cover an element centre" if self.allow_coarse else
                     "needed for a meaningful detachment criterion"))

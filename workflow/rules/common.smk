@@ -29,6 +29,7 @@ def check_config(config, schema_path):
         if where is not None:
             raise ConfigError(f"config key '{where}': nan is not a number; allowed a number "
                               "in the range the schema gives")
+        _integral_counts(config)
         return
     where = ".".join(str(p) for p in error.absolute_path)
     if error.validator == "additionalProperties":
@@ -39,6 +40,28 @@ def check_config(config, schema_path):
         prefix = f"{where}." if where else ""
         raise ConfigError(f"config key '{prefix}{extra[0]}' is unknown{hint}")
     raise ConfigError(f"config key '{where}': {error.message}")
+
+
+#: Keys whose values are counts: JSON Schema calls 64.0 an integer, Python does not.
+_COUNT_KEYS = ("grid", "regular", "random", "hexagonal", "seeds", "threads")
+
+
+def _integral_counts(config):
+    """Counts written as 64.0 become 64 (in place), as the schema accepted them."""
+    def fix(value):
+        if isinstance(value, list):
+            return [fix(v) for v in value]
+        return int(value) if isinstance(value, float) and value.is_integer() else value
+
+    for key in _COUNT_KEYS:
+        if key in config:
+            config[key] = fix(config[key])
+    if "n_pillars" in config.get("fig5", {}):
+        config["fig5"]["n_pillars"] = fix(config["fig5"]["n_pillars"])
+    for entry in config.get("grid_by_n", []):
+        for key in ("n_pillars", "grid"):
+            if key in entry:
+                entry[key] = fix(entry[key])
 
 
 def _first_nan(value, where=""):
@@ -93,7 +116,13 @@ def check_cases(config):
             if layout in LATTICES:
                 build_labels(params)
         except ParameterError as exc:
-            keys = {"n_pillars": layout, "allow_coarse": "allow_coarse: true"}
+            fig5 = config["fig5"]
+            only_fig5 = (layout == fig5["layout"] and n == int(fig5["n_pillars"])
+                         and n not in config.get(layout, []))
+            by_n = any(int(e["n_pillars"]) == n for e in config.get("grid_by_n", []))
+            keys = {"n_pillars": "fig5.n_pillars" if only_fig5 else layout, "seed": "seeds",
+                    "grid": "grid_by_n.grid" if by_n else "grid",
+                    "allow_coarse": "allow_coarse: true"}
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} "
                 f"(case {layout} N = {n}, grid = {grid}, phi = {phi}"
