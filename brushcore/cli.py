@@ -45,6 +45,19 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
 
+def _path(text: str) -> Path:
+    """A file path as typed; an empty one is refused (Path("") would be ".")."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path; allowed a file path")
+    return Path(text)
+
+
+def _output(text: str) -> str:
+    """The output path as typed (a trailing separator kept for the check)."""
+    _path(text)
+    return text
+
+
 def _kbar(text: str) -> float:
     try:
         return float(text)
@@ -144,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--orientation", type=float, default=0.0,
                      help="angle of the ellipse's major axis or a square's side from the "
                           "x axis [degrees]")
-    sim.add_argument("--layout-file", type=Path,
+    sim.add_argument("--layout-file", type=_path,
                      help="label map (.npy: -1 no pillar, 0..N-1 pillar) or image (.png: "
                           "dark pillars on white) for --layout file")
     rough = sim.add_argument_group(
@@ -162,11 +175,11 @@ def build_parser() -> argparse.ArgumentParser:
     rough.add_argument("--kbar-spread", type=float, default=0.0,
                        help="coefficient of variation of a lognormal per-pillar kbar "
                             "(mean --kbar), drawn from --seed")
-    rough.add_argument("--heights", type=Path, default=None, metavar="FILE",
+    rough.add_argument("--heights", type=_path, default=None, metavar="FILE",
                        help="pillar heights [d_K], one per pillar")
-    rough.add_argument("--kbar-file", type=Path, default=None, metavar="FILE",
+    rough.add_argument("--kbar-file", type=_path, default=None, metavar="FILE",
                        help="pillar kbar in [1e-10, inf], one per pillar")
-    rough.add_argument("--gap-map", type=Path, default=None, metavar="FILE",
+    rough.add_argument("--gap-map", type=_path, default=None, metavar="FILE",
                        help="extra gap of every element [d_K], grid x grid (rows y)")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
@@ -202,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
                           "pip install 'brushcore[gpu]' and a CUDA 12 card; whole grid, "
                           "no symmetry fold)")
-    sim.add_argument("--out", required=True, help="output netCDF file")
+    sim.add_argument("--out", type=_output, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return parser
 

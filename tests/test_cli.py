@@ -68,6 +68,7 @@ BAD = [
     (["--pillars", "abc"], r"argument --pillars: invalid int value: 'abc' \(see 'brushcore "
                            r"simulate --help'\)"),
     (["--kbar", "-inf"], r"--kbar -inf is invalid"),  # a value, not an unknown flag
+    (["--heights", ""], r"argument --heights: an empty path"),  # not the folder "."
 
     (["--k", "0.1"], "unknown argument --k "),
     (["--ou", "x.nc"], "unknown argument --ou "),

@@ -103,6 +103,13 @@ def test_values_beyond_what_can_run_are_refused(field, value, allowed):
                 kbar_spread=100.0, e_star=1e30, h=1e-30)  # the ends themselves run
 
 
+def test_numpy_bools_are_switches_too():
+    options = SolverOptions(symmetry=np.False_, early_decisions=np.True_)
+    assert options.symmetry is False and options.early_decisions is True
+    with pytest.raises(ParameterError, match="settle_decisions=1 is invalid"):
+        SolverOptions(settle_decisions=1)
+
+
 def test_rtol_has_a_floor():
     with pytest.raises(ParameterError, match=r"rtol=1e-13 is invalid: allowed a number in "
                                              r"\[1e-12, 1e-3\]"):

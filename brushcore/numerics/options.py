@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from brushcore.numerics import mkl
 from brushcore.validation import is_integer, is_real, normalise, require
 
@@ -145,13 +147,12 @@ class SolverOptions:
                  self.lookahead, "a number in [0, 0.1]")
         require(self.cascade in ("local", "global"), "cascade", self.cascade,
                  "'local' or 'global'")
-        require(isinstance(self.symmetry, bool), "symmetry", self.symmetry, "true or false")
+        for name in ("symmetry", "early_decisions", "settle_decisions"):  # NumPy's too
+            value = getattr(self, name)
+            require(isinstance(value, (bool, np.bool_)), name, value, "true or false")
+            object.__setattr__(self, name, bool(value))
         require(self.precision in ("auto", "mixed", "double"), "precision", self.precision,
                 "'auto', 'mixed' or 'double'")
-        require(isinstance(self.early_decisions, bool), "early_decisions",
-                self.early_decisions, "true or false")
-        require(isinstance(self.settle_decisions, bool), "settle_decisions",
-                self.settle_decisions, "true or false")
         require(self.fft_library in ("auto", "fftw", "mkl"), "fft_library", self.fft_library,
                 "'auto', 'fftw' or 'mkl'")
         require(self.fft_library != "mkl" or mkl.available(), "fft_library", self.fft_library,
