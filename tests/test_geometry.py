@@ -233,8 +233,10 @@ def test_refused_label_maps_name_the_file_and_the_pillars(tmp_path):
         read_label_map(tmp_path / "good.npy", 64)
     with pytest.raises(ParameterError, match=r"float\.npy.*integer label map"):
         read_label_map(_save(tmp_path, "float.npy", good.astype(float)), 32)
-    with pytest.raises(ParameterError, match=r"pickle\.npy.*not readable as a plain"):
+    with pytest.raises(ParameterError, match=r"pickle\.npy.*not readable as a plain .npy "
+                                             r"array: it holds Python objects") as err:
         read_label_map(_save(tmp_path, "pickle.npy", np.array([{"a": 1}], dtype=object)))
+    assert "allow_pickle" not in str(err.value)  # never advise loading pickles
     with pytest.raises(ParameterError, match=r"layout_file=.*missing\.npy.*no such file"):
         read_label_map(tmp_path / "missing.npy")
 

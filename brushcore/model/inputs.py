@@ -110,12 +110,21 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
     return np.array([row for _, row in rows])
 
 
+def npy_problem(exc: Exception) -> str:
+    """What `np.load(..., allow_pickle=False)` found wrong, without NumPy's
+    advice to load pickles unsafely (never right for an input file)."""
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    if "allow_pickle" in text or "pickled" in text:
+        return "it holds Python objects or is not a .npy file"
+    return text[:120]
+
+
 def _load_npy(path: Path, name: str) -> np.ndarray:
     try:
         arr = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as exc:
         raise ParameterError(name, str(path), "a readable .npy file of numbers "
-                             "(no pickles)", str(exc).splitlines()[0][:120]) from None
+                             "(no pickles)", npy_problem(exc)) from None
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise ParameterError(name, str(path), "real numbers", f"its dtype is {arr.dtype}")
     return np.asarray(arr, dtype=float)

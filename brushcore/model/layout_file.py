@@ -33,6 +33,7 @@ import numpy as np
 from brushcore.model.params import BrushParams
 
 from brushcore.model.labelmap import check_not_touching
+from brushcore.model.inputs import npy_problem
 from brushcore.validation import ParameterError
 
 #: Largest image accepted (the largest grid, 8192^2), checked before decoding.
@@ -54,7 +55,7 @@ def _read_npy(path: Path) -> np.ndarray:
         data = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
         raise _refuse(path, "a .npy file of an n x n integer array",
-                      f"not readable as a plain .npy array: {exc}") from None
+                      f"not readable as a plain .npy array: {npy_problem(exc)}") from None
     if not isinstance(data, np.ndarray) or data.dtype.kind not in "iu":
         kind = getattr(data, "dtype", type(data).__name__)
         raise _refuse(path, "an integer label map (-1 = no pillar, 0 ... N-1 = pillar)",
