@@ -343,6 +343,9 @@ def test_cli_runs_shapes_and_file_layouts_and_records_them(tmp_path):
     # the flag replaces a parameter's name, not the same word in prose
     (["--layout", "file", "--layout-file", "LABELS", "--shape", "square"],
      "--shape square is invalid: allowed the default 'disc' with --layout 'file'"),
+    # the file's own size fails the grid rule: the file is blamed, not a --grid never typed
+    (["--layout", "file", "--layout-file", "TINY"], r"--layout-file .*s\.npy is invalid \(it is "
+                                                    r"32 x 32 elements: .*a map of side >= \d+"),
     (["--layout", "hexagonal", "--pillars", "7", "--grid", "128"], "--pillars 7 .*6 or 9"),
     (["--layout", "regular", "--pillars", "16", "--grid", "128", "--aspect", "2"],
      "--aspect 2.0 is invalid: allowed 1 unless --shape is 'ellipse'"),
@@ -354,8 +357,11 @@ def test_cli_refuses_bad_geometry_and_writes_nothing(tmp_path, capsys, extra, me
     labels = build_labels(_ellipse_brush())
     touch = np.full((32, 32), -1)
     touch[2:6, 2:6], touch[6:9, 2:6] = 0, 1
+    tiny = np.full((32, 32), -1)
+    tiny[1::8, 1::8] = np.arange(16).reshape(4, 4)  # one-element pillars
     files = {"LABELS": str(save_label_map(labels, tmp_path / "m.npy")),
-             "TOUCH": str(save_label_map(touch, tmp_path / "t.npy"))}
+             "TOUCH": str(save_label_map(touch, tmp_path / "t.npy")),
+             "TINY": str(save_label_map(tiny, tmp_path / "s.npy"))}
     out = tmp_path / "never.nc"
     argv = ["simulate", "--kbar", "0.1", "--out", str(out), "--quiet"]
     argv += [files.get(a, a) for a in extra]

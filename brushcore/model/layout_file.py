@@ -202,5 +202,19 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
             raise ParameterError(name, kwargs[name], f"{found[name]}, the value of {path}")
     if "phi" in kwargs and abs(kwargs["phi"] / found["phi"] - 1.0) > 1e-9:
         raise ParameterError("phi", kwargs["phi"], f"{found['phi']!r}, the value of {path}")
+    typed = {name for name in ("n_pillars", "grid", "phi") if name in kwargs}
     kwargs.update(n_pillars=found["n_pillars"], grid=found["grid"], phi=found["phi"])
-    return BrushParams(layout="file", kbar=kbar, layout_file=str(path), **kwargs)
+    try:
+        return BrushParams(layout="file", kbar=kbar, layout_file=str(path), **kwargs)
+    except ParameterError as exc:
+        if exc.name not in ("n_pillars", "grid", "phi") or exc.name in typed:
+            raise
+        # The file's own N, grid or phi fails a check: the file is what to
+        # change, in words that are not flags the user did not type.
+        found_as = {"n_pillars": f"it holds {exc.value} pillars",
+                    "grid": f"it is {exc.value} x {exc.value} elements",
+                    "phi": f"its pillars cover {exc.value:.4g} of it"}[exc.name]
+        allowed = (exc.allowed.replace("grid >=", "a map of side >=") if exc.name == "grid"
+                   else "a filling factor in (0, 0.5]" if exc.name == "phi" else exc.allowed)
+        raise _refuse(path, allowed, found_as + (f": {exc.reason}" if exc.reason else "")
+                      ) from None
