@@ -108,8 +108,8 @@ class BrushParams:
         F_K = sqrt(8 pi E* dgamma a0^3); 0 stops at first touch.
     kbar_spread : coefficient of variation C in [0, 100] of a lognormal per-pillar
         kbar with mean ``kbar`` (finite kbar only), drawn from ``seed``.
-    heights : protrusion of each pillar in units of d_K, each in [-1e3, 1e3], in label order
-        (see `brushcore.model.layout.regular_centres`; larger reaches the
+    heights : protrusion of each pillar in units of d_K, each in [-1e3, 1e3],
+        in label order (see `brushcore.model.layout.regular_centres`; larger reaches the
         substrate first); exclusive with ``roughness``.
     kbar_values : kbar of each pillar in [1e-10, inf], label order; exclusive
         with ``kbar_spread`` (``kbar`` then only names the brush).

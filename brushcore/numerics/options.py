@@ -54,8 +54,9 @@ class SolverOptions:
     precision : "auto" (default), "mixed" or "double".  "mixed" runs the
         host's FFTs in single precision (1.4-1.8x faster) and applies the
         block inverses from a float32 copy; CG's vectors and dot products,
-        springs and the inverses' downdates stay in double.  The transforms' relative error, ~1e-7, lies three orders
-        below the default CG tolerance, but it is not symmetric: mirror
+        springs and the inverses' downdates stay in double.  The transforms'
+        relative error, ~1e-7, lies three orders below the default CG
+        tolerance, but it is not symmetric: mirror
         images no longer tie (tie_rtol), and soft symmetric brushes, whose
         cascades depend on the order of near-equal pillars, then take
         another path (regular 576 at kbar 1e-6: W 0.8 % off).  "auto" is
