@@ -72,6 +72,15 @@ def is_integer(value: object) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
 
 
+def require_switches(obj: object, names: tuple[str, ...], allowed: str) -> None:
+    """Check on/off fields of a frozen dataclass (Python or NumPy bools) and
+    store them as Python bools; ``allowed`` as the caller's users write it."""
+    for name in names:
+        value = getattr(obj, name)
+        require(isinstance(value, (bool, np.bool_)), name, value, allowed)
+        object.__setattr__(obj, name, bool(value))
+
+
 def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...]) -> None:
     """Turn NumPy scalars of a frozen dataclass into Python int / float in place.
 

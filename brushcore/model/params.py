@@ -13,7 +13,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from brushcore.validation import ParameterError, is_integer, is_real, normalise, require
+from brushcore.validation import (ParameterError, is_integer, is_real, normalise, require,
+                                  require_switches)
 from brushcore.model.lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, nearest_hexagonal_counts
 from brushcore.model.shapes import SHAPES
 from brushcore.model.theory import stiffness_from_kbar
@@ -193,9 +194,7 @@ class BrushParams:
             value = getattr(self, name)
             require(is_real(value) and low <= value <= high, name, value,
                      f"a number in [{low:g}, {high:g}]")
-        require(isinstance(self.allow_coarse, (bool, np.bool_)), "allow_coarse",
-                 self.allow_coarse, "True or False")
-        object.__setattr__(self, "allow_coarse", bool(self.allow_coarse))
+        require_switches(self, ("allow_coarse",), "True or False")
         self._check_rough()
         require(self.backend in BACKENDS, "backend", self.backend,
                  "'cpu' (the default) or 'gpu'")

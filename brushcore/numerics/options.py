@@ -4,10 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from brushcore.numerics import mkl
-from brushcore.validation import is_integer, is_real, normalise, require
+from brushcore.validation import is_integer, is_real, normalise, require, require_switches
 
 
 @dataclass(frozen=True)
@@ -148,10 +146,8 @@ class SolverOptions:
                  self.lookahead, "a number in [0, 0.1]")
         require(self.cascade in ("local", "global"), "cascade", self.cascade,
                  "'local' or 'global'")
-        for name in ("symmetry", "early_decisions", "settle_decisions"):  # NumPy's too
-            value = getattr(self, name)
-            require(isinstance(value, (bool, np.bool_)), name, value, "true or false")
-            object.__setattr__(self, name, bool(value))
+        require_switches(self, ("symmetry", "early_decisions", "settle_decisions"),
+                         "true or false")
         require(self.precision in ("auto", "mixed", "double"), "precision", self.precision,
                 "'auto', 'mixed' or 'double'")
         require(self.fft_library in ("auto", "fftw", "mkl"), "fft_library", self.fft_library,

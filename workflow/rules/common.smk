@@ -220,8 +220,7 @@ def sweep_cases(config):
 
 def grid_list(value):
     """A config grid (an integer or a list of integers) as a sorted list."""
-    values = value if isinstance(value, (list, tuple)) else [value]  # 64.0 is an integer too
-    return sorted({int(g) for g in values})
+    return sorted({int(value)} if isinstance(value, int) else {int(g) for g in value})
 
 
 def case_grids(config, n_pillars):
