@@ -281,6 +281,10 @@ def test_lint(repo_copy: Path) -> None:
         ({"grid": 128, "regular": [256]}, "config: grid = 128 is invalid"),
         ({"regular": [16], "random": [], "phi": 0.05},
          "phi is realised as 0.04688 instead of 0.05"),
+        # a random layout too dense to pack, found by packing it as its job would
+        ({"regular": [], "random": [16], "phi": 0.5},
+         r"config: random = 16 is invalid \(random layout: only 14 discs .*allowed fewer "
+         r"pillars, a smaller phi or a smaller min_gap \(CLI only: --min-gap\)"),
     ],
 )
 def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: dict,

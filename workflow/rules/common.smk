@@ -88,10 +88,11 @@ def check_cases(config):
 
     Builds the parameters of each case (ranges, the grid rule: pillar radius
     >= 2 elements, hexagonal N) and the label map of each lattice brush
-    (regular, hexagonal: realised phi within 5 %, for every pillar shape), so
-    that a config that cannot run stops `snakemake -n` already.
-    Random layouts are packed in their jobs (seconds each); a packing failure
-    fails that job.  The geometry does not depend on kbar: checked once.
+    (regular, hexagonal: realised phi within 5 %, for every pillar shape) and
+    random layout (packed as its job will pack it: milliseconds for N = 1620
+    at phi 0.12, under a second where packing fails), so that a config that
+    cannot run stops `snakemake -n` already.  The geometry does not depend
+    on kbar: checked once.
     """
     try:  # the solver options every job will build
         SolverOptions(**config["solver"])
@@ -113,8 +114,7 @@ def check_cases(config):
                 allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
                 **parse_shape_tag(shape),
             )
-            if layout in LATTICES:
-                build_labels(params)
+            build_labels(params)
         except ParameterError as exc:
             fig5 = config["fig5"]
             only_fig5 = (layout == fig5["layout"] and n == int(fig5["n_pillars"])
@@ -122,7 +122,8 @@ def check_cases(config):
             by_n = any(int(e["n_pillars"]) == n for e in config.get("grid_by_n", []))
             keys = {"n_pillars": "fig5.n_pillars" if only_fig5 else layout, "seed": "seeds",
                     "grid": "grid_by_n.grid" if by_n else "grid",
-                    "allow_coarse": "allow_coarse: true"}
+                    "allow_coarse": "allow_coarse: true",
+                    "min_gap": "min_gap (CLI only: --min-gap)"}
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} "
                 f"(case {layout} N = {n}, grid = {grid}, phi = {phi}"
