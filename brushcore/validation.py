@@ -8,6 +8,7 @@ hold the rules.
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
 import re
 from collections.abc import Mapping
@@ -96,3 +97,16 @@ def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...]) ->
         value = getattr(obj, name)
         if is_real(value):
             object.__setattr__(obj, name, float(value))
+
+
+def brief(obj: object) -> str:
+    """A frozen dataclass as its fields that differ from their defaults
+    (``layout='regular', n_pillars=16, kbar=0.001, grid=64``): the part of
+    a parameter set that a failure message needs, without the twenty
+    defaults around it."""
+    parts = []
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if f.default is dataclasses.MISSING or value != f.default:
+            parts.append(f"{f.name}={value!r}")
+    return ", ".join(parts) or "defaults"

@@ -359,6 +359,9 @@ def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
     message = str(info.value)
     for part in ("did not converge in 1 iterations", "size ", "at event 0", "elements attached"):
         assert part in message, f"{part!r} missing from: {message}"
+    # the problem as the fields that differ from their defaults, not all twenty
+    assert message.endswith("; problem: layout='random', n_pillars=16, kbar=0.1, grid=48, "
+                            "seed=3; options: max_iter=1"), message  # phi 0.12: the default
 
 
 def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:

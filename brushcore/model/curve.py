@@ -35,6 +35,7 @@ from brushcore.numerics.protocol import (APPROACH, RETRACT, START, ProtocolCurve
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.numerics.pulloff import Progress, PullOffCurve, SolverError, pull_off
 from brushcore.numerics.threads import fft_threads
+from brushcore.validation import brief
 
 #: How to read dimensional values: the inputs define the unit system.
 UNITS_CONVENTION = ("SI: e_star in Pa, dgamma in J m-2, h in m, so lengths in m, forces in N, "
@@ -147,7 +148,7 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
         with threadpool_limits(limits=1, user_api="blas"):
             curve = pull_off(op, sigma_c, params.h, options, progress)
     except (ConvergenceError, SolverError) as exc:
-        raise type(exc)(f"{exc}; problem: {params}; options: {options}") from None
+        raise type(exc)(f"{exc}; problem: {brief(params)}; options: {brief(options)}") from None
     detach = np.full(grid_labels.size, -1, dtype=np.int32)
     detach[op.elements] = curve.detach_step
     detach = detach.reshape(grid_labels.shape)
@@ -277,7 +278,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
             curve = run_protocol(op, z, sigma_c, params.h, options, protocol, progress,
                                  dispatch=dispatch)
     except (ConvergenceError, SolverError) as exc:
-        raise type(exc)(f"{exc}; problem: {params}; options: {options}") from None
+        raise type(exc)(f"{exc}; problem: {brief(params)}; options: {brief(options)}") from None
     return labels, op, curve, conv.applications - before + op.refined_applications
 
 
