@@ -29,7 +29,7 @@ EXACT = SolverOptions.exact()  # CG to 1e-8, global cascades: reference results
 
 
 def _retraction(curve) -> tuple[float, float]:
-    """F_ad and W = integral of max(F, 0) dd over the last retraction leg."""
+    """F_ad and W = integral of max(F, 0) dd over the last retraction branch."""
     r = curve.retraction
     return float(curve.force[r].max()), positive_work(curve.displacement[r], curve.force[r])
 
@@ -280,6 +280,39 @@ def test_reattachment_in_two_cycles(soft_reference):
     assert f2 == pytest.approx(f1, rel=1e-6) and w2 == pytest.approx(w1, rel=1e-6)
     assert loop_energy(curve.displacement, curve.force) > loop_energy(
         single.displacement, single.force)  # two pull-offs dissipate more than one
+
+
+def test_retraction_split_by_waypoints_is_one_branch():
+    """F_ad and W are taken over the retraction branch, not its last waypoint leg.
+
+    A retraction that stops at a displacement or a force on its way out
+    follows the same path as one that does not: the same F_ad and W (it
+    once kept only the last leg: W/W_K 3.28 instead of 42.59, measured
+    against an independent dense solver that gives 42.59).  A protocol
+    that ends in an approach takes them over its last retraction, not over
+    the approach after it (W once came out as 0).
+    """
+    heights = np.array([0.2, 0.0, -0.1, 0.05, 0.15, -0.2, 0.0, 0.1, -0.05])
+    params = BrushParams("regular", 9, 0.003, 48, heights=heights)
+    load = Waypoint("force", -1.0)
+
+    def pulled(*protocol):
+        ds = simulate(params, EXACT, protocol=protocol)
+        return float(ds.adhesive_force_normalized), float(ds.work_of_separation_normalized), ds
+
+    f, w, _ = pulled(load, Waypoint("separation"))
+    for stop in (Waypoint("displacement", 24.0), Waypoint("displacement", 24.6),
+                 Waypoint("force", 0.2)):
+        f_split, w_split, _ = pulled(load, stop, Waypoint("separation"))
+        # one more recorded point on a straight segment: round-off only
+        assert f_split == pytest.approx(f, rel=1e-12) and w_split == pytest.approx(w, rel=1e-12)
+    f_back, w_back, ds = pulled(load, Waypoint("displacement", 1.5), Waypoint("force", -0.5))
+    branch = ds.retraction.values.astype(bool)
+    legs = ds.branch.values[branch]
+    assert set(legs) == {0, 1} and legs[0] == 0, legs  # the turning point, then leg 1
+    d, force = ds.displacement.values, ds.force_normalized.values
+    assert w_back > 0 and f_back == pytest.approx(force[branch].max(), rel=1e-12)
+    assert np.all(np.diff(d[branch]) > 0)  # the final approach is not in it
 
 
 # --- numerics ---------------------------------------------------------------------------

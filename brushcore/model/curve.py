@@ -444,7 +444,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     Beyond today's variables (same names, units and meaning, now over both
     branches of the loop): per step ``branch`` (waypoint index, -1 at first
     touch), ``direction`` (-1 approach, 0 first touch, +1 retraction) and
-    ``retraction`` (1 on the last retraction leg, where ``adhesive_force``
+    ``retraction`` (1 on the last retraction branch, where ``adhesive_force``
     and ``work_of_separation`` = integral of max(F, 0) dd are taken); per
     pillar (dimension ``pillar``, label order) centre, height, kbar, force
     at F_ad and let-go displacement; scalars ``dissipated_energy`` (the
@@ -525,7 +525,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                          "1", flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
                          flag_meanings="approach first_touch retraction"),
         "retraction": var("step", ret.astype(np.int8),
-                          "step belongs to the last retraction leg", "1",
+                          "step belongs to the last retraction branch", "1",
                           flag_values=np.array([0, 1], dtype=np.int8),
                           flag_meanings="other last_retraction"),
         "attachment_step": var(("y", "x"), on_grid(curve.attach_step, -1, np.int32),

@@ -95,14 +95,16 @@ class ProtocolCurve:
         step at which it attached (-1: never) and the first step without it
         after its last detachment (-1: never detached)
     pillar_force_at_peak : per pillar, force [force] at the largest tensile
-        force of the last retraction leg (load sharing at F_ad)
+        force of the last retraction branch (load sharing at F_ad)
     peak_step : the step of that force
     let_go : per pillar, d [length] at which its last element detached (NaN:
         still attached or never touched)
     attached_at_waypoint : per waypoint, attached elements (operator order)
     attached_at_peak : attached elements at ``peak_step``
-    retraction : per step, whether it belongs to the last retraction leg
-        (its starting point included): F_ad and W are taken over it
+    retraction : per step, whether it belongs to the last retraction branch:
+        the retraction waypoints that follow one another from the last turn
+        out of an approach (included) to the next turn back into one
+        (included) or the end; F_ad and W are taken over it
     events, cg_iterations : counts over the run
     """
 
@@ -494,13 +496,19 @@ class _Engine:
         self._solve_unit()
         self._record()  # first touch: no force
         waypoint_step, at_waypoint = [], []
-        retraction_start = 0
+        # The last retraction branch: the retraction waypoints that follow
+        # one another (a retraction split by a waypoint is one branch), from
+        # the last turn out of an approach to the next turn back into one.
+        retraction, moving = [0, None], START
         for k, wp in enumerate(protocol):
             self.leg = k
             s = self._direction(wp)
-            if s == RETRACT:
-                retraction_start = len(self.rec["d"]) - 1
+            if s == RETRACT and moving != RETRACT:
+                retraction = [len(self.rec["d"]) - 1, None]
                 self.peak = self._no_peak()
+            elif s == APPROACH and moving == RETRACT:
+                retraction[1] = len(self.rec["d"])  # the turning point included
+            moving = s or moving
             while s != 0:
                 self.dir = s
                 t, reached = self._next(s, wp)
@@ -524,8 +532,8 @@ class _Engine:
             waypoint_step.append(len(self.rec["d"]) - 1)
             at_waypoint.append(xp.asarray(op.attached, copy=True))
         r = self.rec
-        retraction = np.zeros(len(r["d"]), dtype=bool)
-        retraction[retraction_start:] = True
+        on_branch = np.zeros(len(r["d"]), dtype=bool)
+        on_branch[retraction[0]:retraction[1]] = True
         f_peak, i_peak, pillar_force, attached_peak = self.peak
         host = be.to_host  # the curve comes back to the host at the end
         return ProtocolCurve(
@@ -537,4 +545,4 @@ class _Engine:
             peak_step=i_peak, let_go=host(self.let_go),
             attached_at_waypoint=tuple(host(a) for a in at_waypoint),
             attached_at_peak=host(attached_peak), events=self.events, cg_iterations=self.cg_iters,
-            retraction=retraction)
+            retraction=on_branch)
