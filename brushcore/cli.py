@@ -278,10 +278,12 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
     for flag, value in (("--pillars", args.pillars), ("--grid", args.grid)):
         if value is None:
             raise _Missing(f"{flag} is required for --layout {args.layout}")
-    return BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
-                       grid=args.grid, phi=args.phi,
-                       layout_file="" if args.layout_file is None else str(args.layout_file),
-                       **common)
+    from brushcore.model.layout import hinted_params
+
+    return hinted_params(
+        lambda grid: BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
+                                 grid=grid, phi=args.phi, layout_file="" if args.layout_file
+                                 is None else str(args.layout_file), **common), args.grid)
 
 
 class _Missing(Exception):

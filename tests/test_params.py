@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
 
 from brushcore import BrushParams, ParameterError, SolverOptions
-from brushcore.model.layout import build_labels
+from brushcore.model.layout import build_labels, hinted_params
 
 
 def test_numpy_scalars_are_accepted_and_normalised():
@@ -51,7 +52,8 @@ RULE = [(2304, 512, True), (256, 512, True), (256, 256, True), (16, 64, True),
 @pytest.mark.parametrize("n_pillars,grid,runs", RULE)
 def test_one_discretisation_rule(n_pillars, grid, runs):
     def check(allow_coarse: bool) -> BrushParams:
-        p = BrushParams("regular", n_pillars, 1.0, grid, allow_coarse=allow_coarse)
+        p = hinted_params(lambda g: BrushParams("regular", n_pillars, 1.0, g,
+                                                allow_coarse=allow_coarse), grid)
         labels = build_labels(p)
         phi = np.count_nonzero(labels >= 0) / labels.size
         assert (p.pillar_radius_elements >= 2 and abs(phi / 0.12 - 1) <= 0.05) == runs
@@ -62,12 +64,31 @@ def test_one_discretisation_rule(n_pillars, grid, runs):
     else:
         with pytest.raises(ParameterError, match="grid") as err:
             check(False)
-        # the suggested grid really passes the radius rule
-        hint = str(err.value)
-        if "grid >= " in hint:
-            suggested = int(hint.split("grid >= ")[1].split()[0])
-            assert BrushParams("regular", n_pillars, 1.0, suggested).pillar_radius_elements >= 2
+        # the suggested grid passes every check, not only the radius rule
+        suggested = int(re.search(r"allowed grid (\d+), the next", str(err.value)).group(1))
+        build_labels(BrushParams("regular", n_pillars, 1.0, suggested))
         check(True)  # explicitly asked for: runs
+
+
+# Grids that the radius rule alone would suggest and the filling factor's check
+# refuses (realised phi is not monotone in the grid): the suggestion runs.
+@pytest.mark.parametrize("args", [
+    dict(layout="regular", n_pillars=16, grid=32, phi=0.05),   # radius: 64, refused
+    dict(layout="regular", n_pillars=16, grid=64, phi=0.05),   # 65 runs, 68 does not
+    dict(layout="random", n_pillars=64, grid=64, shape="square"),  # radius: 82, refused
+    dict(layout="hexagonal", n_pillars=64, grid=40, shape="ellipse", aspect=2.0),
+])
+def test_suggested_grid_runs(args):
+    def make(grid: int) -> BrushParams:
+        return BrushParams(kbar=1.0, **{**args, "grid": grid})
+
+    with pytest.raises(ParameterError, match="grid") as err:
+        build_labels(hinted_params(make, args["grid"]))
+    suggested = int(re.search(r"allowed grid (\d+), the next", str(err.value)).group(1))
+    build_labels(make(suggested))
+    for grid in range(args["grid"] + 1, suggested):  # and no grid between them runs
+        with pytest.raises(ParameterError):
+            build_labels(make(grid))
 
 
 def test_floor_even_when_coarse_is_allowed():

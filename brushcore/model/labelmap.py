@@ -21,16 +21,17 @@ def touching_pillars(labels: np.ndarray, limit: int = 5) -> list[tuple[int, int,
 
     Returns
     -------
-    Up to ``limit`` tuples (p, q, row, column): pillars p < q touch at the
-    element (row, column) of p and its neighbour below or to the right.
+    Up to ``limit`` tuples (p, q, row, column), one per pair: pillars p < q
+    touch at the element (row, column) and its neighbour below or to the
+    right (the first such element of the pair).
     """
-    found: list[tuple[int, int, int, int]] = []
-    for a, b, touch in _edge_neighbours(labels):
-        rows, cols = np.nonzero(touch)
-        for r, c in zip(rows[:limit], cols[:limit]):
-            p, q = sorted((int(a[r, c]), int(b[r, c])))
-            found.append((p, q, int(r), int(c)))
-    return sorted(found)[:limit]
+    parts = [(np.minimum(a[touch], b[touch]), np.maximum(a[touch], b[touch]), *np.nonzero(touch))
+             for a, b, touch in _edge_neighbours(labels)]
+    p, q, rows, cols = (np.concatenate([part[i] for part in parts]) for i in range(4))
+    order = np.lexsort((cols, rows, q, p))  # by pair, then by element
+    p, q, rows, cols = p[order], q[order], rows[order], cols[order]
+    first = np.flatnonzero(np.r_[p.size > 0, (p[1:] != p[:-1]) | (q[1:] != q[:-1])])[:limit]
+    return [(int(p[i]), int(q[i]), int(rows[i]), int(cols[i])) for i in first]
 
 
 def count_touching_pairs(labels: np.ndarray) -> int:

@@ -7,7 +7,7 @@ import jsonschema
 import yaml
 
 from brushcore.model.params import BrushParams, ParameterError
-from brushcore.model.layout import build_labels
+from brushcore.model.layout import build_labels, hinted_params
 from brushcore.numerics.options import SolverOptions
 from brushcore.model.shapes import parse_shape_label, shape_label
 
@@ -109,11 +109,12 @@ def check_cases(config):
             continue
         seen.add((layout, n, seed, grid, phi, rough, shape))
         try:
-            params = BrushParams(
-                layout, n, float(kbar), grid, phi=phi, seed=seed,
-                allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
-                **parse_shape_tag(shape),
-            )
+            params = hinted_params(
+                lambda g: BrushParams(
+                    layout, n, float(kbar), g, phi=phi, seed=seed,
+                    allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
+                    **parse_shape_tag(shape),
+                ), grid)
             build_labels(params)
         except ParameterError as exc:
             fig5 = config["fig5"]
