@@ -140,7 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "file's)")
     sim.add_argument("--phi", type=float, default=0.12, action=_Given,
                      help="filling factor (0, 0.5] (--layout file: the file's)")
-    sim.add_argument("--seed", type=int, default=0, help="seed of the random layout")
+    sim.add_argument("--seed", type=int, default=0, help="seed of the random layout and of drawn heights "
+                     "(--roughness) and stiffnesses (--kbar-spread)")
     sim.add_argument("--min-gap", type=float, default=1.0,
                      help="minimum gap between random pillars [elements of the 512 x 512 "
                           "grid, L/512, on every grid]")
@@ -353,6 +354,11 @@ def _simulate(args: argparse.Namespace) -> int:
           f"events = {ds.attrs['events']}  operator applications = "
           f"{ds.attrs['operator_applications']}  time = {ds.attrs['wall_time_s']:.1f} s  "
           f"-> {args.out}")
+    if "pillars_in_contact_at_preload" in ds:  # an approach ran: say how far it pressed
+        touching = int(ds.pillars_in_contact_at_preload)
+        print(f"{touching} of {params.n_pillars} pillars in contact at the preload"
+              + (" (--preload 0 stops the approach at first touch; give --preload P to press "
+                 "the brush on)" if touching < params.n_pillars and not params.preload else ""))
     return 0
 
 

@@ -164,7 +164,8 @@ def test_version_and_defaults_in_help():
     text = _cli("simulate", "--help").stdout
     assert "(default: 0.12)" in text and "(default: local)" in text
     # zero defaults are defaults too (0 == False once hid them) ...
-    assert re.search(r"--seed SEED\s+seed of the random layout \(default: 0\)", text), text
+    assert re.search(r"--seed SEED\s+seed of the random layout .*\(--kbar-spread\)\s+"
+                     r"\(default: 0\)", text, flags=re.DOTALL), text
     assert re.search(r"--preload PRELOAD\s+[^-]*\(default: 0\.0\)", text), text
     # ... while an on/off switch has no value to show
     assert "(default: True)" not in text and "(default: False)" not in text
@@ -176,6 +177,21 @@ def test_every_run_reports_its_discretisation(tmp_path):
     assert re.search(r"pillar radius 4\.69 elements, phi realised 0\.1\d+ \(requested 0\.12\)",
                      res.stderr), res.stderr
     assert abs(read_curve(tmp_path / "c.nc").attrs["pillar_radius_elements"] - 4.69) < 0.01
+
+
+def test_rough_run_says_how_many_pillars_it_pressed_on(tmp_path):
+    """A rough brush without --preload is pulled off after first touch, one
+    pillar in contact (DESIGN.md's convention): the run says so, and how to press on."""
+    args = ["simulate", "--layout", "regular", "--pillars", "16", "--kbar", "0.01", "--grid",
+            "64", "--roughness", "0.3", "--quiet"]
+    alone = _cli(*args, "--out", str(tmp_path / "a.nc"))
+    assert alone.returncode == 0, alone.stderr
+    touching = int(read_curve(tmp_path / "a.nc").pillars_in_contact_at_preload)
+    assert touching == 1
+    assert (f"1 of 16 pillars in contact at the preload (--preload 0 stops the approach at "
+            f"first touch") in alone.stdout, alone.stdout
+    pressed = _cli(*args, "--preload", "1", "--out", str(tmp_path / "b.nc"))
+    assert "16 of 16 pillars in contact at the preload\n" in pressed.stdout, pressed.stdout
 
 
 def test_run_reports_random_discs_that_touch(tmp_path):

@@ -204,6 +204,22 @@ def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
     assert "square" in fig5.get_suptitle()
 
 
+def test_fig5_of_the_whole_sweep_draws_the_shape_asked_for(shape_sweep, shape_curves) -> None:
+    """Given the sweep as it is on disk (several shapes), Fig. 5 draws the
+    named shape's curve and snapshots (it once drew both shapes' points as
+    one curve beside the discs' snapshots, whatever the title said)."""
+    from brushcore.data import figures
+    from brushcore.data.io import read_curve
+
+    for shape in ("square", "disc"):
+        curve = read_curve(shape_curves[CASES.index(("regular", 1.0, shape))])
+        fig = figures.fig5(shape_sweep, n_pillars=4, kbar=[1.0], shape=shape)
+        d, f = fig.axes[0].lines[0].get_data()
+        np.testing.assert_array_equal(f, curve["force_normalized"].values)
+        image = fig.axes[1].get_images()[0].get_array()
+        np.testing.assert_array_equal(image, curve["contact_snapshot"].values[0] + 1)
+
+
 def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> None:
     """The summary's Fig. 5a row is the brush the config's `fig5` names (layout
     and shape), as the Fig. 5 figure draws it; the paper's value is quoted

@@ -315,6 +315,14 @@ def test_retraction_split_by_waypoints_is_one_branch():
     assert np.all(np.diff(d[branch]) > 0)  # the final approach is not in it
 
 
+def test_empty_protocol_is_refused():
+    """It was an IndexError from deep in the engine."""
+    from brushcore import ParameterError
+
+    with pytest.raises(ParameterError, match=r"^protocol=\[\] is invalid: allowed at least one"):
+        simulate(FLAT, protocol=[])
+
+
 # --- numerics ---------------------------------------------------------------------------
 
 def _soft_blocks(compliance: float, seed: int, detached: float):

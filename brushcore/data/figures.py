@@ -27,7 +27,8 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
-from brushcore.data.aggregate import SHAPE_DIM, finest_grid, shape_slice, snapshots
+from brushcore.data.aggregate import (SHAPE_DIM, finest_grid, flat_slice, shape_slice,
+                                      snapshots)
 from brushcore.data.convergence import (QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
                                         touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
@@ -109,10 +110,13 @@ def fig5(
     Numbered dots on each curve mark the steps of the snapshots to its right
     (red: attached element, grey: detached, white: no pillar): the label map
     itself, so squares, ellipses and lattices show as they were meshed.
-    `shape` (a `shape_label`) only names the pillars in the title: the sweep
-    passed in holds one shape (`brushcore.data.aggregate.shape_slice`).
+    `shape` (a `shape_label`) picks the pillars where the sweep holds
+    several shapes and names them in the title; of a sweep with rough
+    cases the flat brushes are drawn.
     """
-    sweep = finest_grid(sweep)  # one curve per case: the best-resolved one
+    if SHAPE_DIM in sweep.dims:
+        sweep = shape_slice(sweep, shape)
+    sweep = finest_grid(flat_slice(sweep, None))  # one curve per case: the best-resolved one
     cases = [k for k in kbar if _curve(sweep, layout, n_pillars, k, seed) is not None]
     n_snap = int(sweep.sizes.get("snapshot", 0))
     rows = max(len(cases), 1)

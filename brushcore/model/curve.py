@@ -35,7 +35,7 @@ from brushcore.numerics.protocol import (APPROACH, RETRACT, START, ProtocolCurve
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.numerics.pulloff import Progress, PullOffCurve, SolverError, pull_off
 from brushcore.numerics.threads import fft_threads
-from brushcore.validation import brief
+from brushcore.validation import ParameterError, brief
 
 #: How to read dimensional values: the inputs define the unit system.
 UNITS_CONVENTION = ("SI: e_star in Pa, dgamma in J m-2, h in m, so lengths in m, forces in N, "
@@ -367,7 +367,24 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
 
     Signs: d > 0 pulls the brush away, F > 0 is tensile.  Normalised values
     follow the paper (eqs. 20-24) with A the discretised real contact area.
+
+    Parameters
+    ----------
+    params : the brush (geometry, stiffness, heights, preload)
+    options : solver tolerances and switches (default `SolverOptions()`)
+    progress : called as progress(events, attached, total) after each event
+    labels : label map to use instead of the one ``params`` builds
+    protocol : waypoints, normalised (above); None for the default
+    backend : "cpu" or "gpu", overriding ``params.backend``
+
+    Raises
+    ------
+    ParameterError
+        Before any solve, for a layout or discretisation that cannot run,
+        an empty protocol or a missing GPU.
     """
+    if protocol is not None and not len(protocol):
+        raise ParameterError("protocol", list(protocol), "at least one Waypoint")
     if backend is not None:
         params = replace(params, backend=backend)
     resolve_backend(params.backend)  # a missing CuPy or card fails before any work
@@ -460,7 +477,6 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
         waypoints = preload_protocol(inputs.preload)
     else:
         if params.preload != 0:
-            from brushcore.validation import ParameterError
             raise ParameterError("preload", params.preload,
                                  "0 when a protocol is given (its first waypoint is the load)")
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))

@@ -60,7 +60,8 @@ def equivalent_radius(area: float) -> float:
 
 
 def force_scale(area: float, e_star: float, dgamma: float) -> float:
-    """Kendall force of the compact punch of area A, the paper's eq. 20 scale."""
+    """Kendall force sqrt(8 pi E* dgamma a0^3) of the compact punch of area A
+    (a0 = sqrt(A / pi)), the paper's eq. 20 scale F_K [force]."""
     return kendall_force(equivalent_radius(area), e_star, dgamma)
 
 

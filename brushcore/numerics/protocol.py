@@ -52,11 +52,15 @@ class Waypoint:
 
     Parameters
     ----------
-    kind : "force" (reach the total force ``value`` [force], tensile
-        positive, so a preload P is ``Waypoint("force", -P)``),
-        "displacement" (reach d = ``value`` [length]) or "separation"
-        (retract until no element is attached; ``value`` unused).
-    value : the target [force or length]
+    kind : "force" (reach the total force ``value``, tensile positive, so
+        a preload P is ``Waypoint("force", -P)``), "displacement" (reach
+        d = ``value``) or "separation" (retract until no element is
+        attached; ``value`` unused).
+    value : the target, in the units of whoever reads it: normalised in
+        `brushcore.simulate(..., protocol=...)` (forces in F_K,
+        displacements in d_K, as the curve's ``*_normalized`` variables),
+        dimensional [force or length] in this module's engine
+        (`run_protocol`, `preload_protocol`)
 
     The direction follows from the state: towards the target.  A force
     target that cannot be reached (the brush lets go first on retraction)
