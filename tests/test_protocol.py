@@ -315,6 +315,25 @@ def test_retraction_split_by_waypoints_is_one_branch():
     assert np.all(np.diff(d[branch]) > 0)  # the final approach is not in it
 
 
+def test_protocol_that_never_retracts_reports_no_pull_off(tmp_path):
+    """An approach alone has no adhesive force or work of separation: NaN, not
+    the largest force of the approach (it once reported 0, the first touch's)."""
+    from brushcore.data.io import read_curve, write_curve
+
+    heights = np.array([0.2, 0.0, -0.1, 0.05, 0.15, -0.2, 0.0, 0.1, -0.05])
+    ds = simulate(BrushParams("regular", 9, 0.003, 48, heights=heights),
+                  protocol=[Waypoint("force", -1.0)])
+    assert not ds.retraction.values.any()
+    for name in ("adhesive_force_normalized", "work_of_separation_normalized",
+                 "displacement_at_adhesive_force"):
+        assert np.isnan(float(ds[name])), name
+    assert np.isnan(ds.pillar_force_at_adhesive_force.values).all()
+    assert int(ds.snapshot_step.values[-1]) == -1
+    assert float(ds.force_normalized.values[-1]) == pytest.approx(-1.0, rel=1e-6)
+    write_curve(ds, tmp_path / "approach.nc")
+    assert np.isnan(float(read_curve(tmp_path / "approach.nc").adhesive_force))
+
+
 def test_empty_protocol_is_refused():
     """It was an IndexError from deep in the engine."""
     from brushcore import ParameterError

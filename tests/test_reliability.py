@@ -58,9 +58,10 @@ def copy_repo(dest: Path) -> Path:
     return dest
 
 
-def snakemake(workdir: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+def snakemake(workdir: Path, *args: str, timeout: float = 300,
+              env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     return subprocess.run([*SNAKEMAKE, *args], cwd=workdir, capture_output=True, text=True,
-                          timeout=timeout)
+                          timeout=timeout, env=env)
 
 
 def output(proc: subprocess.CompletedProcess) -> str:
@@ -468,19 +469,41 @@ def test_failed_write_leaves_neither_file_nor_temporary(cli_curves: list[Path], 
         f"a failed write left files: {sorted(p.name for p in tmp_path.iterdir())}")
 
 
+#: Makes every random brush's solve fail in the jobs (a `sitecustomize` on
+#: PYTHONPATH): whatever can be checked is checked at plan time, so a job
+#: that fails is one whose solve fails.
+FAILING_RANDOM_SOLVES = textwrap.dedent("""
+    import brushcore.model.curve as curve
+    from brushcore.numerics.pulloff import SolverError
+
+    solve = curve.run
+
+    def fail_random(params, *args, **kwargs):
+        if params.layout == "random":
+            raise SolverError("injected failure of a random brush's solve")
+        return solve(params, *args, **kwargs)
+
+    curve.run = fail_random
+""")
+
+
 def test_failing_job_fails_the_sweep_loudly(tmp_path: Path) -> None:
-    """A job whose layout cannot be built: Snakemake fails, names it, writes no curve for it."""
+    """A job whose solve fails: Snakemake fails, names it, writes no curve for it."""
     work = copy_repo(tmp_path / "repo")
+    hook = tmp_path / "hook"
+    hook.mkdir()
+    (hook / "sitecustomize.py").write_text(FAILING_RANDOM_SOLVES)
     config = work / "config/unfit.yaml"
-    # 40 discs of radius 4 elements pass every plan-time check but cannot be packed
-    config.write_text("grid: 64\nphi: 0.5\nkbar: [1.0]\nregular: [4]\nrandom: [40]\n"
+    config.write_text("grid: 64\nkbar: [1.0]\nregular: [4]\nrandom: [4]\n"
                       "seeds: [0]\nfig5: {n_pillars: 4, kbar: [1.0]}\nthreads: 1\n")
-    proc = snakemake(work, "--cores", "2", "--configfile", "config/unfit.yaml")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(hook), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/unfit.yaml", env=env)
     text = output(proc)
-    assert proc.returncode != 0, f"the sweep succeeded with an unfit layout:\n{text[-4000:]}"
-    assert "Error in rule simulate" in text and "N40_kbar1.0_seed0" in text, text[-4000:]
-    log = (work / "logs/simulate/random/N40_kbar1.0_seed0_grid64_phi0.5.log").read_text()
-    assert "n_pillars=40" in log and "ParameterError" in log, log
+    assert proc.returncode != 0, f"the sweep succeeded with a failing solve:\n{text[-4000:]}"
+    assert "Error in rule simulate" in text and "N4_kbar1.0_seed0" in text, text[-4000:]
+    log = (work / "logs/simulate/random/N4_kbar1.0_seed0_grid64_phi0.12.log").read_text()
+    assert "SolverError" in log and "injected failure" in log, log
     assert not (work / "results/curves/random").exists() or not list(
         (work / "results/curves/random").iterdir()), "the failed job left files"
     assert not (work / "results/sweep.nc").exists(), "sweep.nc written despite a failed job"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, replace
@@ -490,9 +491,11 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     ws = theory.work_scale(area_total, dg)
     d, f = curve.displacement, curve.force
     ret = curve.retraction
-    i_max = int(np.flatnonzero(ret)[np.argmax(f[ret])])
-    f_ad = float(f[i_max])
-    work = positive_work(d[ret], f[ret])
+    if ret.any():
+        i_max = int(np.flatnonzero(ret)[np.argmax(f[ret])])
+        f_ad, d_ad, work = float(f[i_max]), float(d[i_max]), positive_work(d[ret], f[ret])
+    else:  # a protocol that never retracts: no pull-off to report
+        i_max, f_ad, d_ad, work = -1, math.nan, math.nan, math.nan
     dissipated = loop_energy(d, f)
     area = curve.attached_elements * h * h
     n_pillars = op.n_pillars
@@ -518,7 +521,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     in_contact = int(np.count_nonzero(np.bincount(
         pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
     pillar_force = curve.pillar_force_at_peak
-    if pillar_force is None:
+    if pillar_force is None or i_max < 0:
         pillar_force = np.full(n_pillars, np.nan)
 
     var = _var
@@ -572,7 +575,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
         "adhesive_force": var((), f_ad, "adhesive force (maximum tensile force of the "
                               "last retraction)", "N"),
         "adhesive_force_normalized": var((), f_ad / fs, "F_ad / F_K", "1"),
-        "displacement_at_adhesive_force": var((), float(d[i_max]), "d at the adhesive force",
+        "displacement_at_adhesive_force": var((), d_ad, "d at the adhesive force",
                                               "m"),
         "work_of_separation": var((), work, "work of separation, integral of max(F, 0) dd "
                                   "over the last retraction", "J"),

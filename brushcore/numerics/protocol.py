@@ -503,7 +503,7 @@ class _Engine:
         # The last retraction branch: the retraction waypoints that follow
         # one another (a retraction split by a waypoint is one branch), from
         # the last turn out of an approach to the next turn back into one.
-        retraction, moving = [0, None], START
+        retraction, moving = [0, 0], START  # empty until a retraction starts
         for k, wp in enumerate(protocol):
             self.leg = k
             s = self._direction(wp)
