@@ -126,12 +126,6 @@ def series_stiffness(spring: float | np.ndarray, contact: float) -> float | np.n
     return 1.0 / (1.0 / np.asarray(spring, dtype=float) + 1.0 / contact)
 
 
-def displacement_unit(area: float, e_star: float, dgamma: float) -> float:
-    """Unit of heights and roughness, d_K = sqrt(2 pi dgamma a0 / E*) [length]
-    (the same as `displacement_scale`, named for its use with heights)."""
-    return displacement_scale(area, e_star, dgamma)
-
-
 def foundation_pull_off(d0: np.ndarray, k_eff: np.ndarray, f_c: float | np.ndarray
                         ) -> float:
     """Adhesive force of independent pillars, all attached [force].
