@@ -321,7 +321,9 @@ def build_labels(params: BrushParams) -> np.ndarray:
     except ParameterError as exc:
         if params.layout == "file":
             raise
-        raise grid_hint(exc, lambda grid: replace(params, grid=grid), params.grid) from None
+        # a gap map fits one grid only, and the label map does not depend on it
+        raise grid_hint(exc, lambda grid: replace(params, grid=grid, gap_map=None),
+                        params.grid) from None
 
 
 def _checked_labels(params: BrushParams) -> np.ndarray:
