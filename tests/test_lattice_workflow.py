@@ -220,6 +220,33 @@ def test_fig5_of_the_whole_sweep_draws_the_shape_asked_for(shape_sweep, shape_cu
         np.testing.assert_array_equal(image, curve["contact_snapshot"].values[0] + 1)
 
 
+def test_figs_6_and_8_draw_rigid_pillars(tmp_path: Path) -> None:
+    """kbar = inf is drawn one decade right of the stiffest finite kbar, under
+    a "rigid" tick (it fell off the log axis, and Fig. 8 of rigid runs alone
+    crashed)."""
+    from brushcore import BrushParams, simulate
+    from brushcore.data import figures
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import write_curve
+
+    paths = []
+    for kbar in (math.inf, 1e-2):
+        paths.append(tmp_path / f"k{kbar}.nc")
+        write_curve(simulate(BrushParams("regular", 4, kbar, 32)), paths[-1])
+    for files, x_rigid in ((paths, 0.1), (paths[:1], 1.0)):
+        sweep = build_sweep(files)
+        for draw, name in ((figures.fig6, "adhesive_force_normalized"),
+                           (figures.fig8, "work_of_separation_normalized")):
+            fig = draw(sweep)
+            ax = fig.axes[0]
+            xs = np.concatenate([line.get_xdata() for line in ax.lines if len(line.get_xdata())])
+            ys = np.concatenate([line.get_ydata() for line in ax.lines if len(line.get_xdata())])
+            rigid = float(sweep[name].sel(kbar=math.inf).squeeze())
+            assert np.any((xs == x_rigid) & np.isclose(ys, rigid, rtol=1e-12)), (draw, xs, ys)
+            assert "rigid" in [t.get_text() for t in ax.get_xticklabels()]
+            figures.save(fig, tmp_path / f"{draw.__name__}.png")
+
+
 def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> None:
     """The summary's Fig. 5a row is the brush the config's `fig5` names (layout
     and shape), as the Fig. 5 figure draws it; the paper's value is quoted

@@ -171,9 +171,36 @@ def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, 
     return [(n, s) for n, s in series if s.size]
 
 
-def _kbar_axes(ax, title: str, ylabel: str) -> None:
-    """Log kbar axis, panel title and labels shared by Figs. 6 and 8."""
+def _rigid_x(kbars: np.ndarray) -> float:
+    """Where rigid pillars (kbar = inf) are drawn on a log kbar axis: one
+    decade right of the stiffest finite kbar (at 1 when none is finite)."""
+    finite = kbars[np.isfinite(kbars)]
+    return float(finite.max()) * 10.0 if finite.size else 1.0
+
+
+def _kbar_x(kbar, x_inf: float) -> np.ndarray:
+    """kbar values as x positions: rigid ones at ``x_inf``."""
+    k = np.asarray(kbar, dtype=float)
+    return np.where(np.isinf(k), x_inf, k)
+
+
+def _rigid_ticks(ax, kbars: np.ndarray, x_inf: float) -> None:
+    """Decade ticks over the finite kbar, and "rigid" at ``x_inf`` where rigid ran."""
+    if not np.isinf(kbars).any():
+        return
+    finite = kbars[np.isfinite(kbars)]
+    ticks = ([10.0**e for e in range(int(np.floor(np.log10(finite.min()))),
+                                     int(np.ceil(np.log10(finite.max()))) + 1)]
+             if finite.size else [])
+    ax.set_xticks([*ticks, x_inf], [f"{t:g}" for t in ticks] + ["rigid"])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+
+
+def _kbar_axes(ax, title: str, ylabel: str, kbars: np.ndarray, x_inf: float) -> None:
+    """Log kbar axis (rigid pillars at ``x_inf``), panel title and labels
+    shared by Figs. 6 and 8."""
     ax.set_xscale("log")
+    _rigid_ticks(ax, kbars, x_inf)
     ax.set_title(title, loc="left")
     ax.set_xlabel(K_LABEL)
     ax.set_ylabel(ylabel)
@@ -184,20 +211,24 @@ def fig6(sweep: xr.Dataset) -> Figure:
 
     The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
     punch F_ad = 1 is dotted.  With several seeds the bars span min to max.
+    Rigid pillars (kbar = inf) are drawn one decade right of the stiffest
+    finite kbar.
     """
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    x_inf = _rigid_x(kbars)
     for index, (layout, ax) in enumerate(axes.items()):
         brushes = _brush_series(sweep, "adhesive_force_normalized", layout)
         for n, series in brushes:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
             runs = runs.sel(kbar=series.kbar)
             low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
-            ax.errorbar(series.kbar, series, yerr=[series - low, high - series], marker="o",
-                        ms=4, capsize=2, color=colors[n], label=f"N = {n}")
-        _kbar_axes(ax, _panel_title(index, layout), FAD_LABEL)
+            ax.errorbar(_kbar_x(series.kbar, x_inf), series, yerr=[series - low, high - series],
+                        marker="o", ms=4, capsize=2, color=colors[n], label=f"N = {n}")
+        _kbar_axes(ax, _panel_title(index, layout), FAD_LABEL, kbars, x_inf)
         if not brushes:
             _no_data(ax, f"no {layout} runs")
             continue
@@ -263,23 +294,28 @@ def fig8(sweep: xr.Dataset) -> Figure:
 
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
     (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch.
+    Rigid pillars (kbar = inf) are drawn one decade right of the stiffest
+    finite kbar.
     """
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
     phi = _phi(sweep)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    x_inf = _rigid_x(kbars)
     for index, (layout, ax) in enumerate(axes.items()):
         brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
         for n, series in brushes:
-            ax.plot(series.kbar, series, "o-", ms=4, color=colors[n], label=f"N = {n}")
+            ax.plot(_kbar_x(series.kbar, x_inf), series, "o-", ms=4, color=colors[n],
+                    label=f"N = {n}")
             if math.isfinite(phi):
-                # Only where the springs' energy matters; it falls as 1/kbar.
+                # Only where the springs' energy matters; it falls as 1/kbar (0 if rigid).
                 kbar = series.kbar.values
                 soft = np.asarray(theory.soft_work(n, phi, kbar))
                 keep = soft >= SOFT_WORK_FLOOR
                 ax.plot(kbar[keep], soft[keep], "--", lw=1, color=colors[n])
         ax.set_yscale("log")
-        _kbar_axes(ax, _panel_title(index, layout), W_LABEL)
+        _kbar_axes(ax, _panel_title(index, layout), W_LABEL, kbars, x_inf)
         if not brushes:
             _no_data(ax, f"no {layout} runs")
             continue
@@ -335,12 +371,10 @@ def lattices(sweep: xr.Dataset) -> Figure:
         return fig
     phi = _phi(sweep)
     kbars = np.asarray(sweep.kbar.values, dtype=float)
-    finite = kbars[np.isfinite(kbars)]
-    x_inf = finite.max() * 10.0 if finite.size else 1.0  # where rigid pillars are drawn
+    x_inf = _rigid_x(kbars)
     for index, (ax, (n, brushes)) in enumerate(zip(axes, compared.items())):
         for layout, shape, runs in brushes:
-            k = np.asarray(runs.kbar.values, dtype=float)
-            x = np.where(np.isinf(k), x_inf, k)
+            x = _kbar_x(runs.kbar.values, x_inf)
             mean = runs.mean("seed", skipna=True).values
             low, high = runs.min("seed", skipna=True).values, runs.max("seed", skipna=True).values
             marker, line = SHAPE_MARKERS.get(parse_shape_label(shape)["shape"], ("^", "-."))
@@ -356,10 +390,7 @@ def lattices(sweep: xr.Dataset) -> Figure:
                            lw=0.8, label=r"hexagonal: $(\varphi/\mathrm{fill})^{-1/4}$")
         ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8, label=r"soft limit $N^{1/4}$")
         ax.set_xscale("log")
-        if np.isinf(kbars).any() and finite.size:
-            ticks = [10.0**e for e in range(int(np.floor(np.log10(finite.min()))),
-                                            int(np.ceil(np.log10(finite.max()))) + 1)]
-            ax.set_xticks([*ticks, x_inf], [f"{t:g}" for t in ticks] + ["rigid"])
+        _rigid_ticks(ax, kbars, x_inf)
         ax.set_title(f"({chr(ord('a') + index)}) N = {n}", loc="left")
         ax.set_xlabel(K_LABEL)
         ax.set_ylabel(FAD_LABEL)
