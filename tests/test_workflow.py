@@ -340,6 +340,24 @@ def test_curve_names_carry_grid_and_phi(repo_copy: Path, tmp_path: Path) -> None
     assert not names[64, 0.12] & names[96, 0.12] and not names[64, 0.12] & names[64, 0.2]
 
 
+def test_aggregation_refuses_a_file_holding_another_case(test_run: Path) -> None:
+    """A curve copied over another's name would enter the sweep as its own case
+    and leave the named one NaN: the workflow says which case each file must hold."""
+    from brushcore.data.aggregate import AggregationError, CaseKey, build_sweep, case_key
+    from brushcore.data.io import read_curve
+
+    good = sorted((test_run / "results/curves").rglob("*.nc"))[:2]
+    named = [(case_key(c), float(c.attrs["phi"])) for c in map(read_curve, good)]
+    sweep = build_sweep(good, expected=named)  # each as named: fine
+    assert int(sweep["adhesive_force_normalized"].notnull().sum()) == 2
+    with pytest.raises(AggregationError, match=rf"curve file {good[0]} holds layout=.* not "
+                                               r"the case its name stands for \(layout="):
+        build_sweep(good, expected=named[::-1])
+    moved = CaseKey(**{**vars(named[0][0]), "grid": named[0][0].grid + 1})
+    with pytest.raises(AggregationError, match="not the case its name stands for"):
+        build_sweep(good[:1], expected=[(moved, named[0][1])])
+
+
 def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> None:
     from brushcore.data.aggregate import AggregationError, build_sweep
 

@@ -32,6 +32,7 @@ from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID
 from brushcore.model.shapes import shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
+from brushcore.validation import brief
 
 #: Order of the layout coordinate (others follow, sorted).
 LAYOUTS = ("regular", "hexagonal", "random")
@@ -141,24 +142,38 @@ def file_sha256(path: str | Path) -> str:
     return digest.hexdigest()
 
 
-def load_curves(paths: Iterable[str | Path]) -> dict[CaseKey, tuple[Path, xr.Dataset]]:
+def load_curves(paths: Iterable[str | Path],
+                expected: Sequence[tuple[CaseKey, float]] | None = None
+                ) -> dict[CaseKey, tuple[Path, xr.Dataset]]:
     """Read every curve file and index it by its case.
+
+    Parameters
+    ----------
+    paths : curve files
+    expected : per path, the case and phi it must hold (the workflow's,
+        from the file's name), or None to take each file's own
 
     Raises
     ------
     AggregationError
-        If a file cannot be read (the message names it), two files hold the
-        same case (the message names both), or a random layout off the
-        512^2 grid was drawn under the rule before 2026-12-04 (`_check_brush`).
+        If a file cannot be read (the message names it), holds another case
+        than ``expected`` says, two files hold the same case (the message
+        names both), or a random layout off the 512^2 grid was drawn under
+        the rule before 2026-12-04 (`_check_brush`).
     """
     curves: dict[CaseKey, tuple[Path, xr.Dataset]] = {}
-    for raw in paths:
+    paths = list(paths)
+    if expected is not None and len(expected) != len(paths):
+        raise ValueError(f"{len(expected)} expected cases for {len(paths)} curve files")
+    for i, raw in enumerate(paths):
         path = Path(raw)
         try:
             curve = read_curve(path)
             key = case_key(curve)
         except Exception as exc:  # CurveFileError, missing attribute, bad value
             raise AggregationError(f"cannot aggregate curve file {path}: {exc}") from exc
+        if expected is not None:
+            _check_named_case(path, key, float(curve.attrs["phi"]), *expected[i])
         _check_brush(path, curve, key)
         if key in curves:
             raise AggregationError(
@@ -168,6 +183,17 @@ def load_curves(paths: Iterable[str | Path]) -> dict[CaseKey, tuple[Path, xr.Dat
     if not curves:
         raise AggregationError("no curve files to aggregate")
     return curves
+
+
+def _check_named_case(path: Path, key: CaseKey, phi: float, case: CaseKey,
+                      case_phi: float) -> None:
+    """Refuse a file that holds another case than the one its name stands for
+    (a curve copied or moved by hand would otherwise enter the sweep as its
+    own case, and the case asked for would be NaN)."""
+    if (key, phi) != (case, case_phi):
+        raise AggregationError(
+            f"curve file {path} holds {brief(key)}, phi={phi!r}, not the case its name "
+            f"stands for ({brief(case)}, phi={case_phi!r}): delete it and rerun")
 
 
 def _check_brush(path: Path, curve: xr.Dataset, key: CaseKey) -> None:
@@ -254,6 +280,7 @@ def build_sweep(
     *,
     keep_snapshots: Iterable[tuple[str, int]] = (("regular", 256),),
     all_snapshots_below_mb: float = 64.0,
+    expected: Sequence[tuple[CaseKey, float]] | None = None,
 ) -> xr.Dataset:
     """Aggregate curve files into one sweep dataset.
 
@@ -262,6 +289,7 @@ def build_sweep(
     paths : curve files written by `brushcore.data.io.write_curve`.
     keep_snapshots : (layout, n_pillars) whose contact snapshots are kept.
     all_snapshots_below_mb : keep all snapshots when they total less [MiB].
+    expected : per path, the (case, phi) it must hold (`load_curves`).
 
     Returns
     -------
@@ -275,7 +303,7 @@ def build_sweep(
     AggregationError
         Naming the offending file when one cannot be read or cases clash.
     """
-    curves = load_curves(paths)
+    curves = load_curves(paths, expected)
     phi = _common_attr(curves, "phi")
     coords = _case_coords(curves)
     dims = case_dims(curves)

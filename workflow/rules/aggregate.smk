@@ -13,6 +13,7 @@ rule aggregate:
         runtime=30,
     params:
         keep_snapshots=[(config["fig5"]["layout"], config["fig5"]["n_pillars"])],
+        cases=[named_case(case) for case in sweep_cases(config)],  # as curve_files lists them
     script:
         "../scripts/aggregate.py"
 

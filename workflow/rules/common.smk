@@ -264,6 +264,16 @@ def curve_files(config):
     return [curve_file(*case) for case in sweep_cases(config)]
 
 
+def named_case(case):
+    """What the curve file of a case must record: the fields of
+    `brushcore.data.aggregate.CaseKey`, then phi (plain values, for the script)."""
+    layout, n_pillars, kbar, seed, grid, phi, rough, shape = case
+    rough = parse_rough_tag(rough)
+    return [layout, int(n_pillars), float(kbar), int(seed), int(grid),
+            *(rough.get(name, 0.0) for name in ("roughness", "preload", "kbar_spread")),
+            shape[1:] if shape else "disc", float(phi)]
+
+
 def simulate_mem_mb(wildcards, attempt):
     """Memory of one simulation [MB], doubled on a retry.
 
