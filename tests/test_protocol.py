@@ -604,6 +604,13 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert flat.adhesive_force.dims == ("layout", "n_pillars", "kbar", "seed", "grid")
     assert float(flat.adhesive_force.squeeze()) == pytest.approx(
         float(build_sweep(files[:1]).adhesive_force.squeeze()), rel=1e-12)
+    # a study that always presses on: its smallest preload stands for the flat brush,
+    # whose pull-off does not depend on it (the quadrant's CG tolerance apart)
+    pressed = flat_slice(build_sweep(files[1:], keep_snapshots=[("regular", 4)]))
+    for name in ("adhesive_force", "work_of_separation"):
+        assert float(pressed[name].squeeze()) == pytest.approx(float(flat[name].squeeze()),
+                                                               rel=1e-5), name
+    assert pressed.sizes["case"] == 1
     # the rough figures draw this sweep (grid dimension included): one point per roughness
     from brushcore.data import figures
 

@@ -513,22 +513,29 @@ def write_sweep(sweep: xr.Dataset, path: str | Path) -> None:
 
 
 def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
-    """The flat brushes of a sweep (roughness, preload, kbar_spread all 0) of one shape.
+    """The flat brushes of a sweep (roughness and kbar_spread 0) of one shape.
 
     A sweep of flat brushes is returned as it is; in one with rough cases the
     ROUGH_DIMS are selected at 0 (NaN everywhere when no flat case ran), and
     the pillar shape at `shape` (`shape_slice`), so that the paper's figures
     and summary see today's four dimensions.  ``shape=None`` keeps every shape.
+    Where no run was at preload 0 the smallest preload stands for it: a flat
+    brush pulls off as from full contact whatever the preload (within CG's
+    tolerance), so a rough study that always presses on still has its flat
+    brushes.
     """
     sweep = shape_slice(sweep, shape)
     if not set(ROUGH_DIMS) & set(sweep.dims):
         return sweep
-    flat = sweep.reindex({d: [0.0] for d in ROUGH_DIMS}).isel({d: 0 for d in ROUGH_DIMS})
+    at = {d: 0.0 for d in ROUGH_DIMS}
+    if "preload" in sweep.dims and 0.0 not in sweep["preload"].values:
+        at["preload"] = float(sweep["preload"].min())
+    flat = sweep.reindex({d: [v] for d, v in at.items()}).isel({d: 0 for d in ROUGH_DIMS})
     flat = flat.drop_vars(list(ROUGH_DIMS))
-    case_vars = [f"case_{d}" for d in ROUGH_DIMS if f"case_{d}" in flat.variables]
+    case_vars = [d for d in ROUGH_DIMS if f"case_{d}" in flat.variables]
     if case_vars:  # keep the snapshots of flat cases only
-        keep = np.logical_and.reduce([flat[v].values == 0 for v in case_vars])
-        flat = flat.isel(case=np.flatnonzero(keep)).drop_vars(case_vars)
+        keep = np.logical_and.reduce([flat[f"case_{d}"].values == at[d] for d in case_vars])
+        flat = flat.isel(case=np.flatnonzero(keep)).drop_vars([f"case_{d}" for d in case_vars])
     return flat
 
 
