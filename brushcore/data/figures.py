@@ -455,6 +455,18 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     return fig
 
 
+def _no_false_zoom(ax, span: float = 0.05) -> None:
+    """Keep a y axis from magnifying differences below ``span`` of its values
+    (a flat brush's F_ad at two preloads differs by CG's 1e-7, which
+    matplotlib's autoscale and offset label drew as a steep drop)."""
+    lo, hi = ax.get_ylim()
+    scale = max(abs(lo), abs(hi))
+    if hi - lo < span * scale:
+        middle = 0.5 * (lo + hi)
+        ax.set_ylim(middle - 0.5 * span * scale, middle + 0.5 * span * scale)
+    ax.ticklabel_format(axis="y", useOffset=False)
+
+
 def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
                   ) -> Figure:
     """Adhesive force against preload per kbar, one panel per roughness (issue 11)."""
@@ -477,6 +489,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
         ax.set_title(f"roughness {rough:g} " + r"$d_K$", fontsize=9)
         ax.set_xlabel(r"preload [$F_K$]")
         ax.set_ylabel(FAD_LABEL)
+        _no_false_zoom(ax)
         ax.legend(fontsize=7)
     fig.suptitle(f"Preload brings adhesion back: rough {layout} brush, N = {n_pillars}")
     return fig
