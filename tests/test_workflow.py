@@ -165,6 +165,16 @@ def test_second_run_does_nothing(test_run: Path) -> None:
     assert "Nothing to be done" in output(proc), output(proc)
 
 
+def test_keys_that_change_no_curve_rerun_nothing(test_run: Path, tmp_path: Path) -> None:
+    """allow_coarse and backend decide whether and where a case runs, not its
+    curve: setting them plans no simulation over a finished sweep."""
+    config = tmp_path / "same.yaml"
+    config.write_text(yaml.safe_dump({"allow_coarse": True, "backend": "cpu"}))
+    proc = snakemake(test_run, "-n", "--configfile", "config/test.yaml", str(config))
+    assert proc.returncode == 0, output(proc)
+    assert "Nothing to be done" in output(proc), output(proc)
+
+
 def test_report(test_run: Path) -> None:
     proc = snakemake(test_run, "--configfile", "config/test.yaml", "--report", "report.html")
     assert proc.returncode == 0, output(proc)

@@ -25,7 +25,9 @@ rule simulate:
         solver=config["solver"],
         rough=lambda wildcards: parse_rough_tag(wildcards.rough),
         shape=lambda wildcards: parse_shape_tag(wildcards.shape),
-        allow_coarse=config["allow_coarse"],
-        backend=config["backend"],
+    # allow_coarse and backend are read from the config by the script, not
+    # passed as params: they change no curve (a coarse case runs the same
+    # once allowed; a GPU curve is a CPU one within CG's tolerance), so a
+    # change must not rerun the finished ones.
     script:
         "../scripts/simulate.py"

@@ -25,8 +25,8 @@ def main(smk) -> None:
         grid=int(w.grid),
         phi=float(w.phi),
         seed=int(w.seed),
-        allow_coarse=bool(smk.params.allow_coarse),
-        backend=smk.params.backend,
+        allow_coarse=bool(smk.config["allow_coarse"]),
+        backend=smk.config["backend"],
         **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
