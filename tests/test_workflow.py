@@ -282,6 +282,8 @@ def test_lint(repo_copy: Path) -> None:
         ({"grid_by_n": [{"n_pillars": 16, "grid": 16}]},
          r"config: grid_by_n.grid = 16 is invalid .*allowed grid_by_n.grid 41, the next "),
         ({"colour": "red"}, "config key 'colour' is unknown"),
+        ({"grid": 64.5}, "config key 'grid': 64.5 fits none of its forms: 64.5 is not of type "
+                         "'integer'; 64.5 is not of type 'array'"),
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),
         ({"solver": {"rtoll": 1e-5}}, "config key 'solver.rtoll' is unknown; did you mean"),
         ({"regular": [4, 10]}, "config: regular = 10 is invalid: allowed a perfect square"),

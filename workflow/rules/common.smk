@@ -39,7 +39,13 @@ def check_config(config, schema_path):
         hint = f"; did you mean '{close[0]}'?" if close else f"; known keys: {known}"
         prefix = f"{where}." if where else ""
         raise ConfigError(f"config key '{prefix}{extra[0]}' is unknown{hint}")
-    raise ConfigError(f"config key '{where}': {error.message}")
+    message = error.message
+    if error.validator == "oneOf" and error.context:  # say what each form wanted
+        forms = {}
+        for sub in error.context:
+            forms.setdefault(sub.schema_path[0], sub.message)
+        message = f"{error.instance!r} fits none of its forms: " + "; ".join(forms.values())
+    raise ConfigError(f"config key '{where}': {message}")
 
 
 #: Keys whose values are counts: JSON Schema calls 64.0 an integer, Python does not.
