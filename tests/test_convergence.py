@@ -353,3 +353,36 @@ def test_summary_marks_under_resolved():
     }, coords=coords)
     row = _resolution_row(sweep, "regular", 2304)
     assert row.value == "2.08" and "UNDER-RESOLVED" in row.note and "grid 512" in row.note
+
+
+def test_summary_quotes_the_paper_only_where_it_applies():
+    """The paper's numbers stand beside its own brushes, in its rigid range
+    (kbar > 1) and on a soft plateau that the sweep reached; otherwise the
+    row says why not, and a brush off its plateau stays out of the N^(1/4)
+    fit (synthetic sweep: a paper brush on its plateau, N = 100 off it, and
+    no kbar above 1)."""
+    from brushcore.data.summary import headline_rows
+
+    forces = [[[2.40], [2.39], [1.80]],   # N = 64: plateau within 0.4 %
+              [[3.00], [2.50], [1.81]]]   # N = 100: still rising at the softest kbar
+    sweep = xr.Dataset(
+        {"adhesive_force_normalized": (("layout", "n_pillars", "kbar", "seed"), [forces])},
+        coords={"layout": ["regular"], "n_pillars": [64, 100], "kbar": [1e-4, 1e-3, 1.0],
+                "seed": [0]}, attrs={"phi": 0.12})
+    rows = {(r.quantity.split(" (")[0], r.n_pillars): r for r in headline_rows(sweep)}
+    for n in ("64", "100"):
+        rigid = rows["F_ad at the stiffest kbar", n]
+        assert rigid.paper == "" and rigid.note.startswith("NOT RIGID: the stiffest kbar run "
+                                                           "is 1,"), rigid
+    on, off = (rows["N^1/4 / F_ad on the soft plateau", n] for n in ("64", "100"))
+    assert (on.paper, on.note) == ("1.2-1.3", "Fig. 7"), on
+    assert off.paper == "" and off.note.startswith("NOT ON THE PLATEAU"), off
+    fit = rows["N^1/4 / F_ad, fit over all N", ""]
+    assert fit.value == f"{64 ** 0.25 / 2.40:.3g}", fit  # N = 64 alone
+    assert "1 of 2 brushes on the plateau" in fit.note, fit
+    onset = rows["kbar where the soft plateau is reached", "100"]
+    assert onset.value == "n/a", onset
+    from brushcore.data import figures
+
+    labels = figures.fig7(sweep).axes[0].get_legend_handles_labels()[1]
+    assert "not on a plateau (not fitted)" in labels, labels

@@ -262,7 +262,10 @@ def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> Non
         row = headline_rows(shape_sweep, fig5_layout=layout, fig5_n_pillars=4, fig5_kbar=kbar,
                             fig5_shape=shape)[0]
         assert (row.layout, row.value) == (layout, force(layout, kbar, shape)), row
-        assert (row.paper == "~1.8") == (layout == "regular" and shape == "disc"), row
+        assert row.paper == "" and "16 x 16 discs at kbar 0.455" in row.note, row
+    # the paper's ~1.8 stands beside its own brush only: 16 x 16 regular discs at 0.455
+    row = headline_rows(shape_sweep, fig5_n_pillars=256, fig5_kbar=0.455)[0]
+    assert (row.value, row.paper) == ("n/a", "~1.8"), row
 
 
 def test_snapshots_pick_the_shape_asked_for(shape_sweep) -> None:

@@ -31,7 +31,7 @@ from brushcore.data.aggregate import (SHAPE_DIM, finest_grid, flat_slice, shape_
                                       snapshots)
 from brushcore.data.convergence import (QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
                                         touching_grids)
-from brushcore.data.summary import fit_soft_prefactor, seed_mean, soft_plateau
+from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
 F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
 D_LABEL = r"$\bar d = d / \sqrt{2\pi\Delta\gamma\sqrt{A/\pi}/E^*}$"
@@ -243,7 +243,9 @@ def fig6(sweep: xr.Dataset) -> Figure:
 def fig7(sweep: xr.Dataset) -> Figure:
     """Fig. 7: soft-plateau adhesive force against N, log-log, with N^(1/4).
 
-    The plateau value is F_ad at the softest kbar run for each brush.  The
+    The plateau value is F_ad at the softest kbar run for each brush; a
+    brush whose two softest kbar differ by more than `PLATEAU_RTOL` has not
+    reached it (`brushcore.data.summary.on_plateau`) and is drawn as a grey cross, left out of the fit.  The
     fitted prefactor c of F = c N^(1/4) (and 1/c, the paper's 1.2-1.3) is
     printed on the plot.
     """
@@ -253,9 +255,12 @@ def fig7(sweep: xr.Dataset) -> Figure:
     ax.set_title("Soft plateau of the adhesive force")
     all_n, all_f = [], []
     markers = {"regular": "s", "random": "o", "hexagonal": "h"}
+    off = []  # (N, F) of brushes whose softest kbar is not on the plateau
     for layout in _layouts(sweep):
         points = [(int(n), *soft_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
         points = [(n, k, f) for n, k, f in points if math.isfinite(f)]
+        off += [(n, f) for n, _, f in points if not on_plateau(sweep, layout, n)]
+        points = [(n, k, f) for n, k, f in points if on_plateau(sweep, layout, n)]
         if not points:
             continue
         n, k, f = map(np.asarray, zip(*points))
@@ -263,6 +268,8 @@ def fig7(sweep: xr.Dataset) -> Figure:
         all_f += list(f)
         ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none", label=f"{layout} (min "
                 + r"$\bar k$" + f" = {k.min():g})")
+    if off:
+        ax.plot(*zip(*off), "x", ms=6, color="0.5", label="not on a plateau (not fitted)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     # Plain 1-2-5 ticks: decade-only log ticks say little over a range like 64 ... 2304.
@@ -273,7 +280,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     ax.set_xlabel("number of pillars N")
     ax.set_ylabel(FAD_LABEL + " (soft plateau)")
     if not all_n:
-        _no_data(ax, "no runs")
+        _no_data(ax, "no brush on its soft plateau" if off else "no runs")
         return fig
     span = np.geomspace(min(all_n) / 1.5, max(all_n) * 1.5, 50)
     ax.plot(span, theory.soft_limit(span), "k-", lw=1.2, label=r"$N^{1/4}$ (eq. 6)")

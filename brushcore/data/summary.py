@@ -69,6 +69,23 @@ def soft_plateau(sweep: xr.Dataset, layout: str, n_pillars: int) -> tuple[float,
     return float(series.kbar[0]), float(series[0])
 
 
+def on_plateau(sweep: xr.Dataset, layout: str, n_pillars: int,
+               rtol: float = PLATEAU_RTOL) -> bool:
+    """Whether the softest kbar run lies on the soft plateau: the next softest
+    gives F_ad within ``rtol`` of it (False with fewer than two kbar: a
+    plateau cannot be told from one point, nor from a sweep that stops short
+    of it)."""
+    series = seed_mean(sweep, "adhesive_force_normalized", layout, n_pillars)
+    return series.size >= 2 and abs(float(series[1]) - float(series[0])) <= rtol * abs(
+        float(series[0]))
+
+
+#: N the paper ran per layout (its Figs. 6-8): its numbers are quoted beside these only.
+PAPER_BRUSHES = {"regular": (64, 256, 576, 2304), "random": (64, 220, 425, 1620)}
+#: kbar above which the paper calls pillars rigid (its Fig. 6 and §4).
+PAPER_RIGID_KBAR = 1.0
+
+
 def plateau_onset(
     sweep: xr.Dataset, layout: str, n_pillars: int, rtol: float = PLATEAU_RTOL
 ) -> float:
@@ -161,32 +178,44 @@ def headline_rows(
     fig5 = finest_grid(flat_slice(sweep[scalars], fig5_shape))
     sweep = finest_grid(flat_slice(sweep[scalars]))
     rigid_theory = theory.rigid_limit(phi) if math.isfinite(phi) else math.nan
-    papers = fig5_layout == "regular" and fig5_shape == "disc"
+    papers = (fig5_layout == "regular" and fig5_shape == "disc" and fig5_n_pillars == 256
+              and math.isclose(fig5_kbar, 0.455, rel_tol=1e-9))
     rows = [
         Row("F_ad (normalised), Fig. 5a", fig5_layout, str(fig5_n_pillars), _fmt(fig5_kbar),
             _fmt(value_at(fig5, "adhesive_force_normalized", fig5_layout, fig5_n_pillars,
                           fig5_kbar)), "~1.8" if papers else "",
             "close to the rigid limit" if papers else
-            f"the config's Fig. 5 brush ({fig5_shape} pillars); the paper's is regular discs"),
+            f"the config's Fig. 5 brush ({fig5_shape} pillars); the paper's ~1.8 is regular "
+            "16 x 16 discs at kbar 0.455"),
         Row("rigid limit phi^-1/4 (eq. 5)", "", "", "", _fmt(rigid_theory), "1.7",
             f"phi = {_fmt(phi)} requested"),
     ]
     brushes = _brushes(sweep)
     for layout, n in brushes:
         kbar, force = rigid_end(sweep, layout, n)
+        rigid = kbar > PAPER_RIGID_KBAR
         rows.append(Row("F_ad at the stiffest kbar (rigid limit)", layout, str(n), _fmt(kbar),
-                        _fmt(force), "slightly above 1.7", "Fig. 6, kbar > 1"))
+                        _fmt(force), "slightly above 1.7" if rigid and _papers(layout, n) else "",
+                        "Fig. 6, kbar > 1" if rigid else
+                        f"NOT RIGID: the stiffest kbar run is {_fmt(kbar)}, the paper's rigid "
+                        f"range is kbar > {PAPER_RIGID_KBAR:g}"))
     plateau_n, plateau_f = [], []
     for layout, n in brushes:
         kbar, force = soft_plateau(sweep, layout, n)
-        plateau_n.append(n)
-        plateau_f.append(force)
+        reached = on_plateau(sweep, layout, n)
+        if reached:  # only plateau values enter the fit
+            plateau_n.append(n)
+            plateau_f.append(force)
         rows.append(Row("N^1/4 / F_ad on the soft plateau (softest kbar)", layout, str(n),
                         _fmt(kbar), _fmt(float(theory.soft_limit(n)) / force),
-                        "1.2-1.3", "Fig. 7"))
+                        "1.2-1.3" if reached and _papers(layout, n) else "",
+                        "Fig. 7" if reached else
+                        f"NOT ON THE PLATEAU: the two softest kbar differ by more than "
+                        f"{PLATEAU_RTOL:.0%}; run softer kbar (left out of the fit)"))
     fit = fit_soft_prefactor(plateau_n, plateau_f)
     rows.append(Row("N^1/4 / F_ad, fit over all N", "all", "", "", _fmt(fit["ratio"]),
-                    "1.2-1.3", f"free power-law exponent {_fmt(fit['exponent'])} (eq. 6: 0.25)"))
+                    "1.2-1.3", f"free power-law exponent {_fmt(fit['exponent'])} (eq. 6: 0.25)"
+                    f"; {len(plateau_n)} of {len(brushes)} brushes on the plateau"))
     big = seed_mean(sweep, "adhesive_force_normalized", "regular", 2304)
     enhancement = float(big.max()) if big.size else math.nan
     rows.append(Row("enhancement F_ad / F_K, 2304 pillars (max over kbar)", "regular", "2304",
@@ -195,10 +224,18 @@ def headline_rows(
         rows.append(_resolution_row(sweep, layout, n))
     paper_onset = {64: "~1e-3", 2304: "~1e-5"}
     for layout, n in brushes:
+        reached = on_plateau(sweep, layout, n)
         rows.append(Row(f"kbar where the soft plateau is reached (within {PLATEAU_RTOL:.0%})",
-                        layout, str(n), "", _fmt(plateau_onset(sweep, layout, n), 2),
-                        paper_onset.get(n, ""), "Fig. 6"))
+                        layout, str(n), "",
+                        _fmt(plateau_onset(sweep, layout, n), 2) if reached else NOT_AVAILABLE,
+                        paper_onset.get(n, "") if _papers(layout, n) else "",
+                        "Fig. 6" if reached else "no plateau in the kbar run"))
     return rows
+
+
+def _papers(layout: str, n_pillars: int) -> bool:
+    """Whether the paper ran this brush (its numbers are quoted beside it only)."""
+    return n_pillars in PAPER_BRUSHES.get(layout, ())
 
 
 def _resolution_row(sweep: xr.Dataset, layout: str, n_pillars: int) -> Row:

@@ -95,7 +95,9 @@ def soft_work(n_pillars: int | np.ndarray, phi: float, kbar: float | np.ndarray)
 
     Each of the N springs carries f = N^(-3/4) F_K at pull-off and stores
     f^2 / (2k); normalising by 2 pi a0^2 dgamma with a0 = L sqrt(phi / pi)
-    and k = kbar E* L gives W_S = 2 sqrt(phi / pi) / (sqrt(N) kbar).
+    and k = kbar E* L gives W_S = 2 sqrt(phi / pi) / (sqrt(N) kbar).  The
+    paper prints the last step of eq. 27 as sqrt(phi) / (sqrt(N) kbar),
+    smaller by 2 / sqrt(pi) = 1.128; eqs. 25-26 give the form used here.
     """
     n = np.asarray(n_pillars, dtype=float)
     return 2.0 * math.sqrt(phi / math.pi) / (np.sqrt(n) * np.asarray(kbar, dtype=float))
