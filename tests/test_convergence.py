@@ -32,9 +32,29 @@ def test_three_grids_constant_ratio_exact(p):
     assert e.order == pytest.approx(p, rel=1e-6), "Richardson's closed-form order"
     assert e.value == pytest.approx(F0, rel=1e-10)
     assert e.coefficient == pytest.approx(C, rel=1e-5)
-    # Roache's GCI: Fs |f1 - f2| / (r^p - 1) = Fs |f1 - f0|, and it covers f0.
-    assert e.error == pytest.approx(1.25 * abs(e.finest - F0), rel=1e-8)
+    # Roache's GCI: Fs |f1 - f2| / (r^p - 1) = Fs |f1 - f0| at a trusted order
+    # (0.5 ... 1.1); beyond it Fs = 3 with the correction of the nearest trusted order.
+    trusted = 0.5 <= p <= 1.1
+    correction = abs(e.finest - law(h[1], p)) / (2.0 ** (p if trusted else 1.1) - 1.0)
+    assert e.error == pytest.approx((1.25 if trusted else 3.0) * correction, rel=1e-8)
     assert abs(e.finest - F0) <= e.error
+
+
+def test_error_bar_holds_the_limit_of_scattered_data():
+    """The band holds the true limit of f0 + C h^p data whose values scatter by
+    0.1 % from grid to grid (the realised phi does that), in 95 % of the fits
+    kept: true orders 0.7, 1 and 1.5, a 3 % mesh error on the coarsest of
+    256/512/1024 (measured 95-100 %; Fs 1.25 at any order held 78-86 %, and
+    almost never a fit that observed p > 2)."""
+    rng = np.random.default_rng(1)
+    h = 1.0 / np.array([256.0, 512.0, 1024.0])
+    for p in (0.7, 1.0, 1.5):
+        c = 0.03 * F0 / h[0] ** p
+        fits = [extrapolate(h, law(h, p, c=c) + 1e-3 * F0 * rng.normal(size=3))
+                for _ in range(300)]
+        kept = [e for e in fits if np.isfinite(e.value)]
+        held = np.mean([abs(e.value - F0) <= e.error for e in kept])
+        assert len(kept) > 200 and held >= 0.92, (p, len(kept), held)
 
 
 def test_order_of_input_does_not_matter():
