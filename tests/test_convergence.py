@@ -57,6 +57,20 @@ def test_error_bar_holds_the_limit_of_scattered_data():
         assert len(kept) > 200 and held >= 0.92, (p, len(kept), held)
 
 
+def test_no_order_is_reported_where_none_was_observed():
+    """Four diverging values send the least squares to its search bound, which
+    is no observed order (it was reported as 0.02); two equal finest values
+    beside a third give none either (it was inf)."""
+    h = 1.0 / np.array([256.0, 512.0, 1024.0, 2048.0])
+    e = extrapolate(h, [1.70, 1.69, 1.67, 1.63])
+    assert e.poor_fit and math.isnan(e.order) and math.isnan(e.value), e
+    e = extrapolate(h[:3], [1.70, 1.69, 1.69])
+    assert e.poor_fit and math.isnan(e.order), e
+    # three diverging grids keep their (negative) observed order: it says how fast
+    e = extrapolate(h[1:], [1.69, 1.67, 1.63])
+    assert e.poor_fit and e.order == pytest.approx(-1.0), e
+
+
 def test_order_of_input_does_not_matter():
     h = 1.0 / np.array([512.0, 128.0, 256.0])
     e = extrapolate(h, law(h, 1.0))

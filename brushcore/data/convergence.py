@@ -56,8 +56,10 @@ Method
   ``max_relative_residual`` of the range of f).
   Where a flag makes (1) meaningless, f0 and the error are NaN; the order
   that was observed is kept (negative when the differences grow under
-  refinement), NaN when none was (oscillation, or no root with uneven
-  ratios); the raw values stay with the caller (and in
+  refinement, on three grids), NaN when none was (oscillation, no root
+  with uneven ratios, the two finest values equal beside a third, or a
+  least-squares order at its search bound, which is where four or more
+  diverging values send it); the raw values stay with the caller (and in
   `extrapolate_sweep`'s output).
 
 All functions are pure.  h is any length proportional to the element size;
@@ -236,6 +238,8 @@ def _ratio_gap(p: float, h: np.ndarray, target: float) -> float:
 
 def _three_grid_order(h: np.ndarray, f: np.ndarray, bounds: tuple[float, float]) -> float:
     """Observed order through three points; NaN when none is positive."""
+    if f[1] == f[0]:
+        return _NAN  # the two finest agree beside a third that differs: no order
     target = (f[2] - f[1]) / (f[1] - f[0])
     if not target > 0:
         return _NAN  # oscillation: the caller flags it
@@ -338,10 +342,14 @@ def extrapolate(
         return result(non_monotone=True)
 
     f0, coef, p, resid = _extrapolate_sorted(h, f, opts)
+    if n > 3 and not opts.order_bounds[0] * (1 + 1e-6) < p < opts.order_bounds[1] * (1 - 1e-6):
+        p = _NAN  # the least squares ran into its search bound: no order was observed
     if not np.isfinite(p) or p <= 0:
         # Differences grow under refinement: no limit exists.  A negative
-        # observed order (constant ratio) is still reported: it says how fast.
-        return result(order=p, resid=resid, non_monotone=not monotone, poor_fit=True)
+        # observed order (constant ratio) is still reported: it says how fast;
+        # an infinite one (two equal values beside a third) is not an order.
+        return result(order=p if np.isfinite(p) else _NAN, resid=resid,
+                      non_monotone=not monotone, poor_fit=True)
     lo, hi = opts.order_range
     scale = float(f.max() - f.min())
     poor = not (lo < p <= hi) or resid > opts.max_relative_residual * scale
