@@ -420,3 +420,22 @@ def test_summary_quotes_the_paper_only_where_it_applies():
 
     labels = figures.fig7(sweep).axes[0].get_legend_handles_labels()[1]
     assert "not on a plateau (not fitted)" in labels, labels
+
+
+@pytest.mark.parametrize(("radii", "flag"), [((2.1, 4.2, 8.4), "coarsest_under_resolved"),
+                                             ((4.2, 8.4, 16.8), ""),
+                                             ((1.0, 2.0, 3.9), "under_resolved")])
+def test_table_says_when_the_fit_rests_on_an_under_resolved_grid(radii, flag):
+    """A fit whose finest grid resolves the pillars may still rest on a
+    coarsest grid that does not (N = 2304 on 512/1024/2048: r = 2.08 first)."""
+    grids = np.array([256, 512, 1024])
+    dims = ("layout", "n_pillars", "kbar", "seed", "grid")
+    coords = {"layout": ["regular"], "n_pillars": [64], "kbar": [1.0], "seed": [0],
+              "grid": grids}
+    values = law(1.0 / grids, 1.0).reshape(1, 1, 1, 1, 3)
+    sweep = xr.Dataset({q: (dims, values) for q in
+                        ("adhesive_force_normalized", "work_of_separation_normalized")}
+                       | {"pillar_radius_elements": (dims, np.reshape(radii, (1, 1, 1, 1, 3)))},
+                       coords=coords)
+    table = convergence_table(extrapolate_sweep(sweep))
+    assert set(table["flags"]) == {flag}, table

@@ -412,6 +412,12 @@ def _finest_index(values: np.ndarray) -> int:
     return int(idx[-1]) if idx.size else -1
 
 
+def _coarsest_index(values: np.ndarray) -> int:
+    """Index (along grid, ascending n) of the coarsest finite value, -1 if none."""
+    idx = np.flatnonzero(np.isfinite(values))
+    return int(idx[0]) if idx.size else -1
+
+
 def extrapolate_sweep(
     sweep: xr.Dataset,
     quantities: Sequence[str] = QUANTITIES,
@@ -437,7 +443,8 @@ def extrapolate_sweep(
         ``{q}_n_grids`` and the int8 flags ``{q}_non_monotone``,
         ``{q}_poor_fit``, ``{q}_too_few_grids``; the raw values ``{q}`` on
         (cases..., grid); ``finest_grid`` and ``pillar_radius_elements_finest``
-        of the finest grid run; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs``
+        of the finest grid run, ``pillar_radius_elements_coarsest`` of the
+        coarsest; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs``
         on (cases..., grid) where the sweep has it.
 
     Raises
@@ -476,24 +483,27 @@ def extrapolate_sweep(
                 attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
             out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
         out[q] = raw.copy()
-    # Finest grid run per case (finite first quantity), and its resolution.
+    # Finest and coarsest grid run per case (finite first quantity), and their
+    # resolution: the fit rests on the coarsest as much as on the finest.
     anyq = sweep[quantities[0]]
-    finest_i = xr.apply_ufunc(_finest_index, anyq, input_core_dims=[[GRID_DIM]],
-                              vectorize=True, output_dtypes=[np.int64])
-    idx = finest_i.clip(min=0)
-    finest_n = xr.where(finest_i >= 0, sweep[GRID_DIM].isel({GRID_DIM: idx}, drop=True), np.nan)
-    out["finest_grid"] = finest_n.astype(np.float64).assign_attrs(
-        units="1", long_name="elements per side n of the finest grid run")
-    if "pillar_radius_elements" in sweep:
-        rad = sweep["pillar_radius_elements"].isel({GRID_DIM: idx}, drop=True)
-        rad = xr.where(finest_i >= 0, rad, np.nan)
-    else:
-        phi = sweep["phi"] if "phi" in sweep.coords else float(sweep.attrs.get("phi", np.nan))
-        rad = finest_n * np.sqrt(phi / (np.pi * sweep["n_pillars"].astype(np.float64)))
+    for end, index in (("finest", _finest_index), ("coarsest", _coarsest_index)):
+        at = xr.apply_ufunc(index, anyq, input_core_dims=[[GRID_DIM]],
+                            vectorize=True, output_dtypes=[np.int64])
+        idx = at.clip(min=0)
+        grid_n = xr.where(at >= 0, sweep[GRID_DIM].isel({GRID_DIM: idx}, drop=True), np.nan)
+        if end == "finest":
+            out["finest_grid"] = grid_n.astype(np.float64).assign_attrs(
+                units="1", long_name="elements per side n of the finest grid run")
+        if "pillar_radius_elements" in sweep:
+            rad = sweep["pillar_radius_elements"].isel({GRID_DIM: idx}, drop=True)
+            rad = xr.where(at >= 0, rad, np.nan)
+        else:
+            phi = sweep["phi"] if "phi" in sweep.coords else float(sweep.attrs.get("phi", np.nan))
+            rad = grid_n * np.sqrt(phi / (np.pi * sweep["n_pillars"].astype(np.float64)))
+        out[f"pillar_radius_elements_{end}"] = rad.assign_attrs(
+            units="1", long_name=f"pillar radius a_p / h on the {end} grid run [elements]")
     if TOUCHING in sweep:  # random discs on grids coarser than 512: a mesh error to see
         out[TOUCHING] = sweep[TOUCHING].copy()
-    out["pillar_radius_elements_finest"] = rad.assign_attrs(
-        units="1", long_name="pillar radius a_p / h on the finest grid run [elements]")
     ds = xr.Dataset(out).assign_coords(h=h)
     ds.attrs = {
         "title": "brushcore mesh-refinement study: results extrapolated to h -> 0",
@@ -538,8 +548,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
         Case columns, the quantity, one column ``n=<grid>`` per grid with the
         raw value, the finest radius in elements, extrapolated value, error,
         order and the flags (as a comma-separated ``flags`` column; besides
-        the fit's, ``under_resolved`` and ``touching_pillars``, see
-        `write_tables`).
+        the fit's, ``under_resolved``, ``coarsest_under_resolved`` and
+        ``touching_pillars``, see `write_tables`).
     """
     import pandas as pd
 
@@ -564,6 +574,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
                      if int(one[f"{q}_{f}"])]
             if row["radius_elements_finest"] < UNDER_RESOLVED_RADIUS:
                 flags.append("under_resolved")
+            elif float(one["pillar_radius_elements_coarsest"]) < UNDER_RESOLVED_RADIUS:
+                flags.append("coarsest_under_resolved")
             if TOUCHING in one and touching_grids(one[TOUCHING].values).any():
                 flags.append("touching_pillars")
             row["flags"] = ",".join(flags)
@@ -601,6 +613,8 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
               "uncertainty (>= 4 grids). "
               f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements; "
+              "coarsest_under_resolved: the fit's coarsest grid is (the fit rests on a "
+              "grid whose own mesh error is a few per cent); "
               "touching_pillars: on some grid two pillars' footprints share an element "
               "edge (random discs on grids coarser than 512).\n\n")
     Path(md_path).write_text(header + to_markdown(table))
