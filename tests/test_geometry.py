@@ -239,6 +239,27 @@ def test_refused_label_maps_name_the_file_and_the_pillars(tmp_path):
     assert "allow_pickle" not in str(err.value)  # never advise loading pickles
     with pytest.raises(ParameterError, match=r"layout_file=.*missing\.npy.*no such file"):
         read_label_map(tmp_path / "missing.npy")
+    (tmp_path / "folder.npy").mkdir()
+    with pytest.raises(ParameterError, match=r"folder\.npy.*\(a folder\)"):
+        read_label_map(tmp_path / "folder.npy")
+
+
+def test_broken_images_are_refused_not_crashed_on(tmp_path):
+    """A PNG cut short or another format under a .png name was a traceback
+    from the decoder (only the header read was guarded)."""
+    from PIL import Image
+
+    pixels = np.full((32, 32), 255, dtype=np.uint8)
+    pixels[4:10, 4:10] = 0
+    Image.fromarray(pixels).save(tmp_path / "whole.png")
+    data = (tmp_path / "whole.png").read_bytes()
+    (tmp_path / "half.png").write_bytes(data[:len(data) // 2])
+    Image.fromarray(pixels).save(tmp_path / "photo.jpg")
+    (tmp_path / "jpeg.png").write_bytes((tmp_path / "photo.jpg").read_bytes())
+    assert read_label_map(tmp_path / "whole.png").max() == 0
+    for name in ("half.png", "jpeg.png"):
+        with pytest.raises(ParameterError, match=rf"{name}.*not decodable as one.*a PNG image"):
+            read_label_map(tmp_path / name)
 
 
 def test_image_over_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):

@@ -525,6 +525,7 @@ def test_spread_draws_are_reproducible_and_have_the_asked_moments():
     ("0.1\n" * 15, "--heights", "it holds 15"),
     ("0.1\n" * 5 + "nan\n" + "0.1\n" * 10, "--heights", "line 6 holds nan"),
     ("0.1\n" * 15 + "0\n", "--kbar-file", "line 16 holds 0.0"),
+    ("0.1\n" * 15 + "1e-11\n", "--kbar-file", "line 16 holds 1e-11"),  # under MIN_KBAR
     ("0.1\n" * 3 + "abc\n", "--kbar-file", "line 4: 'abc' is not a number"),
 ])
 def test_cli_refuses_bad_files_before_any_work(tmp_path, capsys, content, flag, message):
@@ -538,6 +539,31 @@ def test_cli_refuses_bad_files_before_any_work(tmp_path, capsys, content, flag, 
     err = capsys.readouterr().err
     assert rc == 2 and flag in err and str(bad) in err and message in err, err
     assert not out.exists() and list(tmp_path.iterdir()) == [bad]
+
+
+def test_value_files_are_read_as_data(tmp_path):
+    """Numbers as a data file writes them, nothing Python's float() would also
+    take; broken .npy files refused, not crashed on (an empty one was an
+    EOFError, a .npz under a .npy name an AttributeError)."""
+    from brushcore import ParameterError
+    from brushcore.model.inputs import read_pillar_values
+
+    def read(name: str, data: bytes):
+        (tmp_path / name).write_bytes(data)
+        return read_pillar_values(tmp_path / name, 4, "heights")
+
+    assert read("bom.txt", b"\xef\xbb\xbf0.5\n1\n2\n3\n").tolist() == [0.5, 1, 2, 3]
+    with open(tmp_path / "upper.NPY", "wb") as fh:  # np.save would append ".npy"
+        np.save(fh, np.arange(4.0))
+    assert read_pillar_values(tmp_path / "upper.NPY", 4, "heights").tolist() == [0, 1, 2, 3]
+    for token in ("1_0", "\u0661", "0x10"):
+        with pytest.raises(ParameterError, match=rf"line 1: '{token}' is not a number"):
+            read("odd.txt", f"{token}\n1\n2\n3\n".encode())
+    with pytest.raises(ParameterError, match=r"empty\.npy.*a readable \.npy file"):
+        read("empty.npy", b"")
+    np.savez(tmp_path / "archive.npz", a=np.zeros(4))
+    with pytest.raises(ParameterError, match=r"archive, not one array"):
+        read("archive.npy", (tmp_path / "archive.npz").read_bytes())
 
 
 @pytest.mark.parametrize("flag,value", [("--preload", "-1"), ("--roughness", "-0.5"),

@@ -10,17 +10,30 @@ the line (or the entry of a ``.npy`` array), before any computation.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 
+from brushcore.model.params import MIN_KBAR
 from brushcore.validation import ParameterError
+
+
+#: A number as a text file writes it: ASCII digits, optional sign, point and
+#: exponent, or inf/nan (refused later by value).  Python's float() also takes
+#: "1_0" (10) and other scripts' digits, which a data file must not mean.
+_NUMBER = re.compile(r"[+-]?(?:(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|inf(?:inity)?|nan)",
+                     re.IGNORECASE | re.ASCII)
+
+
+def _is_npy(path: Path) -> bool:
+    return path.suffix.lower() == ".npy"
 
 
 def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
     """(line number, values) of every non-empty line of a text file."""
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a BOM is no character of line 1
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(name, str(path), "a readable text or .npy file",
                              type(exc).__name__ + ": " + str(exc).split(":")[0]) from None
@@ -31,23 +44,23 @@ def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
             continue
         values = []
         for token in line.split():
-            try:
-                values.append(float(token))
-            except ValueError:
+            if not _NUMBER.fullmatch(token):
                 raise ParameterError(name, str(path), "numbers only",
-                                     f"line {number}: {token!r} is not a number") from None
+                                     f"line {number}: {token!r} is not a number")
+            values.append(float(token))
         rows.append((number, values))
     return rows
 
 
 def _check_values(path: Path, name: str, where: str, values, positive: bool) -> None:
+    """Refuse NaN and inf, and for stiffness anything below `MIN_KBAR` (inf: rigid)."""
+    stiffness = f"stiffness values in [{MIN_KBAR:g}, inf]"
     for value in values:
         if math.isnan(value) or (math.isinf(value) and not (positive and value > 0)):
-            raise ParameterError(name, str(path), "stiffness values in (0, inf]" if positive
-                                 else "finite numbers", f"{where} holds {value!r}")
-        if positive and value <= 0:
-            raise ParameterError(name, str(path), "stiffness values in (0, inf]",
+            raise ParameterError(name, str(path), stiffness if positive else "finite numbers",
                                  f"{where} holds {value!r}")
+        if positive and value < MIN_KBAR:
+            raise ParameterError(name, str(path), stiffness, f"{where} holds {value!r}")
 
 
 def read_pillar_values(path: str | Path, n_pillars: int, name: str,
@@ -59,10 +72,10 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
     path : the file
     n_pillars : the count expected
     name : the parameter it sets (for messages: "heights", "kbar_values")
-    positive : values must lie in (0, inf] (stiffness); otherwise finite
+    positive : values must lie in [MIN_KBAR, inf] (stiffness); otherwise finite
     """
     path = Path(path)
-    if path.suffix == ".npy":
+    if _is_npy(path):
         arr = _load_npy(path, name)
         if arr.ndim != 1 or arr.size != n_pillars:
             raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
@@ -87,7 +100,7 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
 def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarray:
     """An n x n map (row y, column x) from a text file of n lines or a .npy array."""
     path = Path(path)
-    if path.suffix == ".npy":
+    if _is_npy(path):
         arr = _load_npy(path, name)
         if arr.shape != (grid, grid):
             raise ParameterError(name, str(path), f"an array of shape ({grid}, {grid})",
@@ -122,9 +135,12 @@ def npy_problem(exc: Exception) -> str:
 def _load_npy(path: Path, name: str) -> np.ndarray:
     try:
         arr = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
         raise ParameterError(name, str(path), "a readable .npy file of numbers "
                              "(no pickles)", npy_problem(exc)) from None
+    if not isinstance(arr, np.ndarray):  # np.load opens a .npz whatever its name
+        raise ParameterError(name, str(path), "a .npy file of numbers",
+                             f"it is a {type(arr).__name__} archive, not one array")
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise ParameterError(name, str(path), "real numbers", f"its dtype is {arr.dtype}")
     return np.asarray(arr, dtype=float)

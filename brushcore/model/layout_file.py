@@ -91,7 +91,10 @@ def _read_png(path: Path) -> np.ndarray:
     if width * height > MAX_IMAGE_PIXELS:
         raise _refuse(path, f"an image of at most {MAX_IMAGE_PIXELS} pixels",
                       f"is {width} x {height} pixels")
-    pixels = np.asarray(mpimg.imread(path), dtype=float)
+    try:
+        pixels = np.asarray(mpimg.imread(path), dtype=float)
+    except (OSError, SyntaxError, ValueError) as exc:  # truncated, or another format
+        raise _refuse(path, "a PNG image", f"not decodable as one: {exc}") from None
     if pixels.ndim == 3:
         alpha = pixels[..., 3] if pixels.shape[2] == 4 else np.ones(pixels.shape[:2])
         grey = pixels[..., :3].mean(axis=2) if pixels.shape[2] >= 3 else pixels[..., 0]
@@ -127,7 +130,8 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
         raise _refuse(path, f"a file ending in {' or '.join(SUFFIXES)}",
                       f"unknown kind {path.suffix or '(no suffix)'!r}")
     if not path.is_file():
-        raise _refuse(path, "an existing, readable file", "no such file")
+        raise _refuse(path, "an existing, readable file",
+                      "a folder" if path.is_dir() else "no such file")
     labels = _read_npy(path) if path.suffix.lower() == ".npy" else _read_png(path)
     unit = "elements" if path.suffix.lower() == ".npy" else "pixels"
     if labels.ndim != 2 or labels.shape[0] != labels.shape[1]:
