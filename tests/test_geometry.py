@@ -239,6 +239,10 @@ def test_refused_label_maps_name_the_file_and_the_pillars(tmp_path):
     assert "allow_pickle" not in str(err.value)  # never advise loading pickles
     with pytest.raises(ParameterError, match=r"layout_file=.*missing\.npy.*no such file"):
         read_label_map(tmp_path / "missing.npy")
+    background = np.where(good >= 0, good + 1, 0)  # scipy.ndimage.label's convention
+    with pytest.raises(ParameterError, match=r"background\.npy.*label 0 covers 0\.969 of the "
+                                             r"map: is 0 the background\?"):
+        read_label_map(_save(tmp_path, "background.npy", background), 32)
     (tmp_path / "folder.npy").mkdir()
     with pytest.raises(ParameterError, match=r"folder\.npy.*\(a folder\)"):
         read_label_map(tmp_path / "folder.npy")

@@ -143,6 +143,13 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
     present = np.unique(labels[labels >= 0])
     if present.size == 0:
         raise _refuse(path, "a map with at least one pillar", "no pillar element")
+    counts = np.bincount(labels[labels >= 0])
+    if counts.max() > labels.size / 2:  # no pillar covers half the square (phi <= 0.5)
+        big = int(counts.argmax())
+        raise _refuse(path, "-1 for no pillar and 0 ... N-1 for the pillars",
+                      f"label {big} covers {counts[big] / labels.size:.3g} of the map: is "
+                      f"{big} the background?"
+                      + (" (scipy.ndimage.label and scikit-image write 0)" if big == 0 else ""))
     n_pillars = int(present[-1]) + 1
     if present.size != n_pillars:
         missing = np.setdiff1d(np.arange(n_pillars), present)
