@@ -158,8 +158,9 @@ def fine(specs: list[str], grid: int, threads: int, limit: float) -> None:
         proc = subprocess.run([sys.executable, __file__, "child", spec, "--grid", str(grid),
                                "--threads", str(threads), "--limit", str(limit)],
                               capture_output=True, text=True)
-        if proc.returncode:
-            print(f"{spec:>24} failed: {proc.stderr.strip().splitlines()[-1]}", flush=True)
+        if proc.returncode:  # a child killed (out of memory: SIGKILL) says nothing
+            last = (proc.stderr.strip().splitlines() or [f"exit status {proc.returncode}"])[-1]
+            print(f"{spec:>24} failed: {last}", flush=True)
             continue
         r = json.loads(proc.stdout.strip().splitlines()[-1])
         if "stopped" in r:

@@ -50,7 +50,9 @@ def main() -> None:
     paths = []
     for kbar in args.kbar:
         for grid in sorted(args.grids):
-            path = args.out / f"{args.layout}_N{args.pillars}_kbar{kbar!r}_grid{grid}.nc"
+            # every parameter in the name: a rerun with another phi must not reuse these
+            path = args.out / (f"{args.layout}_N{args.pillars}_kbar{kbar!r}_grid{grid}"
+                               f"_phi{args.phi!r}.nc")
             if not path.exists():
                 t0 = time.perf_counter()
                 params = BrushParams(args.layout, args.pillars, kbar, grid, phi=args.phi)

@@ -162,18 +162,19 @@ def compare_times(jobs: list[dict], other: list[dict]) -> dict[str, tuple[int, f
 
 def compare_results(curves: Path, other: Path) -> list[tuple]:
     """(|dF_ad| / F_ad, |dW| / W, key) of every curve in both folders, by
-    the curve files' layout, N, kbar, seed and grid; largest |dW| first."""
+    the curve files' whole case (`brushcore.data.aggregate.case_key`: layout,
+    N, kbar, seed, grid, rough parameters, shape) and phi; largest |dW| first."""
     import xarray as xr
+
+    from brushcore.data.aggregate import case_key
 
     def load(root: Path) -> dict[tuple, tuple[float, float]]:
         out = {}
         for path in sorted(root.rglob("*.nc")):
             with xr.open_dataset(path) as ds:
-                a = ds.attrs
                 if "adhesive_force_normalized" not in ds:
                     continue
-                key = (str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]),
-                       int(a["seed"]), int(a["grid"]))
+                key = (case_key(ds), float(ds.attrs["phi"]))
                 out[key] = (float(ds.adhesive_force_normalized),
                             float(ds.work_of_separation_normalized))
         return out
