@@ -264,6 +264,13 @@ def test_broken_images_are_refused_not_crashed_on(tmp_path):
     for name in ("half.png", "jpeg.png"):
         with pytest.raises(ParameterError, match=rf"{name}.*not decodable as one.*a PNG image"):
             read_label_map(tmp_path / name)
+    # white pillars on black, and no pixel dark enough: the message says how pixels are read
+    Image.fromarray(255 - pixels).save(tmp_path / "inverted.png")
+    Image.fromarray(np.full((32, 32), 200, dtype=np.uint8)).save(tmp_path / "grey.png")
+    for name, reason in (("inverted.png", "one pillar covers 0.965 of it"),
+                         ("grey.png", "no pillar element")):
+        with pytest.raises(ParameterError, match=rf"{name}.*{reason}.*darker than 50 % grey"):
+            read_label_map(tmp_path / name)
 
 
 def test_image_over_the_pixel_limit_is_refused_before_decoding(tmp_path, monkeypatch):

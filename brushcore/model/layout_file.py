@@ -42,7 +42,16 @@ SUFFIXES = (".npy", ".png")
 _NAME = "layout_file"
 
 
-def _refuse(path: Path, allowed: str, reason: str) -> ParameterError:
+#: What an image's refusal adds where the pixels' reading may be the cause.
+IMAGE_RULE = ("an image pixel is pillar when darker than 50 % grey and at least half "
+              "opaque: black pillars on white")
+
+
+def _refuse(path: Path, allowed: str, reason: str, image_rule: bool = False) -> ParameterError:
+    """The refusal of a layout file; ``image_rule`` adds how an image's pixels are
+    read, for refusals (no pillar, too much pillar) that a misread image causes."""
+    if image_rule and path.suffix.lower() == ".png":
+        reason = f"{reason}; {IMAGE_RULE}"
     return ParameterError(_NAME, str(path), allowed, reason)
 
 
@@ -142,13 +151,18 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
                       f"is {labels.shape[0]} x {labels.shape[1]} {unit}")
     present = np.unique(labels[labels >= 0])
     if present.size == 0:
-        raise _refuse(path, "a map with at least one pillar", "no pillar element")
+        raise _refuse(path, "a map with at least one pillar", "no pillar element",
+                      image_rule=True)
     counts = np.bincount(labels[labels >= 0])
     if counts.max() > labels.size / 2:  # no pillar covers half the square (phi <= 0.5)
         big = int(counts.argmax())
+        share = f"{counts[big] / labels.size:.3g}"
+        if path.suffix.lower() == ".png":
+            raise _refuse(path, "pillars covering at most half the image",
+                          f"one pillar covers {share} of it (white pillars on black?)",
+                          image_rule=True)
         raise _refuse(path, "-1 for no pillar and 0 ... N-1 for the pillars",
-                      f"label {big} covers {counts[big] / labels.size:.3g} of the map: is "
-                      f"{big} the background?"
+                      f"label {big} covers {share} of the map: is {big} the background?"
                       + (" (scipy.ndimage.label and scikit-image write 0)" if big == 0 else ""))
     n_pillars = int(present[-1]) + 1
     if present.size != n_pillars:
@@ -227,5 +241,5 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
                     "phi": f"its pillars cover {exc.value:.4g} of it"}[exc.name]
         allowed = (exc.allowed.replace("grid >=", "a map of side >=") if exc.name == "grid"
                    else "a filling factor in (0, 0.5]" if exc.name == "phi" else exc.allowed)
-        raise _refuse(path, allowed, found_as + (f": {exc.reason}" if exc.reason else "")
-                      ) from None
+        raise _refuse(path, allowed, found_as + (f": {exc.reason}" if exc.reason else ""),
+                      image_rule=exc.name == "phi") from None
