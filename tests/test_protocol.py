@@ -584,7 +584,7 @@ def test_gap_map_file_shape_is_checked(tmp_path):
     with pytest.raises(Exception, match="shape"):
         read_gap_map(tmp_path / "g.npy", 8)
     (tmp_path / "g.txt").write_text("0 0\n0 inf\n")
-    with pytest.raises(Exception, match="line 2 holds inf"):
+    with pytest.raises(Exception, match="line 2, column 2, holds inf"):
         read_gap_map(tmp_path / "g.txt", 2)
 
 

@@ -116,7 +116,8 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
         if len(row) != grid:
             raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
                                  f"line {number} holds {len(row)} numbers")
-        _check_values(path, name, f"line {number}", row, False)
+        for column, value in enumerate(row, start=1):
+            _check_values(path, name, f"line {number}, column {column},", [value], False)
     if len(rows) != grid:
         raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
                              f"it holds {len(rows)} lines of numbers")
@@ -129,7 +130,7 @@ def npy_problem(exc: Exception) -> str:
     text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     if "allow_pickle" in text or "pickled" in text:
         return "it holds Python objects or is not a .npy file"
-    return text[:120]
+    return text if len(text) <= 120 else text[:117].rsplit(" ", 1)[0] + " ..."
 
 
 def _load_npy(path: Path, name: str) -> np.ndarray:
