@@ -406,16 +406,11 @@ def _apply(values: np.ndarray, h: np.ndarray, opts: ConvergenceOptions) -> tuple
             float(e.n_grids), float(e.non_monotone), float(e.poor_fit), float(e.too_few_grids))
 
 
-def _finest_index(values: np.ndarray) -> int:
-    """Index (along grid, ascending n) of the finest finite value, -1 if none."""
+def _end_index(values: np.ndarray, end: int) -> int:
+    """Index (along grid, ascending n) of the coarsest (``end`` 0) or finest
+    (``end`` -1) finite value, -1 if none."""
     idx = np.flatnonzero(np.isfinite(values))
-    return int(idx[-1]) if idx.size else -1
-
-
-def _coarsest_index(values: np.ndarray) -> int:
-    """Index (along grid, ascending n) of the coarsest finite value, -1 if none."""
-    idx = np.flatnonzero(np.isfinite(values))
-    return int(idx[0]) if idx.size else -1
+    return int(idx[end]) if idx.size else -1
 
 
 def extrapolate_sweep(
@@ -486,9 +481,10 @@ def extrapolate_sweep(
     # Finest and coarsest grid run per case (finite first quantity), and their
     # resolution: the fit rests on the coarsest as much as on the finest.
     anyq = sweep[quantities[0]]
-    for end, index in (("finest", _finest_index), ("coarsest", _coarsest_index)):
-        at = xr.apply_ufunc(index, anyq, input_core_dims=[[GRID_DIM]],
-                            vectorize=True, output_dtypes=[np.int64])
+    for end, position in (("finest", -1), ("coarsest", 0)):
+        at = xr.apply_ufunc(_end_index, anyq, kwargs={"end": position},
+                            input_core_dims=[[GRID_DIM]], vectorize=True,
+                            output_dtypes=[np.int64])
         idx = at.clip(min=0)
         grid_n = xr.where(at >= 0, sweep[GRID_DIM].isel({GRID_DIM: idx}, drop=True), np.nan)
         if end == "finest":

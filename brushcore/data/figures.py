@@ -245,9 +245,9 @@ def fig7(sweep: xr.Dataset) -> Figure:
 
     The plateau value is F_ad at the softest kbar run for each brush; a
     brush whose two softest kbar differ by more than `PLATEAU_RTOL` has not
-    reached it (`brushcore.data.summary.on_plateau`) and is drawn as a grey cross, left out of the fit.  The
-    fitted prefactor c of F = c N^(1/4) (and 1/c, the paper's 1.2-1.3) is
-    printed on the plot.
+    reached it (`brushcore.data.summary.on_plateau`) and is drawn as a grey
+    cross, left out of the fit.  The fitted prefactor c of F = c N^(1/4)
+    (and 1/c, the paper's 1.2-1.3) is printed on the plot.
     """
     sweep = finest_grid(sweep)
     fig = _new_figure(4.6, 3.8)
@@ -257,10 +257,11 @@ def fig7(sweep: xr.Dataset) -> Figure:
     markers = {"regular": "s", "random": "o", "hexagonal": "h"}
     off = []  # (N, F) of brushes whose softest kbar is not on the plateau
     for layout in _layouts(sweep):
-        points = [(int(n), *soft_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
-        points = [(n, k, f) for n, k, f in points if math.isfinite(f)]
-        off += [(n, f) for n, _, f in points if not on_plateau(sweep, layout, n)]
-        points = [(n, k, f) for n, k, f in points if on_plateau(sweep, layout, n)]
+        points = [(int(n), *soft_plateau(sweep, layout, int(n)),
+                   on_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
+        points = [point for point in points if math.isfinite(point[2])]
+        off += [(n, f) for n, _, f, reached in points if not reached]
+        points = [(n, k, f) for n, k, f, reached in points if reached]
         if not points:
             continue
         n, k, f = map(np.asarray, zip(*points))

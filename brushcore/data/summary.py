@@ -200,9 +200,10 @@ def headline_rows(
                         f"NOT RIGID: the stiffest kbar run is {_fmt(kbar)}, the paper's rigid "
                         f"range is kbar > {PAPER_RIGID_KBAR:g}"))
     plateau_n, plateau_f = [], []
+    reached_by = {(layout, n): on_plateau(sweep, layout, n) for layout, n in brushes}
     for layout, n in brushes:
         kbar, force = soft_plateau(sweep, layout, n)
-        reached = on_plateau(sweep, layout, n)
+        reached = reached_by[layout, n]
         if reached:  # only plateau values enter the fit
             plateau_n.append(n)
             plateau_f.append(force)
@@ -224,7 +225,7 @@ def headline_rows(
         rows.append(_resolution_row(sweep, layout, n))
     paper_onset = {64: "~1e-3", 2304: "~1e-5"}
     for layout, n in brushes:
-        reached = on_plateau(sweep, layout, n)
+        reached = reached_by[layout, n]
         rows.append(Row(f"kbar where the soft plateau is reached (within {PLATEAU_RTOL:.0%})",
                         layout, str(n), "",
                         _fmt(plateau_onset(sweep, layout, n), 2) if reached else NOT_AVAILABLE,
