@@ -564,6 +564,10 @@ def test_value_files_are_read_as_data(tmp_path):
     np.savez(tmp_path / "archive.npz", a=np.zeros(4))
     with pytest.raises(ParameterError, match=r"archive, not one array"):
         read("archive.npy", (tmp_path / "archive.npz").read_bytes())
+    # A decimal comma is two values: the count is off, and the message says why.
+    with pytest.raises(ParameterError, match=r"it holds 8;.*write decimals with a point"):
+        read("comma.txt", b"0,5\n1,5\n2,5\n3,5\n")
+    assert read("csv.txt", b"0.5, 1.5,2.5 ,3.5\n").tolist() == [0.5, 1.5, 2.5, 3.5]
 
 
 @pytest.mark.parametrize("flag,value", [("--preload", "-1"), ("--roughness", "-0.5"),

@@ -52,6 +52,15 @@ def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
     return rows
 
 
+def _comma_hint(path: Path) -> str:
+    """A hint where a count is off and the file has a comma between digits:
+    "0,5" is read as two values (commas separate values), not as 0.5."""
+    text = path.read_text(encoding="utf-8-sig", errors="replace")
+    data = "\n".join(line.split("#", 1)[0] for line in text.splitlines())
+    return "; commas separate values: write decimals with a point" \
+        if re.search(r"\d,\d", data) else ""
+
+
 def _check_values(path: Path, name: str, where: str, values, positive: bool) -> None:
     """Refuse NaN and inf, and for stiffness anything below `MIN_KBAR` (inf: rigid)."""
     stiffness = f"stiffness values in [{MIN_KBAR:g}, inf]"
@@ -93,7 +102,7 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
         extra = f"; value {n_pillars + 1} is on line {lines[n_pillars]}" \
             if len(values) > n_pillars else ""
         raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
-                             f"it holds {len(values)}{extra}")
+                             f"it holds {len(values)}{extra}{_comma_hint(path)}")
     return np.array(values)
 
 
@@ -115,7 +124,7 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
     for number, row in rows:
         if len(row) != grid:
             raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
-                                 f"line {number} holds {len(row)} numbers")
+                                 f"line {number} holds {len(row)} numbers{_comma_hint(path)}")
         for column, value in enumerate(row, start=1):
             _check_values(path, name, f"line {number}, column {column},", [value], False)
     if len(rows) != grid:
