@@ -1,4 +1,4 @@
-"""Speed benchmark of the pull-off solver (issue 4). Prints a table; asserts nothing.
+"""Speed benchmark of the pull-off solver. Prints a table; asserts nothing.
 
     python benchmarks/bench_pulloff.py            # the three 512 cases, three modes
     python benchmarks/bench_pulloff.py --grid 256 --quick   # no exact mode: no dF, dW

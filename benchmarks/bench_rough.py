@@ -1,4 +1,4 @@
-"""Cost of a rough, preloaded pull-off against today's flat one (issue 11).
+"""Cost of a rough, preloaded pull-off against today's flat one.
 
     python benchmarks/bench_rough.py                 # 16 x 16, kbar 0.455, 512^2
     python benchmarks/bench_rough.py --grid 256 --lookahead 0 0.001 0.01

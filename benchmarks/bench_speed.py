@@ -1,4 +1,4 @@
-"""Speed and memory figures of issue 12. Prints tables; asserts nothing.
+"""Speed and memory figures (README, "Speed and memory"; docs/SPEED.md). Prints tables; asserts nothing.
 
     python benchmarks/bench_speed.py ratio          # one application / bare FFT pair
     python benchmarks/bench_speed.py target         # 16 x 16, kbar 0.455 at 1024^2

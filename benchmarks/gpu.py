@@ -1,4 +1,4 @@
-"""GPU figures of issue 15. Prints a table; asserts nothing.
+"""GPU figures (README, "On a GPU"). Prints a table; asserts nothing.
 
     python benchmarks/gpu.py                       # the issue's cases on the card (< 5 min)
     python benchmarks/gpu.py --with-4096           # also 16 x 16 at 4096^2

@@ -1,4 +1,4 @@
-"""Square, hexagonal and random arrays of the same N and phi over kbar (issue 13).
+"""Square, hexagonal and random arrays of the same N and phi over kbar.
 
     python benchmarks/lattice_study.py                     # N = 64, phi = 0.12, grid 256
     python benchmarks/lattice_study.py --pillars 16 --grid 128 --seeds 1 --out /tmp/x

@@ -23,8 +23,9 @@ def test_love_coefficient_matches_quadrature():
         ref = dblquad(lambda yy, xx: 1.0 / (np.pi * 2.0 * np.hypot(x - xx, y - yy)),
                       -0.5, 0.5, -0.5, 0.5, epsabs=1e-12)[0]
         assert love_coefficient(x, y, 1.0, 2.0) == pytest.approx(ref, rel=1e-7), (x, y)
-    assert love_coefficient(0.0, 0.0, 1.0, 1.0) == pytest.approx(theory.self_compliance(1, 1),
-                                                                 rel=1e-14)
+    # h = 2 and E* = 3: a swap of the two would be off by 9/4
+    assert love_coefficient(0.0, 0.0, 2.0, 3.0) == pytest.approx(
+        theory.self_compliance(h=2.0, e_star=3.0), rel=1e-14)
 
 
 @pytest.mark.parametrize("n", [3, 7, 12])
@@ -327,7 +328,7 @@ def test_sherman_morrison_preconditioner_inverts_diagonal_plus_spring():
     op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, use_block=False)
     pl = op.pl
     m = np.where(pl[:, None] == pl[None, :], compliance[pl][:, None], 0.0)
-    m += np.eye(op.size) * theory.self_compliance(1.0, 1.0)
+    m += np.eye(op.size) * theory.self_compliance(h=1.0, e_star=1.0)
     r = rng.standard_normal(op.size)
     assert np.allclose(op.precondition(r), np.linalg.solve(m, r), rtol=1e-12)
 

@@ -8,7 +8,7 @@ NaN-padded along ``step``.  ``grid`` (elements per side n) is a dimension even
 when a sweep has one grid, so that mesh-refinement studies
 (`brushcore.data.convergence`) and single-grid sweeps share one layout;
 `finest_grid` reduces it to one value per case for the figures and tables.
-Pillar shapes other than discs (issue 13) and rough brushes (issue 11) add
+Pillar shapes other than discs and rough brushes add
 the dimensions ``shape`` and roughness, preload, kbar_spread, only when such
 a case ran; `flat_slice` gives the flat disc brushes the paper's figures show.
 Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
@@ -35,14 +35,14 @@ from brushcore.data.io import read_curve, write_dataset_atomic
 from brushcore.validation import brief
 
 #: Order of the layout coordinate (others follow, sorted).
-LAYOUTS = ("regular", "hexagonal", "random")
+LAYOUT_ORDER = ("regular", "hexagonal", "random")
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
-#: Pillar cross-section (issue 13): a dimension only when a non-disc case ran,
+#: Pillar cross-section: a dimension only when a non-disc case ran,
 #: with `brushcore.model.shapes.shape_label` values ("disc", "square",
-#: "ellipse2.0_30.0"), so a sweep of discs keeps today's dimensions.
+#: "ellipse2.0_30.0"), so a sweep of discs keeps the flat sweep's dimensions.
 SHAPE_DIM = "shape"
-#: Extra case dimensions of rough, preloaded or graded brushes (issue 11).  A
-#: sweep of flat brushes only keeps today's four dimensions.
+#: Extra case dimensions of rough, preloaded or graded brushes.  A
+#: sweep of flat brushes only keeps the four base dimensions.
 ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
 #: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are.
 ROUGH_SCALARS = ("dissipated_energy_normalized", "pillars_in_contact_at_preload")
@@ -98,10 +98,11 @@ class CaseKey:
 
     Parameters
     ----------
-    layout : "regular" or "random".
+    layout : "regular", "hexagonal", "random" or "file".
     n_pillars : number of pillars N.
-    kbar : normalised spring stiffness k / (E* L) [-].
-    seed : random-layout seed (0 for regular layouts).
+    kbar : normalised spring stiffness k / (E* L) [1].
+    seed : seed of the random layout, heights and stiffnesses (0 where
+        nothing is drawn).
     grid : elements per side n of the L x L square.
     roughness, preload, kbar_spread : rough-brush parameters (0 when flat).
     shape : `shape_label` of the pillar cross-section ("disc" by default).
@@ -127,7 +128,7 @@ def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
     shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
-                        float(a.get("orientation", 0.0)))  # files before issue 13: discs
+                        float(a.get("orientation", 0.0)))  # files without a shape: discs
     return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
                    int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS),
                    shape=shape)
@@ -197,12 +198,12 @@ def _check_named_case(path: Path, key: CaseKey, phi: float, case: CaseKey,
 
 
 def _check_brush(path: Path, curve: xr.Dataset, key: CaseKey) -> None:
-    """Refuse a random layout whose seed names another brush than today's.
+    """Refuse a random layout whose seed names another brush than the current rule's.
 
     Before 2026-12-04 a random layout kept a gap of ``min_gap`` elements of
     its own grid, so off the `RANDOM_GAP_GRID` grid it drew other pillars
     than the same seed draws now (`brushcore.model.layout.random_gap`), and
-    beside today's curves it would pass for the same brush along ``grid``.
+    beside current curves it would pass for the same brush along ``grid``.
     Such files lack the ``random_gap`` attribute that every random curve
     records since; on the 512^2 grid both rules draw the same brush.
     """
@@ -237,8 +238,8 @@ def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:
 
 def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
     keys = list(keys)
-    layouts = [lay for lay in LAYOUTS if any(k.layout == lay for k in keys)]
-    layouts += sorted({k.layout for k in keys} - set(LAYOUTS))
+    layouts = [lay for lay in LAYOUT_ORDER if any(k.layout == lay for k in keys)]
+    layouts += sorted({k.layout for k in keys} - set(LAYOUT_ORDER))
     coords = {
         "layout": np.array(layouts, dtype=object),
         "n_pillars": np.array(sorted({k.n_pillars for k in keys}), dtype=np.int64),
@@ -518,7 +519,7 @@ def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
     A sweep of flat brushes is returned as it is; in one with rough cases the
     ROUGH_DIMS are selected at 0 (NaN everywhere when no flat case ran), and
     the pillar shape at `shape` (`shape_slice`), so that the paper's figures
-    and summary see today's four dimensions.  ``shape=None`` keeps every shape.
+    and summary see the four base dimensions.  ``shape=None`` keeps every shape.
     Where no run was at preload 0 the smallest preload stands for it: a flat
     brush pulls off as from full contact whatever the preload (within CG's
     tolerance), so a rough study that always presses on still has its flat

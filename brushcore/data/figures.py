@@ -1,7 +1,7 @@
 """The paper's Figures 5-8 drawn from a sweep dataset (matplotlib, no pyplot).
 
 `convergence` draws a mesh-refinement study (`brushcore.data.convergence`),
-`lattices` compares layouts and pillar shapes of the same N (issue 13).
+`lattices` compares layouts and pillar shapes of the same N.
 
 Each ``figN`` function takes the dataset of `brushcore.data.aggregate.build_sweep`
 and returns a `matplotlib.figure.Figure`; `save` writes it.  Figures are
@@ -33,8 +33,6 @@ from brushcore.data.convergence import (QUANTITIES, TOUCHING, UNDER_RESOLVED_RAD
                                         touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
-F_LABEL = r"$\bar F = F / \sqrt{8\pi E^*\Delta\gamma (A/\pi)^{3/2}}$"
-D_LABEL = r"$\bar d = d / \sqrt{2\pi\Delta\gamma\sqrt{A/\pi}/E^*}$"
 K_LABEL = r"$\bar k = k / (E^* L)$"
 FAD_LABEL = r"$\bar F_{ad}$"
 W_LABEL = r"$\bar W = W / (2\pi a_0^2 \Delta\gamma)$"
@@ -352,7 +350,7 @@ def _lattice_series(sweep: xr.Dataset, n_pillars: int) -> list[tuple[str, str, x
 
 
 def lattices(sweep: xr.Dataset) -> Figure:
-    """Adhesive force against kbar for every (layout, shape) of the same N (issue 13).
+    """Adhesive force against kbar for every (layout, shape) of the same N.
 
     One panel per N run with more than one layout or shape.  Colour is the
     layout, marker and line style the pillar shape; with several seeds
@@ -423,7 +421,7 @@ def _rough_ready(sweep: xr.Dataset, fig: Figure) -> bool:
 
 def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
                     ) -> Figure:
-    """Adhesive force against roughness per kbar, one panel per preload (issue 11).
+    """Adhesive force against roughness per kbar, one panel per preload.
 
     Bars span the seeds.  Dashed lines are the soft limit (elastic foundation,
     every pillar attached, large N): N^(1/4) G(S d_K / lambda) with G
@@ -477,7 +475,7 @@ def _no_false_zoom(ax, span: float = 0.05) -> None:
 
 def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
                   ) -> Figure:
-    """Adhesive force against preload per kbar, one panel per roughness (issue 11)."""
+    """Adhesive force against preload per kbar, one panel per roughness."""
     sweep = finest_grid(sweep)  # one value per case: the best-resolved one
     fig = _new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
     if not _rough_ready(sweep, fig):
@@ -504,7 +502,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
 
 
 def rough_loop(curve: xr.Dataset) -> Figure:
-    """One approach-retract loop with the contact at the preload and at F_ad (issue 11).
+    """One approach-retract loop with the contact at the preload and at F_ad.
 
     Left: F / F_K against d / d_K, approach and retraction in two colours
     (compression is negative), the preload and F_ad marked.  Right: the
@@ -546,7 +544,7 @@ def rough_loop(curve: xr.Dataset) -> Figure:
 
 
 def load_sharing(curve: xr.Dataset) -> Figure:
-    """Force of every pillar at F_ad against its height (issue 11).
+    """Force of every pillar at F_ad against its height.
 
     Forces are in units of the mean pillar force at F_ad (F_ad / N), heights
     in d_K; colour is the pillar's kbar.  Equal load sharing is the line at 1;

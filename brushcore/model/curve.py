@@ -269,7 +269,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     # cascades are local, where the tiles win from 1,500 elements a pillar.
     max_block = (BlockInverse.MAX_BLOCK if dispatch and dispatches(z, protocol)
                  else BlockInverse.MAX_BLOCK_PROTOCOL)
-    # A dispatched run is today's pull-off, whose float32 solves may go on in double.
+    # A dispatched run is the flat pull-off, whose float32 solves may go on in double.
     op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
                        params.e_star, max_block=max_block,
                        precise=whole_grid_double(params, options) if is_single(conv) else None)
@@ -358,7 +358,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     naming what is missing).  GPU curves agree with CPU ones within CG
     tolerance, not bit for bit, and solve the whole grid (no symmetry fold).
 
-    A flat brush (`BrushParams.is_flat`) without ``protocol`` is today's
+    A flat brush (`BrushParams.is_flat`) without ``protocol`` is the flat
     pull-off from full contact.  Otherwise the brush is approached from
     first touch to ``params.preload`` and retracted until it has let go,
     or follows ``protocol``: waypoints whose values are normalised, forces
@@ -410,32 +410,30 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                       np.int8(-1)).astype(np.int8)
     coord = (np.arange(params.grid) + 0.5) * h
 
-    var = _var
-
     data = {
-        "displacement": var("step", curve.displacement, "pull-off displacement d", "m"),
-        "force": var("step", curve.force, "tensile normal force F", "N"),
-        "contact_area": var("step", area, "real contact area", "m2"),
-        "attached_pillars": var("step", curve.attached_pillars.astype(np.int32),
+        "displacement": _var("step", curve.displacement, "pull-off displacement d", "m"),
+        "force": _var("step", curve.force, "tensile normal force F", "N"),
+        "contact_area": _var("step", area, "real contact area", "m2"),
+        "attached_pillars": _var("step", curve.attached_pillars.astype(np.int32),
                                 "pillars with attached elements", "1"),
-        "displacement_normalized": var("step", curve.displacement / ds_,
+        "displacement_normalized": _var("step", curve.displacement / ds_,
                                        "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
-        "force_normalized": var("step", curve.force / fs,
+        "force_normalized": _var("step", curve.force / fs,
                                 "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)", "1"),
-        "detachment_step": var(("y", "x"), detach, "first step at which the element is "
+        "detachment_step": _var(("y", "x"), detach, "first step at which the element is "
                                "detached", "1", comment="-1 outside pillars"),
-        "contact_snapshot": var(("snapshot", "y", "x"), states, "contact state", "1",
+        "contact_snapshot": _var(("snapshot", "y", "x"), states, "contact state", "1",
                                 flag_values=np.array([-1, 0, 1], dtype=np.int8),
                                 flag_meanings="no_pillar detached attached"),
-        "snapshot_step": var("snapshot", snaps, "step of the snapshot", "1"),
+        "snapshot_step": _var("snapshot", snaps, "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
                                       {"long_name": "stage of the pull-off"}),
-        "adhesive_force": var((), f_ad, "adhesive force (maximum tensile force)", "N"),
-        "adhesive_force_normalized": var((), f_ad / fs, "F_ad / F_K", "1"),
-        "displacement_at_adhesive_force": var((), float(curve.displacement[i_max]),
+        "adhesive_force": _var((), f_ad, "adhesive force (maximum tensile force)", "N"),
+        "adhesive_force_normalized": _var((), f_ad / fs, "F_ad / F_K", "1"),
+        "displacement_at_adhesive_force": _var((), float(curve.displacement[i_max]),
                                               "d at the adhesive force", "m"),
-        "work_of_separation": var((), work, "work of separation, integral of F dd", "J"),
-        "work_of_separation_normalized": var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
+        "work_of_separation": _var((), work, "work of separation, integral of F dd", "J"),
+        "work_of_separation_normalized": _var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
                                              "1"),
     }
     attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
@@ -445,11 +443,11 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                        references=REFERENCES, preconditioner=curve.preconditioner,
                        symmetry_fold=curve.symmetry_fold)
     return xr.Dataset(data, coords={
-        "step": var("step", np.arange(curve.displacement.size, dtype=np.int32),
+        "step": _var("step", np.arange(curve.displacement.size, dtype=np.int32),
                     "step of the pull-off (one per solve)", "1"),
-        "y": var("y", coord, "element centre y", "m"),
-        "x": var("x", coord, "element centre x", "m"),
-        "snapshot": var("snapshot", np.arange(snaps.size, dtype=np.int32),
+        "y": _var("y", coord, "element centre y", "m"),
+        "x": _var("x", coord, "element centre x", "m"),
+        "snapshot": _var("snapshot", np.arange(snaps.size, dtype=np.int32),
                         "contact snapshot index", "1"),
     }, attrs=attrs)
 
@@ -459,7 +457,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                       protocol: Sequence[Waypoint] | None = None) -> xr.Dataset:
     """Approach, preload and retraction (or any waypoint protocol) as a Dataset.
 
-    Beyond today's variables (same names, units and meaning, now over both
+    Beyond the flat pull-off's variables (same names, units and meaning, now over both
     branches of the loop): per step ``branch`` (waypoint index, -1 at first
     touch), ``direction`` (-1 approach, 0 first touch, +1 retraction) and
     ``retraction`` (1 on the last retraction branch, where ``adhesive_force``
@@ -524,76 +522,77 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     if pillar_force is None or i_max < 0:
         pillar_force = np.full(n_pillars, np.nan)
 
-    var = _var
-
     coord = (np.arange(params.grid) + 0.5) * h
     data = {
-        "displacement": var("step", d, "displacement d of the backing plate", "m"),
-        "force": var("step", f, "tensile normal force F", "N"),
-        "contact_area": var("step", area, "real contact area", "m2"),
-        "attached_pillars": var("step", curve.attached_pillars.astype(np.int32),
+        "displacement": _var("step", d, "displacement d of the backing plate", "m"),
+        "force": _var("step", f, "tensile normal force F", "N"),
+        "contact_area": _var("step", area, "real contact area", "m2"),
+        "attached_pillars": _var("step", curve.attached_pillars.astype(np.int32),
                                 "pillars with attached elements", "1"),
-        "displacement_normalized": var("step", d / ds_,
+        "displacement_normalized": _var("step", d / ds_,
                                        "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
-        "force_normalized": var("step", f / fs, "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)",
+        "force_normalized": _var("step", f / fs, "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)",
                                 "1"),
-        "branch": var("step", curve.branch.astype(np.int32),
+        "branch": _var("step", curve.branch.astype(np.int32),
                       "index of the protocol waypoint being followed", "1",
                       comment="-1 at first touch"),
-        "direction": var("step", curve.direction.astype(np.int8), "direction of motion",
+        "direction": _var("step", curve.direction.astype(np.int8), "direction of motion",
                          "1", flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
                          flag_meanings="approach first_touch retraction"),
-        "retraction": var("step", ret.astype(np.int8),
+        "retraction": _var("step", ret.astype(np.int8),
                           "step belongs to the last retraction branch", "1",
                           flag_values=np.array([0, 1], dtype=np.int8),
                           flag_meanings="other last_retraction"),
-        "attachment_step": var(("y", "x"), on_grid(curve.attach_step, -1, np.int32),
+        "attachment_step": _var(("y", "x"), on_grid(curve.attach_step, -1, np.int32),
                                "last step at which the element attached", "1",
                                comment="-1 outside pillars or never in contact"),
-        "detachment_step": var(("y", "x"), on_grid(curve.detach_step, -1, np.int32),
+        "detachment_step": _var(("y", "x"), on_grid(curve.detach_step, -1, np.int32),
                                "first step without the element after its last detachment",
                                "1", comment="-1 outside pillars, never detached"),
-        "contact_snapshot": var(("snapshot", "y", "x"), states, "contact state", "1",
+        "contact_snapshot": _var(("snapshot", "y", "x"), states, "contact state", "1",
                                 flag_values=np.array([-1, 0, 1], dtype=np.int8),
                                 flag_meanings="no_pillar detached attached"),
-        "snapshot_step": var("snapshot", np.asarray(steps, dtype=np.int32),
+        "snapshot_step": _var("snapshot", np.asarray(steps, dtype=np.int32),
                              "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(names),
                                       {"long_name": "stage of the protocol"}),
-        "pillar_y": var("pillar", centre[:, 0], "pillar centroid y", "m"),
-        "pillar_x": var("pillar", centre[:, 1], "pillar centroid x", "m"),
-        "pillar_height": var("pillar", inputs.heights, "pillar protrusion z_p "
+        "pillar_y": _var("pillar", centre[:, 0], "pillar centroid y", "m"),
+        "pillar_x": _var("pillar", centre[:, 1], "pillar centroid x", "m"),
+        "pillar_height": _var("pillar", inputs.heights, "pillar protrusion z_p "
                              "(larger reaches the substrate first)", "m"),
-        "pillar_height_normalized": var("pillar", inputs.heights / ds_, "z_p / d_K", "1"),
-        "pillar_kbar": var("pillar", inputs.kbar, "pillar spring stiffness k_p / (E* L)",
+        "pillar_height_normalized": _var("pillar", inputs.heights / ds_, "z_p / d_K", "1"),
+        "pillar_kbar": _var("pillar", inputs.kbar, "pillar spring stiffness k_p / (E* L)",
                            "1"),
-        "pillar_force_at_adhesive_force": var("pillar", pillar_force,
+        "pillar_force_at_adhesive_force": _var("pillar", pillar_force,
                                               "pillar force at F_ad (tensile positive)", "N"),
-        "pillar_let_go_displacement": var("pillar", curve.let_go,
+        "pillar_let_go_displacement": _var("pillar", curve.let_go,
                                           "d at which the pillar's last element detached",
                                           "m", comment="NaN: never in contact"),
-        "adhesive_force": var((), f_ad, "adhesive force (maximum tensile force of the "
+        "adhesive_force": _var((), f_ad, "adhesive force (maximum tensile force of the "
                               "last retraction)", "N"),
-        "adhesive_force_normalized": var((), f_ad / fs, "F_ad / F_K", "1"),
-        "displacement_at_adhesive_force": var((), d_ad, "d at the adhesive force",
+        "adhesive_force_normalized": _var((), f_ad / fs, "F_ad / F_K", "1"),
+        "displacement_at_adhesive_force": _var((), d_ad, "d at the adhesive force",
                                               "m"),
-        "work_of_separation": var((), work, "work of separation, integral of max(F, 0) dd "
+        "work_of_separation": _var((), work, "work of separation, integral of max(F, 0) dd "
                                   "over the last retraction", "J"),
-        "work_of_separation_normalized": var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
+        "work_of_separation_normalized": _var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
                                              "1"),
-        "dissipated_energy": var((), dissipated, "energy dissipated over the protocol, "
+        "dissipated_energy": _var((), dissipated, "energy dissipated over the protocol, "
                                  "integral of F dd", "J"),
-        "dissipated_energy_normalized": var((), dissipated / ws, "dissipated energy / W_K",
+        "dissipated_energy_normalized": _var((), dissipated / ws, "dissipated energy / W_K",
                                             "1"),
-        "pillars_in_contact_at_preload": var((), np.int32(in_contact),
+        "pillars_in_contact_at_preload": _var((), np.int32(in_contact),
                                              "pillars with attached elements at the end of "
                                              "the first waypoint", "1"),
-        "contact_area_at_preload": var((), float(area[preload_step]),
+        "contact_area_at_preload": _var((), float(area[preload_step]),
                                        "real contact area at the end of the first waypoint",
                                        "m2"),
     }
     if inputs.gap_map is not None:
-        data["gap_map"] = var(("y", "x"), inputs.gap_map, "extra gap of each element", "m")
+        data["gap_map"] = _var(("y", "x"), inputs.gap_map, "extra gap of each element", "m")
+        # In d_K, as BrushParams(gap_map=...) and --gap-map take it back.
+        data["gap_map_normalized"] = _var(("y", "x"), inputs.gap_map / ds_,
+                                          "extra gap of each element / d_K", "1")
     attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
                        steps=int(d.size), applications=applications,
                        cg_iterations=curve.cg_iterations, wall=wall,
@@ -612,12 +611,12 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                         "give every pillar's centroid",
     })
     return xr.Dataset(data, coords={
-        "step": var("step", np.arange(d.size, dtype=np.int32),
+        "step": _var("step", np.arange(d.size, dtype=np.int32),
                     "step of the protocol (one per event or solve)", "1"),
-        "y": var("y", coord, "element centre y", "m"),
-        "x": var("x", coord, "element centre x", "m"),
-        "snapshot": var("snapshot", np.arange(len(steps), dtype=np.int32),
+        "y": _var("y", coord, "element centre y", "m"),
+        "x": _var("x", coord, "element centre x", "m"),
+        "snapshot": _var("snapshot", np.arange(len(steps), dtype=np.int32),
                         "contact snapshot index", "1"),
-        "pillar": var("pillar", np.arange(n_pillars, dtype=np.int32),
+        "pillar": _var("pillar", np.arange(n_pillars, dtype=np.int32),
                       "pillar index (label order)", "1"),
     }, attrs=attrs)

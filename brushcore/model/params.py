@@ -26,7 +26,7 @@ LAYOUTS = ("regular", "random", "hexagonal", "file")
 MAX_ASPECT = 10.0
 
 
-#: The discretisation rule (issue 16): a pillar radius of at least this many
+#: The discretisation rule: a pillar radius of at least this many
 #: elements and a realised filling factor within this relative error of the
 #: requested one, unless the caller asks for a coarse run explicitly.  The
 #: paper's finest brush (2304 pillars on 512^2: radius 2.08 elements, phi
@@ -64,7 +64,8 @@ MAX_SEED = 2**63 - 1  # a file attribute is an int64
 
 @dataclass(frozen=True)
 class BrushParams:
-    """One pull-off problem: a brush of equal pillars on equal springs.
+    """One pull-off problem: a brush of pillars on springs, equal by default,
+    with optional heights, per-pillar stiffness, a gap map and a preload.
 
     Parameters
     ----------
@@ -104,7 +105,7 @@ class BrushParams:
     roughness : standard deviation S in [0, 1e3] of Gaussian pillar heights, in
         units of d_K = sqrt(2 pi dgamma a0 / E*) (a0 = sqrt(A / pi), A the
         discretised pillar area), drawn from ``seed`` (also for regular
-        brushes); 0 (default) is today's flat brush.
+        brushes); 0 (default) is the flat brush.
     preload : compressive force P in [0, 1e3] the approach stops at, in units of
         F_K = sqrt(8 pi E* dgamma a0^3); 0 stops at first touch.
     kbar_spread : coefficient of variation C in [0, 100] of a lognormal per-pillar
@@ -319,7 +320,7 @@ class BrushParams:
         """All fields as netCDF-safe attributes (inf kept as a float).
 
         The rough-brush fields appear only where they differ from their
-        defaults, so a flat brush keeps today's attributes and parameter
+        defaults, so a flat brush keeps the flat brush's attributes and parameter
         hash; arrays are represented by ``inputs_digest`` (their values are
         curve variables).
         """
@@ -335,6 +336,6 @@ class BrushParams:
 
 #: Per-pillar and per-element inputs (arrays) of `BrushParams`.
 ARRAY_FIELDS = ("heights", "kbar_values", "gap_map")
-#: Rough-brush fields and the defaults that reproduce today's flat brush.
+#: Rough-brush fields and the defaults that give the flat brush.
 ROUGH_DEFAULTS = {"roughness": 0.0, "preload": 0.0, "kbar_spread": 0.0, "inputs_digest": ""}
 ROUGH_FIELDS = tuple(ROUGH_DEFAULTS)

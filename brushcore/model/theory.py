@@ -117,15 +117,9 @@ def spring_punch_work(pull_off: float, spring: float, contact: float) -> float:
 # Separated soft pillars do not interact: pillar i carries k_eff,i (d - d0_i)
 # (tensile positive) from its zero-force position d0_i until it lets go at its
 # own critical force f_c, i.e. at d0_i + lambda_i with lambda_i = f_c / k_eff,i
-# (a flat punch on a spring lets go at f_c whatever the spring; DESIGN.md,
+# (a flat punch on a spring lets go at f_c whatever the spring; README,
 # "Rough, graded and preloaded brushes").  Pillars in compression count with
 # their (negative) force and never let go.
-
-
-def series_stiffness(spring: float | np.ndarray, contact: float) -> float | np.ndarray:
-    """Effective stiffness 1 / (1/k + 1/k_c) of a spring in series with its
-    contact [force / length]; k = inf gives k_c."""
-    return 1.0 / (1.0 / np.asarray(spring, dtype=float) + 1.0 / contact)
 
 
 def foundation_pull_off(d0: np.ndarray, k_eff: np.ndarray, f_c: float | np.ndarray

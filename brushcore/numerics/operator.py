@@ -73,7 +73,7 @@ class BrushOperator:
         self._springs = bool(compliance.any())
         self.pillar_of = be.asarray(pillar_of)
         self.compliance = be.asarray(compliance)
-        self.diag = self_compliance(e_star, h)
+        self.diag = self_compliance(h=h, e_star=e_star)
         self._padded = be.asarray(convolver.padded_index(self.elements))
         self.conv.flat_buffer[...] = 0.0
         self.attached = xp.ones(self.elements.size, dtype=xp.bool)

@@ -84,7 +84,7 @@ class PillarSolver:
         np.maximum.at(radius, pillar_of, np.hypot(iy * h - cy[pillar_of], ix * h - cx[pillar_of]))
         self.bound = (FarFieldBound(near_influence(cy, cx, radius, h, e_star, mirrored))
                       if n_pillars > 1 else None)
-        self.diag = self_compliance(e_star, h)
+        self.diag = self_compliance(h=h, e_star=e_star)
 
     def _fft_shape(self, p: int) -> tuple[int, int]:
         by, bx = self._box[p]

@@ -40,7 +40,7 @@ from scipy.linalg import blas
 
 from brushcore.numerics.backend import CPU
 from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import folded_coefficient, love_coefficient, pillar_influence
+from brushcore.numerics.kernel import love_coefficient, pillar_influence
 from brushcore.numerics.multipole import field_terms
 from brushcore.numerics.spmv import packed_products
 from brushcore.numerics.threads import stacked_matmul
@@ -313,13 +313,6 @@ class BlockInverse:
     #: Bytes the stacks may take with the elastic inverses that `attach`
     #: borders (the stack, its packed copy and the elastic inverses).
     BORDER_BUDGET = 4e9
-
-    def _influence(self, ya: np.ndarray, xa: np.ndarray, yb: np.ndarray,
-                   xb: np.ndarray) -> np.ndarray:
-        """Influence coefficients between elements at (ya, xa) and (yb, xb) [length / stress]."""
-        if self._mirrored:
-            return folded_coefficient(ya, xa, yb, xb, self._h, self._e_star)
-        return love_coefficient(ya - yb, xa - xb, self._h, self._e_star)
 
     def _block(self, p: int, slots: np.ndarray) -> np.ndarray:
         """Pillar p's block of the operator over the given slots [length / stress]."""

@@ -7,7 +7,7 @@ taken per element), an attached element satisfies u_i + f_p / k_p = d - z_i,
 a detached one keeps the gap g_i = d - z_i - f_p / k_p - u_i >= 0.  An
 element attaches when its gap closes (g_i <= 0, zero-range adhesion) and
 detaches when its tensile stress exceeds sigma_c; compression never
-detaches (DESIGN.md, "Rough, graded and preloaded brushes").
+detaches (README, "Rough, graded and preloaded brushes").
 
 For a fixed attached set everything is affine in d:
 
@@ -24,8 +24,8 @@ unstable cascades), exactly as in `pulloff.pull_off`.
 
 A flat brush (all offsets equal) under the standard protocol (approach to
 a preload, retract to separation) is dispatched to `pulloff.pull_off`: its
-retraction branch is today's pull-off shifted by the first-touch position,
-its approach a straight line, and it costs exactly what today's does.
+retraction branch is the flat pull-off shifted by the first-touch position,
+its approach a straight line, and it costs exactly what that pull-off does.
 """
 
 from __future__ import annotations
@@ -162,7 +162,7 @@ def loop_energy(displacement: np.ndarray, force: np.ndarray) -> float:
 
 
 def is_flat(offsets: np.ndarray) -> bool:
-    """Whether every element sits at the same height (today's brush); 1-D offsets."""
+    """Whether every element sits at the same height (a flat brush); 1-D offsets."""
     xp = namespace(offsets)
     return bool(offsets.shape[0] == 0 or xp.all(offsets == offsets[0]))
 
@@ -228,13 +228,13 @@ def _flat(op: BrushOperator, z0: float, preload: float, sigma_c: float, h: float
 
     In full contact sigma = (d - z0) sigma_1, so the preload is reached at
     d_P = z0 - P / k with k = F/d of the first segment, and the retraction
-    back to z0 retraces the same line: the pull-off after it is today's.
+    back to z0 retraces the same line: the pull-off after it is the flat one.
     """
     total = op.size
     curve = pull_off(op, sigma_c, h, options, progress)
     d_rel, f = curve.displacement, curve.force
     head = 0
-    if preload > 0:  # first touch and the preload point precede today's curve
+    if preload > 0:  # first touch and the preload point precede the flat pull-off's curve
         head = 2
         d_rel = np.concatenate([[0.0, -preload * d_rel[1] / f[1]], d_rel])
         f = np.concatenate([[0.0, -preload], f])
@@ -538,7 +538,7 @@ class _Engine:
         r = self.rec
         on_branch = np.zeros(len(r["d"]), dtype=bool)
         on_branch[retraction[0]:retraction[1]] = True
-        f_peak, i_peak, pillar_force, attached_peak = self.peak
+        _, i_peak, pillar_force, attached_peak = self.peak
         host = be.to_host  # the curve comes back to the host at the end
         return ProtocolCurve(
             displacement=np.asarray(r["d"]), force=np.asarray(r["f"]),

@@ -1,7 +1,7 @@
 """Threads: pinned to what the scheduler granted, and shared out by slabs.
 
 Several jobs share a machine under Snakemake; oversubscribed BLAS threads
-slowed this solver sevenfold on a 2-core machine (DESIGN.md).  Within a
+slowed this solver sevenfold on a 2-core machine.  Within a
 job granted T threads, the largest streams (MKL's FFT passes, the stacked
 preconditioner inverses) are cut into T slabs along an axis whose items
 are computed independently, one slab per thread of a `Team`, so that the

@@ -144,7 +144,7 @@ class TileCoarse:
             return
         cy, cx = pillar_centroids(self._pillar_of, self._iy, self._ix, h, n_pillars)
         self._r = pillar_influence(cy, cx, h, e_star, mirrored)
-        self._diag = self_compliance(e_star, h)
+        self._diag = self_compliance(h=h, e_star=e_star)
         self._coarse_vectors(np.arange(n_pillars))
         if self.coarse:  # else E was not positive definite
             coupling = float((self._r @ self._c).max())

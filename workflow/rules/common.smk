@@ -375,7 +375,7 @@ def wants_lattice_figure(config):
 
 
 def lattice_figure_files(config):
-    """The lattice comparison figure (issue 13), for configs that ask for one."""
+    """The lattice comparison figure, for configs that ask for one."""
     if not wants_lattice_figure(config):
         return []
     return [f"results/figures/lattices.{ext}" for ext in ("png", "pdf")]

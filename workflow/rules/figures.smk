@@ -100,7 +100,7 @@ rule fig8:
 
 
 rule rough_figure:
-    """Rough brushes (issue 11): F_ad against roughness with the soft limit, and against preload."""
+    """Rough brushes: F_ad against roughness with the soft limit, and against preload."""
     input:
         "results/sweep.nc",
     output:
@@ -128,7 +128,7 @@ rule rough_figure:
 
 
 rule curve_figure:
-    """Rough brushes (issue 11): one approach-retract loop and its load sharing."""
+    """Rough brushes: one approach-retract loop and its load sharing."""
     input:
         lambda wildcards: rough_example_curve(config),
     output:
@@ -154,7 +154,7 @@ rule curve_figure:
 
 
 rule lattices:
-    """Issue 13: F_ad against kbar for every layout and pillar shape of the same N."""
+    """F_ad against kbar for every layout and pillar shape of the same N."""
     input:
         "results/sweep.nc",
     output:

@@ -1,4 +1,4 @@
-"""Script of rule `curve_figure`: one curve file -> one figure (issue 11)."""
+"""Script of rule `curve_figure`: one curve file -> one figure."""
 
 from brushcore.data import figures
 from brushcore.data.io import read_curve
