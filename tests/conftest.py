@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
+import tempfile
 
 import pytest
 from hypothesis import settings
@@ -18,6 +20,25 @@ from brushcore import BrushParams
 settings.register_profile("ci", derandomize=True)
 if os.environ.get("CI", "").lower() not in ("", "0", "false"):
     settings.load_profile("ci")
+
+
+#: The cache folder this run made (the controller's), removed at its end.
+_OWN_CACHE: list[str] = []
+
+
+def pytest_configure(config):
+    """Keep the tests off the user's cache: FFTW wisdom and the FFT library
+    answers go to a folder of this run (xdist workers inherit it through the
+    environment), unless BRUSHCORE_WISDOM_DIR names one already."""
+    if os.environ.get("BRUSHCORE_WISDOM_DIR") or hasattr(config, "workerinput"):
+        return
+    _OWN_CACHE.append(tempfile.mkdtemp(prefix="brushcore-tests-"))
+    os.environ["BRUSHCORE_WISDOM_DIR"] = _OWN_CACHE[0]
+
+
+def pytest_unconfigure(config):
+    for path in _OWN_CACHE:
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def punch_params(radius: float, kbar: float = math.inf, **kw) -> BrushParams:

@@ -125,13 +125,12 @@ SMALL = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01", 
 def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
     (tmp_path / "a.nc").write_text("not a folder")
     os.mkfifo(tmp_path / "pipe")
-    t0 = time.perf_counter()
     res = _cli(*SMALL, "--grid", "256", "--pillars", "256", "--kbar", "0.455", "--out", out,
                cwd=tmp_path)
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
     assert res.stderr.startswith("brushcore: error: --out ") and reason in res.stderr, res.stderr
+    # one line: the discretisation line, printed just before the pull-off, never came
     assert len(res.stderr.strip().splitlines()) == 1
-    assert time.perf_counter() - t0 < 20  # the 256-pillar pull-off (~5 s) never started
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc", "pipe"]  # nothing made
     assert not (tmp_path / "pipe").is_file()
 
@@ -188,8 +187,8 @@ def test_rough_run_says_how_many_pillars_it_pressed_on(tmp_path):
     assert alone.returncode == 0, alone.stderr
     touching = int(read_curve(tmp_path / "a.nc").pillars_in_contact_at_preload)
     assert touching == 1
-    assert (f"1 of 16 pillars in contact at the preload (--preload 0 stops the approach at "
-            f"first touch") in alone.stdout, alone.stdout
+    assert ("1 of 16 pillars in contact at the preload (--preload 0 stops the approach at "
+            "first touch") in alone.stdout, alone.stdout
     pressed = _cli(*args, "--preload", "1", "--out", str(tmp_path / "b.nc"))
     assert "16 of 16 pillars in contact at the preload\n" in pressed.stdout, pressed.stdout
 
@@ -242,11 +241,13 @@ def _default_sigint() -> None:
 
 def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     out = tmp_path / "c.nc"
+    # A curve of about a minute (random 1620 at kbar 1e-5 on 512^2, 60-80 s on
+    # 2 cores): still running 1 s after its first line on any machine.
     proc = subprocess.Popen([sys.executable, "-m", "brushcore.cli", "simulate", "--layout",
-                             "regular", "--pillars", "256", "--kbar", "0.455", "--grid", "512",
+                             "random", "--pillars", "1620", "--kbar", "1e-5", "--grid", "512",
                              "--out", str(out)], stderr=subprocess.PIPE, text=True,
                             preexec_fn=_default_sigint)
-    first = proc.stderr.readline()  # printed after every check, before the ~5 s pull-off
+    first = proc.stderr.readline()  # printed after every check, before the pull-off
     assert first.startswith("grid 512: pillar radius"), first
     time.sleep(1.0)
     proc.send_signal(signal.SIGINT)

@@ -24,11 +24,32 @@ def _a0(ds) -> float:
 
 @pytest.fixture(scope="module")
 def rigid_punches():
-    return {a: simulate(punch_params(a)) for a in (10, 20, 30, 40)}
+    return {a: simulate(punch_params(a)) for a in (10, 20, 30, 40, 50, 60)}
+
+
+def test_detachment_constant_is_the_energy_balance_of_one_element():
+    """sigma_c = sqrt(E* dgamma / (beta h)): one element under a uniform stress
+    sigma stores (1/2) sigma h^2 w_mean, with w_mean = c sigma h / E* its mean
+    displacement; setting that to dgamma h^2 gives beta = c / 2.  c is
+    integrated here from the influence coefficient (itself tested against the
+    Boussinesq integral above), not taken from the closed form in theory."""
+    from scipy.integrate import dblquad
+
+    from brushcore.numerics.kernel import love_coefficient
+
+    c = dblquad(lambda y, x: love_coefficient(x, y, 1.0, 1.0), -0.5, 0.5, -0.5, 0.5,
+                epsabs=1e-11)[0]
+    assert theory.BETA == pytest.approx(c / 2, rel=1e-8)
+    assert 1 / math.sqrt(theory.BETA) == pytest.approx(1.45370, abs=1e-5)  # C of the paper's ref. 18
+    assert theory.critical_stress(2.0, 3.0, 0.5) == pytest.approx(
+        math.sqrt(2.0 * 3.0 / (c / 2 * 0.5)), rel=1e-8)
 
 
 @pytest.mark.parametrize("a", [20, 30, 40])
 def test_flat_punch_stiffness_is_2aE(rigid_punches, a):
+    """The staircase disc's stiffness is 2 a0 E* to first order in h / a0: the
+    error times a0 / h is 0.115-0.118 at a = 10 ... 40 (measured), so < 1.5 %
+    from a = 20 on."""
     ds = rigid_punches[a]
     ratio = _stiffness(ds) / theory.flat_punch_stiffness(_a0(ds), 1.0)
     assert abs(ratio - 1) < 0.015, f"a={a}: stiffness / 2aE* = {ratio:.4f}"
@@ -36,17 +57,58 @@ def test_flat_punch_stiffness_is_2aE(rigid_punches, a):
 
 @pytest.mark.parametrize("a", [20, 30, 40])
 def test_flat_punch_pull_off_is_kendall(rigid_punches, a):
+    """Kendall within 2 %: the staircase edge puts F_ad 0.2-1.7 % above it for
+    a = 10 ... 60 elements (measured), not monotone in a (below)."""
     ds = rigid_punches[a]
     ratio = float(ds.adhesive_force) / theory.kendall_force(_a0(ds), 1.0, 1.0)
-    assert abs(ratio - 1) < 0.03, f"a={a}: F_ad / Kendall = {ratio:.4f}"
+    assert 1 < ratio < 1.02, f"a={a}: F_ad / Kendall = {ratio:.4f}"
     assert float(ds.adhesive_force_normalized) == pytest.approx(ratio, rel=1e-12)
 
 
+def test_kendall_is_approached_as_the_punch_spans_more_elements(rigid_punches):
+    """Kendall's force from above, within 1 % from a = 40 elements on (measured
+    +0.62, +0.55, +0.45 % at a = 40, 50, 60; +1.63 % at 30, +1.70 % at 10).
+
+    A detachment stress off by 1 % moves F_ad by about 1 %, so this band
+    pins sigma_c: C = sqrt(2) in place of 1.4537 (sigma_c 2.7 % low) gives
+    F_ad about 2 % under Kendall and fails, as it passed the 3 % bands before.
+    """
+    ratios = [float(rigid_punches[a].adhesive_force)
+              / theory.kendall_force(_a0(rigid_punches[a]), 1.0, 1.0) for a in (40, 50, 60)]
+    assert all(1 < r < 1.01 for r in ratios), ratios
+
+
 def test_mesh_convergence_of_stiffness(rigid_punches):
-    """The discretisation error of the stiffness shrinks as the punch spans more elements."""
-    err = [abs(_stiffness(rigid_punches[a]) / (2 * _a0(rigid_punches[a])) - 1)
-           for a in (10, 20, 40)]
+    """The stiffness converges to 2 a0 E* at first order in h / a0: extrapolated
+    from a = 10, 20, 40 elements it is 1 within 1e-3 (measured 0.99987, order
+    1.01), with the errors shrinking grid by grid."""
+    from brushcore.data.convergence import extrapolate
+
+    radii = (10, 20, 40)
+    ratios = [_stiffness(rigid_punches[a]) / (2 * _a0(rigid_punches[a])) for a in radii]
+    err = [abs(r - 1) for r in ratios]
     assert err[0] > err[1] > err[2], f"stiffness errors {err} do not decrease with a/h"
+    fit = extrapolate([1 / _a0(rigid_punches[a]) for a in radii], ratios)
+    assert fit.value == pytest.approx(1.0, abs=1e-3), fit
+    assert 0.8 < fit.order < 1.2, fit
+
+
+def test_units_scale_out():
+    """E* = 2, dgamma = 3, h = 0.5 give the same stiffness / 2 a0 E* and
+    F_ad / Kendall as units of 1, to round-off: a dropped factor of h or E*
+    would show here as a factor 2 (the other tests run in units of 1)."""
+    from dataclasses import replace
+
+    base = punch_params(20)
+    ratios = []
+    for e_star, dgamma, h in ((1.0, 1.0, 1.0), (2.0, 3.0, 0.5)):
+        ds = simulate(replace(base, e_star=e_star, dgamma=dgamma, h=h))
+        a0 = _a0(ds)
+        ratios.append((_stiffness(ds) / theory.flat_punch_stiffness(a0, e_star),
+                       float(ds.adhesive_force) / theory.kendall_force(a0, e_star, dgamma),
+                       float(ds.adhesive_force_normalized),
+                       float(ds.work_of_separation_normalized)))
+    np.testing.assert_allclose(ratios[1], ratios[0], rtol=1e-9)
 
 
 def test_punch_on_spring_keeps_rigid_pull_off(rigid_punches):

@@ -144,6 +144,21 @@ def soft_reference():
     return f_c, eps
 
 
+def test_soft_flat_brush_against_an_independent_dense_solver():
+    """4 x 4 soft pillars close together (128^2, phi = 0.07, kbar = 1e-6) let
+    go at 0.925 N f_c by an independent dense solver (the project's design
+    notes), f_c the force of one pillar of the same footprint alone: the
+    neighbours' fields cost 7.5 % even in the soft limit.  Given to three
+    digits (5e-4) with CG at rtol 1e-4: 1e-3."""
+    from test_geometry import _single_pillar_force
+
+    params = BrushParams("regular", 16, 1e-6, 128, phi=0.07, allow_coarse=True)
+    labels = build_labels(params)
+    _, curve, _ = run(params, labels=labels)
+    f_c = min(_single_pillar_force(labels == q) for q in range(16))
+    assert float(curve.force.max()) / (16 * f_c) == pytest.approx(0.925, abs=1e-3)
+
+
 def _tolerance(eps: float) -> float:
     """Interaction bound for the soft-limit comparisons.
 
@@ -332,6 +347,16 @@ def test_protocol_that_never_retracts_reports_no_pull_off(tmp_path):
     assert float(ds.force_normalized.values[-1]) == pytest.approx(-1.0, rel=1e-6)
     write_curve(ds, tmp_path / "approach.nc")
     assert np.isnan(float(read_curve(tmp_path / "approach.nc").adhesive_force))
+    # Back from -1 to -0.5 F_K: a retraction, but never in tension (it gave
+    # F_ad = -0.5, the least compressive force, as a "maximum tensile force").
+    ds = simulate(BrushParams("regular", 9, 0.003, 48, heights=heights),
+                  protocol=[Waypoint("force", -1.0), Waypoint("force", -0.5)])
+    assert ds.retraction.values.any() and float(ds.force.max()) <= 0
+    assert np.isnan(float(ds.adhesive_force_normalized))
+    assert float(ds.work_of_separation_normalized) == 0.0
+    assert int(ds.snapshot_step.values[-1]) == -1
+    write_curve(ds, tmp_path / "compressive.nc")
+    assert np.isnan(float(read_curve(tmp_path / "compressive.nc").adhesive_force))
 
 
 def test_empty_protocol_is_refused():

@@ -60,7 +60,7 @@ SCALAR_VARIABLES = (
 )
 #: Curve-file attributes promoted to sweep variables: name -> (units, long_name).
 ATTRIBUTE_SCALARS = {
-    "events": ("1", "detachment events of the pull-off"),
+    "events": ("1", "events of the run: detachments, and attachments on an approach"),
     "operator_applications": ("1", "applications of the elastic + spring operator"),
     "cg_iterations": ("1", "conjugate-gradient iterations"),
     "wall_time_s": ("s", "wall time of the simulation"),
@@ -310,7 +310,11 @@ def build_sweep(
     dims = case_dims(curves)
     shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
-    first = next(iter(curves.values()))[1]
+    # Descriptions from a protocol's curve where there is one: its meanings
+    # (W over the last retraction, steps of approach and retraction) hold
+    # for a flat pull-off too, not the other way round.
+    first = next((c for _, c in curves.values() if "retraction" in c),
+                 next(iter(curves.values()))[1])
     rough_scalars = ROUGH_SCALARS if ROUGH_DIMS[0] in dims else ()
 
     data: dict[str, xr.DataArray] = {}
@@ -432,16 +436,20 @@ def _snapshots(
         label[i, :m] = [str(s) for s in c["snapshot_label"].values]
         if "detachment_step" in c:
             detach[i] = c["detachment_step"].values
-    first = with_snaps[keys[0]]
+    first = next((with_snaps[k] for k in keys if "retraction" in with_snaps[k]),
+                 with_snaps[keys[0]])  # descriptions as for the scalars
     extra = dims[len(SWEEP_DIMS):]  # shape and rough dims of the sweep, if any
     dims = ("case", "snapshot")
     out = {
         "contact_snapshot": xr.DataArray(
-            snap, dims=(*dims, "y", "x"), attrs=dict(first["contact_snapshot"].attrs)
+            snap, dims=(*dims, "y", "x"), attrs={
+                **first["contact_snapshot"].attrs,
+                "comment": "a case with fewer snapshots than the others is padded with -1 "
+                           "maps, whose snapshot_step is -1 and snapshot_label empty"}
         ),
         "snapshot_step": xr.DataArray(step, dims=dims, attrs=dict(first["snapshot_step"].attrs)),
         "snapshot_label": xr.DataArray(label.astype(str), dims=dims,
-                                       attrs={"long_name": "stage of the pull-off"}),
+                                       attrs={"long_name": "stage of the pull-off or protocol"}),
         "case_layout": xr.DataArray(np.array([k.layout for k in keys]), dims="case",
                                     attrs={"long_name": "layout of the snapshot case"}),
         "case_n_pillars": xr.DataArray(np.array([k.n_pillars for k in keys]), dims="case",

@@ -81,6 +81,7 @@ refinement studies").
 
 from __future__ import annotations
 
+import datetime as _dt
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -89,6 +90,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 from scipy import optimize
+
+from brushcore.model import provenance
 
 #: Results the workflow extrapolates.
 QUANTITIES = ("adhesive_force_normalized", "work_of_separation_normalized")
@@ -517,8 +520,29 @@ def extrapolate_sweep(
         "max_relative_residual": opts.max_relative_residual,
         "min_grids": opts.min_grids,
         "under_resolved_radius_elements": UNDER_RESOLVED_RADIUS,
+        **_provenance(sweep),
     }
     return ds
+
+
+def _provenance(sweep: xr.Dataset) -> dict[str, object]:
+    """History, version and the sweep this study was extrapolated from, so
+    that an extrapolated value can be traced back to its curve files."""
+    now = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+    grids = ", ".join(str(int(g)) for g in sweep[GRID_DIM].values)
+    out: dict[str, object] = {
+        "history": f"{now} extrapolated over grids {grids} by brushcore.data.convergence"
+                   + (f"\n{sweep.attrs['history']}" if "history" in sweep.attrs else ""),
+        "date_created": now,
+        "brushcore_version": provenance.version(),
+        "git_commit": provenance.git_commit(),
+    }
+    if "source_digest_sha256" in sweep.attrs:
+        out["sweep_source_digest_sha256"] = sweep.attrs["source_digest_sha256"]
+    for name in ("e_star", "dgamma", "units_convention"):
+        if name in sweep.attrs:
+            out[name] = sweep.attrs[name]
+    return out
 
 
 def write_dataset(conv: xr.Dataset, path: str | Path) -> None:

@@ -19,7 +19,8 @@ REQUIRED_VARS = ("displacement", "force", "contact_area", "attached_pillars",
 REQUIRED_ATTRS = ("layout", "n_pillars", "kbar", "grid", "phi", "seed",
                   "operator_applications", "brushcore_version", "parameter_hash")
 #: Results of a pull-off: NaN in a protocol's file that never retracts
-#: (its `retraction` flag 0 on every step), finite everywhere else.
+#: (its `retraction` flag 0 on every step) or never pulls in tension,
+#: finite everywhere else.
 PULL_OFF_VARS = REQUIRED_VARS[4:]
 #: Attribute holding the SHA-256 of the file's values and attributes (see `content_digest`).
 DIGEST_ATTR = "content_sha256"
@@ -193,7 +194,10 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
     if stored is not None and str(stored) != content_digest(ds):
         raise CurveFileError(f"{path}: corrupt, its values do not match the {DIGEST_ATTR} "
                              "written with them")
-    never_pulled = "retraction" in ds.variables and not ds["retraction"].values.any()
+    # A protocol that never retracts, or whose retraction stays compressive,
+    # has no adhesive force (NaN) and may carry NaN in the other results.
+    never_pulled = "retraction" in ds.variables and not (
+        ds["force"].values[ds["retraction"].values.astype(bool)] > 0).any()
     for name in REQUIRED_VARS:
         if never_pulled and name in PULL_OFF_VARS:
             continue

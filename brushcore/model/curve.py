@@ -489,9 +489,11 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     ws = theory.work_scale(area_total, dg)
     d, f = curve.displacement, curve.force
     ret = curve.retraction
-    if ret.any():
+    if ret.any() and f[ret].max() > 0:
         i_max = int(np.flatnonzero(ret)[np.argmax(f[ret])])
         f_ad, d_ad, work = float(f[i_max]), float(d[i_max]), positive_work(d[ret], f[ret])
+    elif ret.any():  # a retraction that stays compressive: no tensile force, no work
+        i_max, f_ad, d_ad, work = -1, math.nan, math.nan, 0.0
     else:  # a protocol that never retracts: no pull-off to report
         i_max, f_ad, d_ad, work = -1, math.nan, math.nan, math.nan
     dissipated = loop_energy(d, f)
