@@ -91,6 +91,28 @@ def test_suggested_grid_runs(args):
             build_labels(make(grid))
 
 
+def test_suggested_grid_runs_every_brush_of_a_config():
+    """The default sweep's brushes on 64^2: one grid that runs them all (492),
+    not the first failing brush's own (82, refused for the next one)."""
+    from brushcore.model.layout import grid_hint, next_grid
+
+    brushes = [("regular", n) for n in (64, 256, 576, 2304)] + \
+        [("random", n) for n in (64, 220, 425, 1620)]
+    makes = [lambda g, lay=lay, n=n: BrushParams(lay, n, 1.0, g) for lay, n in brushes]
+    with pytest.raises(ParameterError) as err:
+        makes[4](64)
+    alone = next_grid(makes[4], 65)
+    hint = str(grid_hint(err.value, makes[4], 64, makes[:4] + makes[5:]))
+    common = int(re.search(r"allowed grid (\d+), the next", hint).group(1))
+    assert alone < common
+    for make in makes:
+        build_labels(make(common))
+    for grid in range(65, common):  # no grid between runs them all
+        with pytest.raises(ParameterError):
+            for make in makes:
+                build_labels(make(grid))
+
+
 def test_floor_even_when_coarse_is_allowed():
     """Below sqrt(2)/2 elements a pillar may cover no element centre; the hint is consistent."""
     with pytest.raises(ParameterError, match=r"grid >= \d+") as err:

@@ -18,7 +18,7 @@ which can be less than one of those elements.)
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -270,34 +270,54 @@ def next_grid(make: Callable[[int], BrushParams], start: int) -> int | None:
     return None
 
 
-def grid_hint(exc: ParameterError, make: Callable[[int], BrushParams],
-              grid: int) -> ParameterError:
+def next_common_grid(makes: Sequence[Callable[[int], BrushParams]], start: int) -> int | None:
+    """The smallest grid from ``start`` on at which every brush of ``makes``
+    passes every check (`next_grid` of each, raised until they agree); None
+    where one has no such grid."""
+    grid = start
+    for _ in range(GRID_HINT_TRIES):
+        found = [next_grid(make, grid) for make in makes]
+        if None in found:
+            return None
+        if min(found) == max(found):
+            return found[0]
+        grid = max(found)
+    return None
+
+
+def grid_hint(exc: ParameterError, make: Callable[[int], BrushParams], grid: int,
+              others: Sequence[Callable[[int], BrushParams]] = ()) -> ParameterError:
     """``exc`` suggesting the next grid above ``grid`` that passes every check.
 
     The pillar radius rule alone names a grid that the filling factor's
     check may refuse (random 64 square pillars: 82 by the radius, refused
-    at +5.3 % phi); this names one that runs.  Errors about other
-    parameters, and grid errors with no such grid, come back unchanged.
+    at +5.3 % phi); this names one that runs, for ``make`` and for the
+    ``others`` that share its grid (a config's brushes: a grid that runs
+    one of them only would be refused again for the next).  Errors about
+    other parameters, and grid errors with no such grid, come back unchanged.
     """
     if exc.name != "grid":
         return exc
-    found = next_grid(make, grid + 1)
+    found = next_common_grid([make, *others], grid + 1)
     if found is None:
         return exc
     coarse = "" if "allow_coarse" not in exc.allowed else ", or allow_coarse to run it anyway"
-    return ParameterError("grid", exc.value, f"grid {found}, the next that resolves the "
-                          f"pillars and realises phi within {100 * MAX_PHI_ERROR:g} %"
+    which = "every brush that shares it" if others else "the pillars"
+    return ParameterError("grid", exc.value, f"grid {found}, the next that resolves {which} "
+                          f"and realises phi within {100 * MAX_PHI_ERROR:g} %"
                           + coarse, exc.reason)
 
 
-def hinted_params(make: Callable[[int], BrushParams], grid: int) -> BrushParams:
+def hinted_params(make: Callable[[int], BrushParams], grid: int,
+                  others: Sequence[Callable[[int], BrushParams]] = ()) -> BrushParams:
     """``make(grid)``, a grid it refuses naming the next grid that passes every
-    check (`grid_hint`), not only the pillar radius rule (the CLI's and the
-    workflow's way to build a brush from what the user typed)."""
+    check (`grid_hint`) for it and the ``others`` on the same grid, not only
+    the pillar radius rule (the CLI's and the workflow's way to build a
+    brush from what the user typed)."""
     try:
         return make(grid)
     except ParameterError as exc:
-        raise grid_hint(exc, make, grid) from None
+        raise grid_hint(exc, make, grid, others) from None
 
 
 def build_labels(params: BrushParams) -> np.ndarray:

@@ -7,7 +7,7 @@ import jsonschema
 import yaml
 
 from brushcore.model.params import BrushParams, ParameterError
-from brushcore.model.layout import build_labels, hinted_params
+from brushcore.model.layout import build_labels, grid_hint, hinted_params
 from brushcore.numerics.options import SolverOptions
 from brushcore.model.shapes import parse_shape_label, shape_label
 
@@ -109,26 +109,29 @@ def check_cases(config):
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
         raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
-    seen = set()
+    by_n = {int(e["n_pillars"]) for e in config.get("grid_by_n", [])}
+    makes = {}  # one brush per geometry: it does not depend on kbar
     for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
-        if (layout, n, seed, grid, phi, rough, shape) in seen:
-            continue
-        seen.add((layout, n, seed, grid, phi, rough, shape))
+        makes.setdefault((layout, n, seed, grid, phi, rough, shape), (
+            lambda g, layout=layout, n=n, kbar=kbar, seed=seed, phi=phi, rough=rough,
+            shape=shape: BrushParams(
+                layout, n, float(kbar), g, phi=phi, seed=seed,
+                allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
+                **parse_shape_tag(shape))))
+    for (layout, n, seed, grid, phi, rough, shape), make in makes.items():
         try:
-            params = hinted_params(
-                lambda g: BrushParams(
-                    layout, n, float(kbar), g, phi=phi, seed=seed,
-                    allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
-                    **parse_shape_tag(shape),
-                ), grid)
-            build_labels(params)
+            build_labels(hinted_params(make, grid))
         except ParameterError as exc:
+            # A grid to suggest must run every brush the same grid key sets.
+            key = n if n in by_n else None
+            others = [m for (_, n2, _, g2, *_), m in makes.items()
+                      if m is not make and g2 == grid and (n2 if n2 in by_n else None) == key]
+            exc = grid_hint(exc, make, grid, others)
             fig5 = config["fig5"]
             only_fig5 = (layout == fig5["layout"] and n == int(fig5["n_pillars"])
                          and n not in config.get(layout, []))
-            by_n = any(int(e["n_pillars"]) == n for e in config.get("grid_by_n", []))
             keys = {"n_pillars": "fig5.n_pillars" if only_fig5 else layout, "seed": "seeds",
-                    "grid": "grid_by_n.grid" if by_n else "grid",
+                    "grid": "grid_by_n.grid" if n in by_n else "grid",
                     "allow_coarse": "allow_coarse: true",
                     "min_gap": "min_gap (CLI only: --min-gap)"}
             raise ConfigError(
