@@ -319,6 +319,18 @@ def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict,
     assert "Job stats" not in text and "rule simulate" not in text, text
 
 
+def test_exponent_without_a_point_is_a_number(repo_copy: Path, tmp_path: Path,
+                                               test_config: dict) -> None:
+    """PyYAML reads 1e-4 (no point) as text; the config means a number and
+    plans as if it had written 1.0e-4 (it was refused as "not of type 'number'")."""
+    config = tmp_path / "exponent.yaml"
+    config.write_text("kbar: [1e-4, 1.0e-2, 1E0]\nsolver:\n  rtol: 1e-5\n")
+    proc = snakemake(repo_copy, "-n", "--forceall", "--configfile", "config/test.yaml",
+                     str(config))
+    assert proc.returncode == 0, output(proc)[-3000:]
+    assert planned_simulations(output(proc)) == len(expected_cases(test_config))
+
+
 def test_integral_float_grid_plans_as_its_integer(repo_copy: Path, tmp_path: Path,
                                                   test_config: dict) -> None:
     """JSON Schema counts 64.0 as an integer; the plan must too (it once crashed)."""

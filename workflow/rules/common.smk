@@ -2,6 +2,7 @@
 
 import difflib
 import math
+import re
 
 import jsonschema
 import yaml
@@ -21,6 +22,7 @@ def check_config(config, schema_path):
     """
     with open(schema_path) as fh:
         schema = yaml.safe_load(fh)
+    _exponent_numbers(config)
     error = jsonschema.exceptions.best_match(
         jsonschema.Draft202012Validator(schema).iter_errors(config)
     )
@@ -46,6 +48,23 @@ def check_config(config, schema_path):
             forms.setdefault(sub.schema_path[0], sub.message)
         message = f"{error.instance!r} fits none of its forms: " + "; ".join(forms.values())
     raise ConfigError(f"config key '{where}': {message}")
+
+
+#: A number in exponent form without a point ("1e-8"): YAML 1.2 reads it as a
+#: number, but PyYAML (YAML 1.1, which Snakemake uses) as a string.
+_EXPONENT_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+")
+
+
+def _exponent_numbers(value):
+    """Turn "1e-8" into 1e-8 wherever the config holds it (in place), so that
+    `kbar: [1e-6, 1e-3]` means what it says rather than failing as text."""
+    items = (value.items() if isinstance(value, dict) else
+             enumerate(value) if isinstance(value, list) else ())
+    for key, item in items:
+        if isinstance(item, str) and _EXPONENT_NUMBER.fullmatch(item.strip()):
+            value[key] = float(item)
+        else:
+            _exponent_numbers(item)
 
 
 #: Keys whose values are counts: JSON Schema calls 64.0 an integer, Python does not.
