@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
-from brushcore.model.curve import grid_convolver, spring_compliance
+from brushcore.model.solve import grid_convolver, spring_compliance
 from brushcore.model.layout import build_labels
 from brushcore.numerics.backend import Backend, resolve_backend
 from brushcore.numerics.operator import BrushOperator

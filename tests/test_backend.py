@@ -24,6 +24,7 @@ from brushcore.cli import main
 from brushcore.data.aggregate import build_sweep
 from brushcore.data.io import read_curve, write_curve
 from brushcore.model import curve as curve_module
+from brushcore.model import solve as solve_module
 from brushcore.numerics.backend import resolve_backend
 from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.device_blocks import DeviceBlocks
@@ -60,8 +61,9 @@ def _forbid_work(monkeypatch) -> None:
     def work(*args, **kwargs):
         raise AssertionError("work started before the backend was checked")
 
-    monkeypatch.setattr(curve_module, "build_labels", work)
-    monkeypatch.setattr(curve_module, "pull_off", work)
+    for module in (curve_module, solve_module):
+        monkeypatch.setattr(module, "build_labels", work)
+    monkeypatch.setattr(solve_module, "pull_off", work)
 
 
 def test_unknown_backend_is_refused_naming_the_choices():
@@ -312,8 +314,9 @@ def _fake_gpu() -> backend_module.Backend:
 def test_gpu_wiring_with_numpy_standing_in_for_cupy(monkeypatch):
     fake = _fake_gpu()
     real = resolve_backend
-    monkeypatch.setattr(curve_module, "resolve_backend",
-                        lambda name: fake if name == "gpu" else real(name))
+    for module in (curve_module, solve_module):
+        monkeypatch.setattr(module, "resolve_backend",
+                            lambda name: fake if name == "gpu" else real(name))
     params = BrushParams("random", 12, 1.0, 64, seed=1)
     want = simulate(params, WHOLE_GRID)
     got = simulate(params, WHOLE_GRID, backend="gpu")

@@ -10,7 +10,7 @@ import pytest
 from conftest import punch_params
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate, theory
-from brushcore.model.curve import run
+from brushcore.model.solve import run
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.labelmap import touching_pillars
 from brushcore.model.layout import build_labels, hexagonal_centres

@@ -116,7 +116,7 @@ def test_single_precision_moves_a_solution_more_than_cg_can_see():
     (double-precision transforms) removes it.  Random 220 at kbar 1e-5 on
     256^2, A x = 1 from zero: float32 CG to 1e-7 against double to 1e-11."""
     from brushcore import BrushParams
-    from brushcore.model.curve import spring_compliance
+    from brushcore.model.solve import spring_compliance
     from brushcore.model.layout import build_labels
     params = BrushParams("random", 220, 1e-5, 256)
     labels, compliance = build_labels(params), spring_compliance(params, 220)

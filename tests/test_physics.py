@@ -9,7 +9,7 @@ import pytest
 from conftest import punch_params
 
 from brushcore import BrushParams, SolverOptions, simulate, theory
-from brushcore.model.curve import run
+from brushcore.model.solve import run
 from brushcore.model.layout import build_labels
 
 

@@ -19,7 +19,7 @@ from conftest import punch_params
 
 from brushcore import BrushParams, SolverOptions, Waypoint, simulate, theory  # the public API
 from brushcore.numerics.convolution import Convolver
-from brushcore.model.curve import run, run_protocol_curve
+from brushcore.model.solve import run, run_protocol_curve
 from brushcore.model.layout import build_labels
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.precondition import BlockInverse

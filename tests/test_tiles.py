@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.model.curve import spring_compliance
+from brushcore.model.solve import spring_compliance
 from brushcore.model.layout import build_labels
 from brushcore.numerics.cg import pcg
 from brushcore.numerics.convolution import Convolver

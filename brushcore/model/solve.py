@@ -1,0 +1,219 @@
+"""Solving one problem: the operator and FFTs a run needs, and the pull-off or
+protocol engine on it (`run`, `run_protocol_curve`).  `brushcore.model.curve`
+turns what they return into the curve file's Dataset."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import partial
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from brushcore.model import theory
+from brushcore.model.layout import build_labels
+from brushcore.model.params import BrushParams
+from brushcore.numerics.backend import Backend, resolve_backend
+from brushcore.numerics.cg import ConvergenceError
+from brushcore.numerics.convolution import HAVE_PYFFTW, cached_convolver
+from brushcore.numerics.device_convolution import cached_device_convolver
+from brushcore.numerics.fft_choice import faster_library
+from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
+from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.protocol import ProtocolCurve, Waypoint, dispatches, run_protocol
+from brushcore.numerics.pulloff import Progress, PullOffCurve, SolverError, pull_off
+from brushcore.numerics.threads import fft_threads
+from brushcore.validation import brief
+
+
+def spring_compliance(params: BrushParams, n_pillars: int) -> np.ndarray:
+    """h^2 / k per pillar [length / stress]; zero for rigid pillars."""
+    k = params.stiffness
+    value = 0.0 if np.isinf(k) else params.h**2 / k
+    return np.full(n_pillars, value)
+
+
+def run(params: BrushParams, options: SolverOptions = SolverOptions(),
+        progress: Progress | None = None, labels: np.ndarray | None = None,
+        ) -> tuple[np.ndarray, PullOffCurve, int]:
+    """Solve one pull-off.
+
+    Parameters
+    ----------
+    params, options : the problem and the numerics
+    progress : optional callback, see `pull_off`
+    labels : a label map to use instead of the one `params` describes
+        (for transformed or hand-made layouts); its pillar count must be
+        ``params.n_pillars``
+
+    Returns
+    -------
+    detachment_step map (n, n; -1 outside pillars), the curve, and the
+    number of operator applications.
+
+    Notes
+    -----
+    The mirror-symmetric quadrant path (``options.symmetry``) is CPU-only:
+    with ``params.backend`` other than "cpu" the whole grid is solved.
+    """
+    backend = resolve_backend(params.backend)
+    labels = build_labels(params) if labels is None else labels
+    compliance = spring_compliance(params, params.n_pillars)
+    fold = options.symmetry and backend.on_host
+    quadrant = mirror_quadrant(labels, compliance) if fold else None
+    if quadrant is None:
+        conv = grid_convolver(params, backend, options)
+        grid_labels = labels
+        double = whole_grid_double(params, options)
+    else:  # a quarter of the unknowns, quarter-size transforms
+        conv = cached_mirror_convolver(params.grid, params.h, params.e_star, fft_threads(),
+                                       single_transforms(params, options, folded=True))
+        grid_labels, compliance = quadrant.labels, compliance[quadrant.images[:, 0]]
+        double = partial(cached_mirror_convolver, params.grid, params.h, params.e_star,
+                         fft_threads(), False)
+        if progress is not None:
+            progress = _scaled_progress(progress, 4)
+    before = conv.applications
+    op = BrushOperator(conv, grid_labels, compliance, params.h, params.e_star,
+                       precise=double if is_single(conv) else None)
+    sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
+    try:
+        # Vectors are ~1e4-1e5 long: BLAS threads only contend with the FFTs.
+        with threadpool_limits(limits=1, user_api="blas"):
+            curve = pull_off(op, sigma_c, params.h, options, progress)
+    except (ConvergenceError, SolverError) as exc:
+        raise type(exc)(f"{exc}; problem: {brief(params)}; options: {brief(options)}") from None
+    detach = np.full(grid_labels.size, -1, dtype=np.int32)
+    detach[op.elements] = curve.detach_step
+    detach = detach.reshape(grid_labels.shape)
+    if quadrant is not None:
+        detach, curve = quadrant.unfold_field(detach), quadrant.unfold_curve(curve)
+    return detach, curve, conv.applications - before + op.refined_applications
+
+
+def whole_grid_double(params: BrushParams, options: SolverOptions) -> Callable[[], Any]:
+    """The double-precision twin of a run's whole-grid convolver, on the same
+    library: what a solve handed over to double precision applies
+    (`BrushOperator.refined`)."""
+    return partial(cached_convolver, params.grid, params.h, params.e_star, fft_threads(),
+                   False, host_library(params, options))
+
+
+def is_single(conv: Any) -> bool:
+    """Whether a convolver transforms in single precision."""
+    return getattr(conv, "real_dtype", "float64") == "float32"
+
+
+def single_transforms(params: BrushParams, options: SolverOptions, folded: bool) -> bool:
+    """Whether the host transforms of this run are single precision.
+
+    Layouts that may hold exact mirror images (all but random ones, and any
+    brush solved on a mirror quadrant: ``folded``) need their stresses to
+    tie, so they keep double precision under ``precision="auto"``.  The
+    scipy fallback is always double.
+    """
+    symmetric = folded or params.layout != "random"
+    return HAVE_PYFFTW and options.single_transforms(symmetric)
+
+
+def host_library(params: BrushParams, options: SolverOptions) -> str:
+    """The library of a host run's whole-grid FFTs, "fftw" or "mkl":
+    ``options.fft_library``, with "auto" (both installed) resolved to the
+    faster for this grid, thread count and precision on this machine
+    (`brushcore.numerics.fft_choice`).  A solve handed over to double
+    precision stays on the same library."""
+    library = options.host_fft_library()
+    if options.fft_library == "auto" and library == "mkl":
+        return faster_library(params.grid, params.h, params.e_star, fft_threads(),
+                              single_transforms(params, options, folded=False))
+    return library
+
+
+def fft_library_used(params: BrushParams, options: SolverOptions, backend: Backend,
+                     symmetry_fold: int) -> str:
+    """What a run's transforms ran on: "mkl", "fftw", "scipy" (FFTW missing)
+    or "cupy" (a device)."""
+    if not backend.on_host:
+        return "cupy"
+    if symmetry_fold == 1 and host_library(params, options) == "mkl":
+        return "mkl"
+    return "fftw" if HAVE_PYFFTW else "scipy"
+
+
+def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
+    """The whole-grid convolver for ``backend`` (cached per process); a device
+    always transforms in double precision."""
+    if backend.on_host:
+        return cached_convolver(params.grid, params.h, params.e_star, fft_threads(),
+                                single_transforms(params, options, folded=False),
+                                host_library(params, options))
+    return cached_device_convolver(params.grid, params.h, params.e_star, backend)
+
+
+def _scaled_progress(progress: Progress, factor: int) -> Progress:
+    """A progress callback fed quadrant counts, reporting full-brush counts."""
+    return lambda events, attached, total: progress(events, attached * factor,
+                                                    total * factor)
+
+
+def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
+                       options: SolverOptions = SolverOptions(),
+                       heights: np.ndarray | None = None, gap_map: np.ndarray | None = None,
+                       compliance: np.ndarray | None = None,
+                       progress: Progress | None = None, labels: np.ndarray | None = None,
+                       dispatch: bool = True,
+                       ) -> tuple[np.ndarray, BrushOperator, ProtocolCurve, int]:
+    """Run a loading protocol on a rough and graded brush.
+
+    Parameters
+    ----------
+    params, options : the problem and the numerics
+    protocol : waypoints (see `brushcore.numerics.protocol`), e.g. `preload_protocol(P)`
+    heights : protrusion z_p per pillar in label order [length] (default 0);
+        a larger z reaches the substrate first
+    gap_map : extra gap per element, shape (n, n) [length] (default 0): the
+        element offset is z_i = z_p - gap_i (a spherical tip is r^2 / 2R)
+    compliance : h^2 / k_p per pillar [length / stress] (default: every
+        pillar on the spring of ``params.kbar``)
+    progress, labels : as in `run`
+    dispatch : see `protocol.run_protocol`
+
+    Returns
+    -------
+    label map, the operator (its `elements` and `pillar_of` give the order
+    of the per-element outputs), the curve, and the operator applications.
+    """
+    backend = resolve_backend(params.backend)
+    labels = build_labels(params) if labels is None else labels
+    n_pillars = int(labels.max()) + 1
+    conv = grid_convolver(params, backend, options)
+    before = conv.applications
+    if compliance is None:
+        compliance = spring_compliance(params, n_pillars)
+    # Element offsets in operator order (`BrushOperator.elements`).
+    flat_labels = labels.ravel()
+    elements = np.flatnonzero(flat_labels >= 0)
+    z = np.zeros(elements.size)
+    if heights is not None:
+        z += np.asarray(heights, dtype=float)[flat_labels[elements]]
+    if gap_map is not None:
+        z -= np.asarray(gap_map, dtype=float).ravel()[elements]
+    # A run that goes to the pull-off solver takes its block limit: its
+    # cascades are local, where the tiles win from 1,500 elements a pillar.
+    max_block = (BlockInverse.MAX_BLOCK if dispatch and dispatches(z, protocol)
+                 else BlockInverse.MAX_BLOCK_PROTOCOL)
+    # A dispatched run is the flat pull-off, whose float32 solves may go on in double.
+    op = BrushOperator(conv, labels, np.asarray(compliance, dtype=float), params.h,
+                       params.e_star, max_block=max_block,
+                       precise=whole_grid_double(params, options) if is_single(conv) else None)
+    sigma_c = theory.critical_stress(params.e_star, params.dgamma, params.h)
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            curve = run_protocol(op, z, sigma_c, params.h, options, protocol, progress,
+                                 dispatch=dispatch)
+    except (ConvergenceError, SolverError) as exc:
+        raise type(exc)(f"{exc}; problem: {brief(params)}; options: {brief(options)}") from None
+    return labels, op, curve, conv.applications - before + op.refined_applications
