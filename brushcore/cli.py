@@ -12,6 +12,7 @@ import argparse
 import dataclasses
 import difflib
 import re
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -291,6 +292,18 @@ class _Missing(Exception):
     """A flag that the chosen layout needs was not given."""
 
 
+class _Terminated(Exception):
+    """SIGTERM (kill, Slurm's scancel or time limit) arrived."""
+
+
+#: Exit status after SIGTERM (128 + 15), as shells report it.
+EXIT_TERMINATED = 143
+
+
+def _terminate(signum: int, frame: object) -> NoReturn:
+    raise _Terminated
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.curve import simulate
     from brushcore.data.io import check_output_path, write_curve
@@ -333,8 +346,13 @@ def _simulate(args: argparse.Namespace) -> int:
                  f"an element on this grid; a finer grid separates them)" if touching else ""),
               file=sys.stderr)
         pin_threads(args.threads)
-        ds = simulate(params, options, progress=progress, labels=labels)
-        write_curve(ds, args.out)
+        # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
+        previous = signal.signal(signal.SIGTERM, _terminate)
+        try:
+            ds = simulate(params, options, progress=progress, labels=labels)
+            write_curve(ds, args.out)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
     except ParameterError as exc:
         _error(exc.in_terms_of(FLAGS, sep=" "), progress)
         return 2
@@ -347,6 +365,12 @@ def _simulate(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         _error(INTERRUPTED, progress)
         return EXIT_INTERRUPTED
+    except _Terminated:
+        _error(INTERRUPTED.replace("interrupted", "terminated"), progress)
+        return EXIT_TERMINATED
+    except OSError as exc:  # the disk filled up or the folder went away while writing
+        _error(f"cannot write {args.out}: {exc.strerror or exc}; nothing written", progress)
+        return 1
     if progress is not None:
         progress.end_line()
     print(f"F_ad/F_K = {float(ds.adhesive_force_normalized):.4f}  "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import signal
@@ -237,6 +238,46 @@ def _default_sigint() -> None:
     of a shell, whose children inherit SIGINT ignored (Python then keeps it
     ignored and the job never sees the interrupt)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def test_sigterm_prints_one_line_and_exits_143(tmp_path):
+    """kill, Slurm's scancel or its time limit: like Ctrl-C, one line and no file."""
+    out = tmp_path / "c.nc"
+    proc = subprocess.Popen([sys.executable, "-m", "brushcore.cli", "simulate", "--layout",
+                             "random", "--pillars", "1620", "--kbar", "1e-5", "--grid", "512",
+                             "--out", str(out)], stderr=subprocess.PIPE, text=True)
+    first = proc.stderr.readline()
+    assert first.startswith("grid 512: pillar radius"), first
+    time.sleep(1.0)
+    proc.terminate()
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == 143, rest
+    assert rest.strip().splitlines()[-1] == "brushcore: error: terminated; nothing written"
+    assert "Traceback" not in rest
+    assert not list(tmp_path.iterdir())
+
+
+def test_full_disk_is_said_in_words(tmp_path, monkeypatch):
+    """netCDF reports a full disk as "HDF error": the writer says what it is,
+    and leaves no temporary file."""
+    import shutil
+    from collections import namedtuple
+
+    import xarray as xr
+
+    from brushcore.data import io
+
+    def full(*args, **kwargs):
+        raise RuntimeError("NetCDF: HDF error")
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", full)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 512, 512))
+    ds = xr.Dataset({"x": ("n", np.zeros(1000))})
+    with pytest.raises(OSError, match=r"512 bytes free on its disk") as err:
+        io.write_dataset_atomic(ds, tmp_path / "a.nc", {})
+    assert err.value.errno == errno.ENOSPC
+    assert not list(tmp_path.iterdir())
 
 
 def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):

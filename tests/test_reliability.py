@@ -537,3 +537,37 @@ def test_interrupted_job_logs_one_line_and_exits_130(tmp_path: Path, capfd) -> N
     assert log.read_text() == "working\ninterrupted; nothing written\n"
     err = capfd.readouterr().err
     assert err.strip() == f"{log}: interrupted; nothing written" and "Traceback" not in err
+
+
+def test_orphaned_job_stops_without_writing(tmp_path: Path) -> None:
+    """A job whose Snakemake was killed (its parent gone) stops at its next
+    check with status 75 instead of writing a curve much later, unseen."""
+    ready, result = tmp_path / "ready", tmp_path / "result"
+    job = textwrap.dedent(f"""
+        import time
+        from brushcore.data.joblog import parent_watch
+        check = parent_watch()
+        check(1, 2, 3)  # while the parent lives: nothing happens
+        open({str(ready)!r}, "w").close()
+        try:
+            for _ in range(500):
+                time.sleep(0.02)
+                check()
+            open({str(result)!r}, "w").write("still running")
+        except SystemExit as exc:
+            open({str(result)!r}, "w").write(str(exc.code))
+    """)
+    # The stand-in for Snakemake starts the job and dies once it is running.
+    parent = textwrap.dedent(f"""
+        import os, subprocess, sys, time
+        subprocess.Popen([sys.executable, "-c", {job!r}], stdout=subprocess.DEVNULL)
+        while not os.path.exists({str(ready)!r}):
+            time.sleep(0.01)
+        os._exit(0)
+    """)
+    subprocess.run([sys.executable, "-c", parent], check=True, timeout=60)
+    for _ in range(600):
+        if result.exists() and result.read_text():
+            break
+        time.sleep(0.05)
+    assert result.read_text() == "75"

@@ -388,8 +388,12 @@ def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> N
     good = sorted((test_run / "results/curves").rglob("*.nc"))
     bad = tmp_path / "truncated.nc"
     bad.write_bytes(good[0].read_bytes()[:200])
-    with pytest.raises(AggregationError, match="truncated.nc"):
-        build_sweep([*good, bad])
+    worse = tmp_path / "empty.nc"
+    worse.write_bytes(b"")
+    # every bad file at once, and how to get them back
+    with pytest.raises(AggregationError, match=r"2 curve file\(s\): .*truncated\.nc .*"
+                                               r"empty\.nc .*Delete them and run snakemake"):
+        build_sweep([*good, bad, worse])
     with pytest.raises(AggregationError, match="same case"):
         build_sweep([good[0], good[0]])
 

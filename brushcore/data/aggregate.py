@@ -166,13 +166,15 @@ def load_curves(paths: Iterable[str | Path],
     paths = list(paths)
     if expected is not None and len(expected) != len(paths):
         raise ValueError(f"{len(expected)} expected cases for {len(paths)} curve files")
+    unreadable = []
     for i, raw in enumerate(paths):
         path = Path(raw)
         try:
             curve = read_curve(path)
             key = case_key(curve)
         except Exception as exc:  # CurveFileError, missing attribute, bad value
-            raise AggregationError(f"cannot aggregate curve file {path}: {exc}") from exc
+            unreadable.append(f"{path} ({str(exc).removeprefix(f'{path}: ')})")
+            continue
         if expected is not None:
             _check_named_case(path, key, float(curve.attrs["phi"]), *expected[i])
         _check_brush(path, curve, key)
@@ -181,6 +183,12 @@ def load_curves(paths: Iterable[str | Path],
                 f"curve files {curves[key][0]} and {path} hold the same case {key}"
             )
         curves[key] = (path, curve)
+    if unreadable:  # every one of them at once, and what brings them back
+        shown = "; ".join(unreadable[:10]) + (f"; and {len(unreadable) - 10} more"
+                                              if len(unreadable) > 10 else "")
+        raise AggregationError(
+            f"cannot aggregate {len(unreadable)} curve file(s): {shown}. Delete them and run "
+            "snakemake again: it recomputes the missing curves")
     if not curves:
         raise AggregationError("no curve files to aggregate")
     return curves

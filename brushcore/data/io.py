@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -139,8 +141,13 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
     try:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
         publish(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        free = shutil.disk_usage(path.parent).free
+        if isinstance(exc, (OSError, RuntimeError)) and free < ds.nbytes:
+            # netCDF says only "HDF error" when the disk is full: say so
+            raise OSError(errno.ENOSPC, f"{free} bytes free on its disk, the data take up "
+                                        f"to {ds.nbytes}", str(path)) from exc
         raise
     return path
 

@@ -12,9 +12,12 @@ from brushcore.data.joblog import logged  # noqa: E402 - light; the rest is impo
 
 def main(smk) -> None:
     from brushcore import BrushParams, SolverOptions, simulate
-    from brushcore.data.io import remove_stale_temporaries, write_curve
+    from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
+    from brushcore.data.joblog import parent_watch
     from brushcore.numerics.threads import pin_threads
 
+    orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
+    check_output_path(smk.output[0])  # an unwritable folder fails now, not after the solve
     remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)
     w = smk.wildcards
@@ -31,7 +34,8 @@ def main(smk) -> None:
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
-    curve = simulate(params, SolverOptions(**smk.params.solver))
+    curve = simulate(params, SolverOptions(**smk.params.solver), progress=orphaned)
+    orphaned()
     write_curve(curve, smk.output[0])
     print(
         f"F_ad = {float(curve['adhesive_force_normalized']):.6g}, "
