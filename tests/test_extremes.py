@@ -34,8 +34,10 @@ def test_very_stiff_springs_are_rigid():
 
 @pytest.mark.parametrize("kbar", [1e-8, 1.0, math.inf])
 def test_single_pillar_is_kendall_at_any_stiffness(kbar):
+    """Kendall's force from above within 2 %, as test_physics's punches of
+    radius 10-60 h (+0.2 ... +1.7 %); measured +1.51 % at every stiffness."""
     f, _ = _fw(simulate(BrushParams("regular", 1, kbar, 64, phi=0.3)))  # radius 19.8 h
-    assert abs(f - 1) < 0.03, f"F_ad/F_K = {f:.4f}"
+    assert 1 < f < 1.02, f"F_ad/F_K = {f:.4f}"
 
 
 def test_densest_resolvable_regular_brush():
@@ -56,7 +58,11 @@ def test_filling_factor_extremes(phi):
     ds = simulate(BrushParams("regular", 4, 1e-4, 128, phi=phi, allow_coarse=True))
     f, _ = _fw(ds)
     if phi == 0.01:  # far apart and soft: independent pillars, eq. 6
-        assert f == pytest.approx(theory.soft_limit(4), rel=0.05)
+        # measured 1.386 against 1.414 (-2.0 %): eq. 6 takes phi as asked, the
+        # pillars realise it 7 % high (F ~ a^3/2 per pillar, a^-3/2 in F_K:
+        # eq. 6 holds for the realised area), and the neighbours 10 radii
+        # apart cost 1-2 % (test_protocol's soft foundation: 1.9 %)
+        assert f == pytest.approx(theory.soft_limit(4), rel=0.03)
     else:  # touching neighbours still never beat independent pillars
         assert 1.0 < f < theory.soft_limit(4)
 
