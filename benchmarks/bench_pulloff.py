@@ -25,29 +25,10 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
-from brushcore.numerics.convolution import Convolver, planner_flags
+from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.fft_choice import bare_fft_pair_ms
 
 CASES = [("regular", 256, 0.455), ("regular", 64, 1e-3), ("regular", 2304, 1e-4)]
-
-
-def bare_fft_pair_ms(n: int, repeats: int = 40) -> float:
-    """ms for rfft2 + irfft2 of a 2n x 2n array, pyfftw, one thread, planned
-    with the effort `Convolver` uses for n (`planner_flags`)."""
-    import pyfftw
-
-    a = pyfftw.empty_aligned((2 * n, 2 * n), dtype="float64")
-    b = pyfftw.empty_aligned((2 * n, n + 1), dtype="complex128")
-    flags = planner_flags(n)
-    fwd = pyfftw.FFTW(a, b, axes=(0, 1), flags=flags, threads=1)
-    bwd = pyfftw.FFTW(b, a, axes=(0, 1), direction="FFTW_BACKWARD", flags=flags, threads=1)
-    a[:] = np.random.default_rng(0).random(a.shape)
-    fwd.execute()
-    bwd.execute()
-    t = time.perf_counter()
-    for _ in range(repeats):
-        fwd.execute()
-        bwd.execute()
-    return (time.perf_counter() - t) / repeats * 1e3
 
 
 def application_ms(n: int, repeats: int = 40) -> float:

@@ -42,8 +42,7 @@ from brushcore.numerics.convolution import Convolver
 from brushcore.numerics.mirror import MirrorConvolver
 from brushcore.numerics.threads import pin_threads
 
-sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from bench_pulloff import bare_fft_pair_ms  # noqa: E402
+from brushcore.numerics.fft_choice import bare_fft_pair_ms  # noqa: E402
 
 
 def _ms(conv, fill: int, repeats: int = 20) -> float:

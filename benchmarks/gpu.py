@@ -29,8 +29,7 @@ from brushcore.model.layout import build_labels
 from brushcore.numerics.backend import Backend, resolve_backend
 from brushcore.numerics.operator import BrushOperator
 
-sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from bench_pulloff import bare_fft_pair_ms  # noqa: E402
+from brushcore.numerics.fft_choice import bare_fft_pair_ms  # noqa: E402
 
 #: (label, pillars, kbar, grids) of the issue.
 CASES = (("16x16 kbar 0.455", 256, 0.455, (512, 1024, 2048)),

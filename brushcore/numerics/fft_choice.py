@@ -28,7 +28,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from brushcore.numerics.convolution import Convolver, cache_dir, machine_lock, save_to_cache
+from brushcore.numerics.convolution import (Convolver, cache_dir, machine_lock, planner_flags,
+                                            save_to_cache)
 
 #: Alternating rounds of the timing; the median of each library's rounds counts.
 ROUNDS = 5
@@ -132,3 +133,24 @@ def faster_library(n: int, h: float, e_star: float, threads: int, single: bool) 
             data[key] = entry
             _save(data)
     return entry["library"]
+
+
+def bare_fft_pair_ms(n: int, repeats: int = 40) -> float:
+    """ms for rfft2 + irfft2 of a 2n x 2n array, pyfftw, one thread, planned
+    with the effort `Convolver` uses for n (`planner_flags`): the reference
+    an operator application is measured against (benchmarks)."""
+    import pyfftw
+
+    a = pyfftw.empty_aligned((2 * n, 2 * n), dtype="float64")
+    b = pyfftw.empty_aligned((2 * n, n + 1), dtype="complex128")
+    flags = planner_flags(n)
+    fwd = pyfftw.FFTW(a, b, axes=(0, 1), flags=flags, threads=1)
+    bwd = pyfftw.FFTW(b, a, axes=(0, 1), direction="FFTW_BACKWARD", flags=flags, threads=1)
+    a[:] = np.random.default_rng(0).random(a.shape)
+    fwd.execute()
+    bwd.execute()
+    t = time.perf_counter()
+    for _ in range(repeats):
+        fwd.execute()
+        bwd.execute()
+    return (time.perf_counter() - t) / repeats * 1e3
