@@ -10,12 +10,11 @@ import xarray as xr
 
 from brushcore.data.convergence import (
     ConvergenceOptions,
-    convergence_table,
     extrapolate,
     extrapolate_sweep,
     is_monotone,
-    write_tables,
 )
+from brushcore.data.convergence_report import convergence_table, write_tables
 
 F0, C = 1.7, 0.8
 
@@ -316,7 +315,8 @@ def refinement_curves(tmp_path_factory: pytest.TempPathFactory) -> list:
 
 
 def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, tmp_path):
-    from brushcore.data.aggregate import GRID_DIM, build_sweep, finest_grid, write_sweep
+    from brushcore.data.aggregate import GRID_DIM, build_sweep, write_sweep
+    from brushcore.data.views import finest_grid
 
     sweep = build_sweep(refinement_curves)
     assert sweep["adhesive_force_normalized"].dims == (

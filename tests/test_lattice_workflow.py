@@ -167,7 +167,8 @@ def test_sweep_has_a_shape_dimension_with_missing_cases_nan(shape_sweep) -> None
 
 
 def test_flat_slice_is_the_disc_sweep(shape_sweep, shape_curves) -> None:
-    from brushcore.data.aggregate import build_sweep, flat_slice, shape_slice
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.views import flat_slice, shape_slice
 
     discs = [p for p, c in zip(shape_curves, CASES) if c[2] == "disc"]
     alone = build_sweep(discs)
@@ -186,7 +187,7 @@ def test_flat_slice_is_the_disc_sweep(shape_sweep, shape_curves) -> None:
 def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
                                                                    tmp_path: Path) -> None:
     from brushcore.data import figures
-    from brushcore.data.aggregate import flat_slice
+    from brushcore.data.views import flat_slice
 
     fig6 = figures.fig6(flat_slice(shape_sweep))
     titles = [ax.get_title(loc="left") for ax in fig6.axes]
@@ -271,7 +272,7 @@ def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> Non
 def test_snapshots_pick_the_shape_asked_for(shape_sweep) -> None:
     """Disc and square snapshots of one (layout, N, kbar, seed) are told apart:
     discs unless a shape is named."""
-    from brushcore.data.aggregate import snapshots
+    from brushcore.data.views import snapshots
 
     disc = snapshots(shape_sweep, "regular", 4, 1.0)
     square = snapshots(shape_sweep, "regular", 4, 1.0, shape="square")

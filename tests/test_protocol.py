@@ -657,7 +657,8 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     pytest.importorskip("compliance_checker")
     from test_cf import cf_errors
 
-    from brushcore.data.aggregate import build_sweep, flat_slice, write_sweep
+    from brushcore.data.aggregate import build_sweep, write_sweep
+    from brushcore.data.views import flat_slice
     from brushcore.data.io import write_curve
 
     files = []

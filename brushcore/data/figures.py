@@ -27,8 +27,8 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
-from brushcore.data.aggregate import (SHAPE_DIM, finest_grid, flat_slice, shape_slice,
-                                      snapshots)
+from brushcore.data.aggregate import SHAPE_DIM
+from brushcore.data.views import finest_grid, flat_slice, shape_slice, snapshots
 from brushcore.data.convergence import (QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
                                         touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau

@@ -5,7 +5,7 @@ averaging over seeds, the soft-plateau value, where the plateau starts, and
 the N^(1/4) prefactor fit.  Everything works on whatever part of the paper's
 grid a sweep contains; a missing case gives NaN here and "n/a" in the table.
 On a sweep over several grids every case is taken at the finest grid it ran
-on (`brushcore.data.aggregate.finest_grid`), and the table says how many elements
+on (`brushcore.data.views.finest_grid`), and the table says how many elements
 a pillar radius spans there, marking fewer than 4 as under-resolved.
 """
 
@@ -21,7 +21,8 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import theory
-from brushcore.data.aggregate import GRID_DIM, finest_grid, flat_slice
+from brushcore.data.aggregate import GRID_DIM
+from brushcore.data.views import finest_grid, flat_slice
 from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
@@ -166,7 +167,7 @@ def headline_rows(
     Parameters
     ----------
     sweep : dataset from `brushcore.data.aggregate.build_sweep`; its flat
-        brushes enter (`brushcore.data.aggregate.flat_slice`), discs except
+        brushes enter (`brushcore.data.views.flat_slice`), discs except
         for the Fig. 5a row.
     fig5_layout, fig5_n_pillars, fig5_kbar, fig5_shape : the config's Fig. 5
         brush at its first kbar (a `shape_label` for the shape); the

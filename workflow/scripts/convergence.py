@@ -3,7 +3,8 @@
 import xarray as xr
 
 from brushcore.data import figures
-from brushcore.data.convergence import extrapolate_sweep, write_dataset, write_tables
+from brushcore.data.convergence import extrapolate_sweep, write_dataset
+from brushcore.data.convergence_report import write_tables
 from brushcore.data.joblog import logged
 
 

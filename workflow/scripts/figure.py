@@ -3,7 +3,7 @@
 import xarray as xr
 
 from brushcore.data import figures
-from brushcore.data.aggregate import flat_slice, shape_slice
+from brushcore.data.views import flat_slice, shape_slice
 from brushcore.data.joblog import logged
 
 

@@ -1,0 +1,140 @@
+"""Views of a sweep (``sweep.nc`` as `brushcore.data.aggregate` builds it):
+the slices that the figures, the summary and a reader's analysis take.
+
+`flat_slice` gives the flat disc brushes the paper's figures show,
+`shape_slice` one pillar shape, `snapshots` the contact maps of one case
+and `finest_grid` each case at the finest grid it ran on.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+from brushcore.data.aggregate import GRID_DIM, ROUGH_DIMS, SHAPE_DIM
+
+
+def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
+    """The flat brushes of a sweep (roughness and kbar_spread 0) of one shape.
+
+    A sweep of flat brushes is returned as it is; in one with rough cases the
+    ROUGH_DIMS are selected at 0 (NaN everywhere when no flat case ran), and
+    the pillar shape at `shape` (`shape_slice`), so that the paper's figures
+    and summary see the four base dimensions.  ``shape=None`` keeps every shape.
+    Where no run was at preload 0 the smallest preload stands for it: a flat
+    brush pulls off as from full contact whatever the preload (within CG's
+    tolerance), so a rough study that always presses on still has its flat
+    brushes.
+    """
+    sweep = shape_slice(sweep, shape)
+    if not set(ROUGH_DIMS) & set(sweep.dims):
+        return sweep
+    at = {d: 0.0 for d in ROUGH_DIMS}
+    if "preload" in sweep.dims and 0.0 not in sweep["preload"].values:
+        at["preload"] = float(sweep["preload"].min())
+    flat = sweep.reindex({d: [v] for d, v in at.items()}).isel({d: 0 for d in ROUGH_DIMS})
+    flat = flat.drop_vars(list(ROUGH_DIMS))
+    case_vars = [d for d in ROUGH_DIMS if f"case_{d}" in flat.variables]
+    if case_vars:  # keep the snapshots of flat cases only
+        keep = np.logical_and.reduce([flat[f"case_{d}"].values == at[d] for d in case_vars])
+        flat = flat.isel(case=np.flatnonzero(keep)).drop_vars([f"case_{d}" for d in case_vars])
+    return flat
+
+
+def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
+    """The brushes of one pillar shape (a `shape_label`), without the shape dimension.
+
+    A sweep without SHAPE_DIM holds discs only and is returned as it is for
+    "disc" (and for None, which keeps every shape); a shape that did not run
+    gives NaN everywhere.  Snapshots of other shapes are dropped.
+    """
+    if shape is None or (SHAPE_DIM not in sweep.dims and shape == "disc"):
+        return sweep
+    if SHAPE_DIM not in sweep.dims:  # discs only: nothing of this shape
+        return sweep.where(False)
+    out = sweep.reindex({SHAPE_DIM: [shape]}).isel({SHAPE_DIM: 0}).drop_vars(SHAPE_DIM)
+    name = f"case_{SHAPE_DIM}"
+    if name in out.variables:
+        out = out.isel(case=np.flatnonzero(out[name].values == shape)).drop_vars(name)
+    return out
+
+
+def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0,
+              *, shape: str = "disc", **rough: float):
+    """Contact snapshots of one case, or None when the sweep did not keep them.
+
+    Parameters
+    ----------
+    sweep : dataset of `build_sweep`
+    layout, n_pillars, kbar, seed : the case
+    shape : its pillars' `brushcore.model.shapes.shape_label` (where the
+        sweep holds several shapes)
+    rough : its ``roughness``, ``preload`` and ``kbar_spread`` (each 0, the
+        flat brush, unless given; where the sweep holds rough cases)
+
+    Returns
+    -------
+    xarray.Dataset or None
+        ``contact_snapshot(snapshot, y, x)`` (1 attached, 0 detached, -1 no
+        pillar), ``snapshot_step`` and ``snapshot_label`` of that case.
+    """
+    unknown = set(rough) - set(ROUGH_DIMS)
+    if unknown:
+        raise TypeError(f"snapshots: unknown case keys {sorted(unknown)}; "
+                        f"allowed shape and {', '.join(ROUGH_DIMS)}")
+    if "contact_snapshot" not in sweep:
+        return None
+    hit = (
+        (sweep["case_layout"] == layout)
+        & (sweep["case_n_pillars"] == n_pillars)
+        & np.isclose(sweep["case_kbar"], kbar, rtol=1e-9, atol=0.0)
+        & (sweep["case_seed"] == seed)
+    )
+    if f"case_{SHAPE_DIM}" in sweep.variables:
+        hit = hit & (sweep[f"case_{SHAPE_DIM}"] == shape)
+    for name in ROUGH_DIMS:
+        if f"case_{name}" in sweep.variables:
+            hit = hit & np.isclose(sweep[f"case_{name}"], float(rough.get(name, 0.0)),
+                                   rtol=1e-9, atol=0.0)
+    idx = np.flatnonzero(hit.values)
+    if idx.size == 0:
+        return None
+    names = [n for n in ("contact_snapshot", "snapshot_step", "snapshot_label") if n in sweep]
+    return sweep[names].isel(case=int(idx[0]))
+
+
+def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr.Dataset:
+    """Each case at the finest grid it was run on, without the ``grid`` dimension.
+
+    Figures and the summary show one value per case; on a refinement sweep
+    that is the best-resolved one.  A sweep without ``grid`` (older files) is
+    returned unchanged.
+
+    Parameters
+    ----------
+    sweep : dataset of `build_sweep`.
+    ran : variable whose finite values mark the grids a case ran on.
+
+    Returns
+    -------
+    xarray.Dataset
+        Every variable with a ``grid`` dimension reduced to its value at the
+        finest grid run (NaN where the case never ran), plus ``grid_used``
+        (elements per side of that grid, NaN where none).
+    """
+    if GRID_DIM not in sweep.dims:
+        return sweep
+    sweep = sweep.sortby(GRID_DIM)
+    rank = xr.DataArray(np.arange(sweep.sizes[GRID_DIM]), dims=GRID_DIM)
+    done = np.isfinite(sweep[ran])
+    finest = rank == rank.where(done).max(GRID_DIM)  # one True per case that ran
+    out = sweep.copy()
+    for name, var in sweep.data_vars.items():
+        if GRID_DIM in var.dims:
+            # Exactly one unmasked value survives, so the sum is that value.
+            out[name] = var.where(finest).sum(GRID_DIM, min_count=1).assign_attrs(var.attrs)
+    out["grid_used"] = (
+        sweep[GRID_DIM].astype(np.float64).where(finest).sum(GRID_DIM, min_count=1)
+        .assign_attrs(units="1", long_name="elements per side n of the finest grid run")
+    )
+    return out.drop_vars(GRID_DIM)
