@@ -419,7 +419,7 @@ def test_summary_quotes_the_paper_only_where_it_applies():
     from brushcore.data import figures
 
     labels = figures.fig7(sweep).axes[0].get_legend_handles_labels()[1]
-    assert "not on a plateau (not fitted)" in labels, labels
+    assert "regular: not on a plateau (not fitted)" in labels, labels
 
 
 @pytest.mark.parametrize(("radii", "flag"), [((2.1, 4.2, 8.4), "coarsest_under_resolved"),

@@ -245,7 +245,24 @@ def test_figs_6_and_8_draw_rigid_pillars(tmp_path: Path) -> None:
             rigid = float(sweep[name].sel(kbar=math.inf).squeeze())
             assert np.any((xs == x_rigid) & np.isclose(ys, rigid, rtol=1e-12)), (draw, xs, ys)
             assert "rigid" in [t.get_text() for t in ax.get_xticklabels()]
+            # no line joins the rigid point to the finite ones: a NaN breaks it
+            joined = [np.asarray(line.get_xdata(), dtype=float) for line in ax.lines
+                      if line.get_marker() not in ("None", "", None)  # data, not axhlines
+                      and len(line.get_xdata()) > 1]
+            assert all(np.isnan(x[-2]) for x in joined if x[-1] == x_rigid), joined
+            assert len(files) == 1 or joined, "the finite and rigid runs make one series"
             figures.save(fig, tmp_path / f"{draw.__name__}.png")
+
+
+def test_rigid_tick_keeps_clear_of_the_decade_ticks() -> None:
+    """"rigid" stands one decade right of the decade tick at or above the
+    stiffest finite kbar: with kbar up to 2 that tick is 10 and rigid is at
+    100 (at 20 its label ran into "10")."""
+    from brushcore.data.figures import _rigid_x
+
+    assert _rigid_x(np.array([1e-4, 2.0, math.inf])) == pytest.approx(100.0)
+    assert _rigid_x(np.array([1e-4, 1e-2, math.inf])) == pytest.approx(0.1)
+    assert _rigid_x(np.array([math.inf])) == 1.0
 
 
 def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> None:
@@ -282,3 +299,22 @@ def test_snapshots_pick_the_shape_asked_for(shape_sweep) -> None:
     assert snapshots(shape_sweep, "hexagonal", 4, 1.0, shape="square") is None  # never ran
     with pytest.raises(TypeError, match="unknown case keys"):
         snapshots(shape_sweep, "regular", 4, 1.0, rougness=0.3)
+
+
+def test_fig5_numbers_snapshots_in_the_order_of_the_curve(tmp_path: Path) -> None:
+    """A preloaded brush's file keeps "maximum force" after "separated"
+    (its steps [preload, separated, maximum]); Fig. 5 numbered them in that
+    order, so "3: maximum force" came before "2: separated" on the curve."""
+    from brushcore import BrushParams, simulate
+    from brushcore.data import figures
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import write_curve
+
+    ds = simulate(BrushParams("regular", 4, 0.01, 32, preload=1.0))
+    steps = [int(s) for s in ds.snapshot_step.values]
+    assert steps[2] < steps[1], steps  # the file's order is not the curve's
+    write_curve(ds, tmp_path / "c.nc")
+    fig = figures.fig5(build_sweep([tmp_path / "c.nc"], keep_snapshots=[("regular", 4)]),
+                       n_pillars=4, kbar=(0.01,))
+    titles = [ax.get_title() for ax in fig.axes[1:] if ax.get_title()]
+    assert titles == ["1: preload", "2: maximum force", "3: separated"], titles

@@ -701,7 +701,7 @@ def test_loop_and_load_sharing_figures_show_the_curve():
     fig = figures.rough_loop(ds)
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert f"= {float(ds.adhesive_force_normalized):.3g}" in labels[2]
-    assert labels[3] == "preload 1"  # the protocol stopped at exactly the preload
+    assert labels[3] == "preload 1 $F_K$"  # the protocol stopped at exactly the preload
     sharing = figures.load_sharing(ds)
     y = sharing.axes[0].collections[0].get_offsets()[:, 1]
     # pillar forces at F_ad add up to F_ad: the mean of F_p / (F_ad / N) is 1

@@ -137,15 +137,19 @@ def fig5(
         snap = snapshots(sweep, layout, n_pillars, k, seed)
         if snap is None:
             continue
-        steps = [int(s) for s in snap["snapshot_step"].values]
-        for j, step in enumerate(steps):
-            image_ax = fig.add_subplot(grid[row, 1 + j])
+        # Numbered in the order of their steps: a protocol's file keeps the
+        # "maximum force" map after "separated", though it comes first.
+        stored = [int(s) for s in snap["snapshot_step"].values]
+        order = sorted(range(len(stored)), key=lambda j: (stored[j] < 0, stored[j]))
+        steps = [stored[j] for j in order]
+        for slot, j in enumerate(order):
+            image_ax = fig.add_subplot(grid[row, 1 + slot])
             image_ax.set_axis_off()
-            if step < 0:
+            if stored[j] < 0:
                 continue
             image_ax.imshow(snap["contact_snapshot"].values[j] + 1, cmap=SNAPSHOT_CMAP,
                             vmin=0, vmax=2, interpolation="nearest", origin="lower")
-            image_ax.set_title(f"{j + 1}: {snap['snapshot_label'].values[j]}", fontsize=7)
+            image_ax.set_title(f"{slot + 1}: {snap['snapshot_label'].values[j]}", fontsize=7)
         # One dot per distinct step; snapshots sharing a step share its label ("1,2").
         for step in sorted({s for s in steps if 0 <= s < d.size}):
             label = ",".join(str(j + 1) for j, s in enumerate(steps) if s == step)
@@ -171,9 +175,21 @@ def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, 
 
 def _rigid_x(kbars: np.ndarray) -> float:
     """Where rigid pillars (kbar = inf) are drawn on a log kbar axis: one
-    decade right of the stiffest finite kbar (at 1 when none is finite)."""
+    decade right of the decade tick at or above the stiffest finite kbar, so
+    that its "rigid" label never meets that tick's (at 1 when none is finite)."""
     finite = kbars[np.isfinite(kbars)]
-    return float(finite.max()) * 10.0 if finite.size else 1.0
+    return 10.0 ** (np.ceil(np.log10(finite.max())) + 1) if finite.size else 1.0
+
+
+def _break_before_rigid(x_inf: float, x: np.ndarray, *values: np.ndarray
+                        ) -> tuple[np.ndarray, ...]:
+    """x and values with a NaN between the finite kbar and the rigid point at
+    ``x_inf``, so that no line joins them: the axis between holds no
+    measurement."""
+    arrays = tuple(np.asarray(a, dtype=float) for a in (x, *values))
+    if arrays[0].size < 2 or arrays[0][-1] != x_inf:
+        return arrays
+    return tuple(np.insert(a, a.size - 1, np.nan) for a in arrays)
 
 
 def _kbar_x(kbar, x_inf: float) -> np.ndarray:
@@ -190,7 +206,7 @@ def _rigid_ticks(ax, kbars: np.ndarray, x_inf: float) -> None:
     ticks = ([10.0**e for e in range(int(np.floor(np.log10(finite.min()))),
                                      int(np.ceil(np.log10(finite.max()))) + 1)]
              if finite.size else [])
-    ax.set_xticks([*ticks, x_inf], [f"{t:g}" for t in ticks] + ["rigid"])
+    ax.set_xticks([*ticks, x_inf], [f"$10^{{{round(np.log10(t))}}}$" for t in ticks] + ["rigid"])
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
@@ -209,8 +225,8 @@ def fig6(sweep: xr.Dataset) -> Figure:
 
     The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
     punch F_ad = 1 is dotted.  With several seeds the bars span min to max.
-    Rigid pillars (kbar = inf) are drawn one decade right of the stiffest
-    finite kbar.
+    Rigid pillars (kbar = inf) are drawn at "rigid" (`_rigid_x`), not joined
+    to the finite kbar.
     """
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
@@ -224,8 +240,10 @@ def fig6(sweep: xr.Dataset) -> Figure:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
             runs = runs.sel(kbar=series.kbar)
             low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
-            ax.errorbar(_kbar_x(series.kbar, x_inf), series, yerr=[series - low, high - series],
-                        marker="o", ms=4, capsize=2, color=colors[n], label=f"N = {n}")
+            x, y, lo, hi = _break_before_rigid(x_inf, _kbar_x(series.kbar, x_inf), series,
+                                               low, high)
+            ax.errorbar(x, y, yerr=[y - lo, hi - y], marker="o", ms=4, capsize=2,
+                        color=colors[n], label=f"N = {n}")
         _kbar_axes(ax, _panel_title(index, layout), FAD_LABEL, kbars, x_inf)
         if not brushes:
             _no_data(ax, f"no {layout} runs")
@@ -243,8 +261,8 @@ def fig7(sweep: xr.Dataset) -> Figure:
 
     The plateau value is F_ad at the softest kbar run for each brush; a
     brush whose two softest kbar differ by more than `PLATEAU_RTOL` has not
-    reached it (`brushcore.data.summary.on_plateau`) and is drawn as a grey
-    cross, left out of the fit.  The fitted prefactor c of F = c N^(1/4)
+    reached it (`brushcore.data.summary.on_plateau`) and is drawn in grey
+    with its layout's marker, left out of the fit.  The fitted prefactor c of F = c N^(1/4)
     (and 1/c, the paper's 1.2-1.3) is printed on the plot.
     """
     sweep = finest_grid(sweep)
@@ -258,7 +276,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
         points = [(int(n), *soft_plateau(sweep, layout, int(n)),
                    on_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
         points = [point for point in points if math.isfinite(point[2])]
-        off += [(n, f) for n, _, f, reached in points if not reached]
+        off += [(layout, n, f) for n, _, f, reached in points if not reached]
         points = [(n, k, f) for n, k, f, reached in points if reached]
         if not points:
             continue
@@ -267,8 +285,10 @@ def fig7(sweep: xr.Dataset) -> Figure:
         all_f += list(f)
         ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none", label=f"{layout} (min "
                 + r"$\bar k$" + f" = {k.min():g})")
-    if off:
-        ax.plot(*zip(*off), "x", ms=6, color="0.5", label="not on a plateau (not fitted)")
+    for layout in dict.fromkeys(lay for lay, _, _ in off):  # grey, the layout's marker
+        n_off, f_off = zip(*[(n, f) for lay, n, f in off if lay == layout])
+        ax.plot(n_off, f_off, markers.get(layout, "^"), ms=6, color="0.55",
+                label=f"{layout}: not on a plateau (not fitted)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     # Plain 1-2-5 ticks: decade-only log ticks say little over a range like 64 ... 2304.
@@ -278,11 +298,17 @@ def fig7(sweep: xr.Dataset) -> Figure:
         axis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("number of pillars N")
     ax.set_ylabel(FAD_LABEL + " (soft plateau)")
-    if not all_n:
-        _no_data(ax, "no brush on its soft plateau" if off else "no runs")
+    drawn = all_n + [n for _, n, _ in off]
+    if not drawn:
+        _no_data(ax, "no runs")
         return fig
-    span = np.geomspace(min(all_n) / 1.5, max(all_n) * 1.5, 50)
+    span = np.geomspace(min(drawn) / 1.5, max(drawn) * 1.5, 50)
     ax.plot(span, theory.soft_limit(span), "k-", lw=1.2, label=r"$N^{1/4}$ (eq. 6)")
+    if not all_n:  # nothing to fit: say so, and still explain the grey points
+        ax.text(0.03, 0.97, "no brush on its soft plateau: no fit", transform=ax.transAxes,
+                va="top", fontsize=8)
+        ax.legend(fontsize=7, loc="lower right")
+        return fig
     fit = fit_soft_prefactor(all_n, all_f)
     ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "k--", lw=1,
             label=rf"fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
@@ -290,7 +316,10 @@ def fig7(sweep: xr.Dataset) -> Figure:
         + f" = 1/c = {fit['ratio']:.2f} (paper 1.2-1.3)"
     if math.isfinite(fit["exponent"]):
         text += f"\nfree fit exponent {fit['exponent']:.3f}"
-    ax.text(0.03, 0.97, text, transform=ax.transAxes, va="top", fontsize=8)
+    if len(set(all_n)) == 1:
+        text += f"\nfrom one N only ({all_n[0]}): not a test of the exponent"
+    ax.text(0.03, 0.97, text, transform=ax.transAxes, va="top", fontsize=8,
+            bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "none"})
     ax.legend(fontsize=7, loc="lower right")
     return fig
 
@@ -300,8 +329,8 @@ def fig8(sweep: xr.Dataset) -> Figure:
 
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
     (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch.
-    Rigid pillars (kbar = inf) are drawn one decade right of the stiffest
-    finite kbar.
+    Rigid pillars (kbar = inf) are drawn at "rigid" (`_rigid_x`), not joined
+    to the finite kbar.
     """
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
@@ -312,8 +341,8 @@ def fig8(sweep: xr.Dataset) -> Figure:
     for index, (layout, ax) in enumerate(axes.items()):
         brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
         for n, series in brushes:
-            ax.plot(_kbar_x(series.kbar, x_inf), series, "o-", ms=4, color=colors[n],
-                    label=f"N = {n}")
+            ax.plot(*_break_before_rigid(x_inf, _kbar_x(series.kbar, x_inf), series), "o-",
+                    ms=4, color=colors[n], label=f"N = {n}")
             if math.isfinite(phi):
                 # Only where the springs' energy matters; it falls as 1/kbar (0 if rigid).
                 kbar = series.kbar.values
@@ -355,9 +384,9 @@ def lattices(sweep: xr.Dataset) -> Figure:
     One panel per N run with more than one layout or shape.  Colour is the
     layout, marker and line style the pillar shape; with several seeds
     (random layouts) the dots are the mean and the bars span min to max.
-    Rigid pillars (kbar = inf) are drawn one decade right of the stiffest
-    finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, dashed) and
-    the soft limit N^(1/4) (eq. 6, dotted); orange dashed: the hexagonal
+    Rigid pillars (kbar = inf) are drawn at "rigid" (`_rigid_x`), not joined
+    to the finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, dashed) and
+    the soft limit N^(1/4) (eq. 6, dotted); grey dash-dot: the hexagonal
     lattice's rigid limit at its local filling factor phi / fill (its cells
     cover `lattices.hexagonal_fill` of the square).
 
@@ -380,9 +409,9 @@ def lattices(sweep: xr.Dataset) -> Figure:
     x_inf = _rigid_x(kbars)
     for index, (ax, (n, brushes)) in enumerate(zip(axes, compared.items())):
         for layout, shape, runs in brushes:
-            x = _kbar_x(runs.kbar.values, x_inf)
-            mean = runs.mean("seed", skipna=True).values
-            low, high = runs.min("seed", skipna=True).values, runs.max("seed", skipna=True).values
+            x, mean, low, high = _break_before_rigid(
+                x_inf, _kbar_x(runs.kbar.values, x_inf), runs.mean("seed", skipna=True),
+                runs.min("seed", skipna=True), runs.max("seed", skipna=True))
             marker, line = SHAPE_MARKERS.get(parse_shape_label(shape)["shape"], ("^", "-."))
             ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker=marker, ls=line, ms=4,
                         capsize=2, color=LAYOUT_COLORS.get(layout, f"C{3 + index}"),
@@ -392,15 +421,16 @@ def lattices(sweep: xr.Dataset) -> Figure:
             ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
                        label=r"rigid limit $\varphi^{-1/4}$")
             if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
-                ax.axhline(theory.rigid_limit(phi / hexagonal_fill(n)), color="C1", ls="--",
-                           lw=0.8, label=r"hexagonal: $(\varphi/\mathrm{fill})^{-1/4}$")
+                ax.axhline(theory.rigid_limit(phi / hexagonal_fill(n)), color="0.45",
+                           ls=(0, (6, 2, 1, 2)), lw=1.0,
+                           label=r"hexagonal rigid limit $(\varphi/\mathrm{fill})^{-1/4}$")
         ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8, label=r"soft limit $N^{1/4}$")
         ax.set_xscale("log")
         _rigid_ticks(ax, kbars, x_inf)
         ax.set_title(f"({chr(ord('a') + index)}) N = {n}", loc="left")
         ax.set_xlabel(K_LABEL)
         ax.set_ylabel(FAD_LABEL)
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # off the data
     return fig
 
 
@@ -445,7 +475,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
             if not np.isfinite(mean.values).any():
                 continue
             ax.errorbar(s_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
-                        capsize=2, color=colors[kbar], label=rf"$\bar k$ = {kbar:g}")
+                        capsize=2, color=colors[kbar], label=rf"$\bar k$ = {_kbar_text(kbar)}")
             if np.isfinite(kbar) and kbar <= 0.01 and s_axis.max() > 0:
                 span = np.linspace(0.0, s_axis.max(), 60)
                 lam = float(theory.foundation_stretch(n_pillars, phi, kbar))
@@ -455,10 +485,21 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
         ax.set_title(f"preload {preload:g} " + r"$F_K$", fontsize=9)
         ax.set_xlabel(r"roughness $S$ [$d_K$]")
         ax.set_ylabel(FAD_LABEL)
-        ax.plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
-        ax.legend(fontsize=7)
+    axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
+    _side_legend(fig, axes)
     fig.suptitle(f"Adhesive force of a rough {layout} brush, N = {n_pillars}")
     return fig
+
+
+def _side_legend(fig: Figure, axes) -> None:
+    """One legend for panels that share their lines, right of them, where it
+    covers no data (a legend per panel sat on the curves)."""
+    handles: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="outside right upper", fontsize=7)
 
 
 def _no_false_zoom(ax, span: float = 0.05) -> None:
@@ -491,12 +532,12 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
             if not np.isfinite(mean.values).any():
                 continue
             ax.errorbar(p_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
-                        capsize=2, color=f"C{i}", label=rf"$\bar k$ = {kbar:g}")
+                        capsize=2, color=f"C{i}", label=rf"$\bar k$ = {_kbar_text(kbar)}")
         ax.set_title(f"roughness {rough:g} " + r"$d_K$", fontsize=9)
         ax.set_xlabel(r"preload [$F_K$]")
         ax.set_ylabel(FAD_LABEL)
         _no_false_zoom(ax)
-        ax.legend(fontsize=7)
+    _side_legend(fig, axes)
     fig.suptitle(f"Preload brings adhesion back: rough {layout} brush, N = {n_pillars}")
     return fig
 
@@ -520,10 +561,10 @@ def rough_loop(curve: xr.Dataset) -> Figure:
     i_max = int(np.nanargmax(np.where(back, f, -np.inf)))
     ax.plot(d[i_max], f[i_max], "k^", label=rf"$\bar F_{{ad}}$ = {f[i_max]:.3g}")
     i_pre = int(np.nanargmin(f))
-    ax.plot(d[i_pre], f[i_pre], "kv", label=f"preload {-f[i_pre]:.3g}")
+    ax.plot(d[i_pre], f[i_pre], "kv", label=rf"preload {-f[i_pre]:.3g} $F_K$")
     ax.axhline(0.0, color="0.6", lw=0.5)
-    ax.set_xlabel(r"$d / d_K$")
-    ax.set_ylabel(r"$F / F_K$ (tensile > 0)")
+    ax.set_xlabel(r"$\bar d = d / d_K$")
+    ax.set_ylabel(r"$\bar F = F / F_K$ (tensile > 0)")
     ax.legend(fontsize=7)
     labels = [str(s) for s in curve["snapshot_label"].values] if "snapshot_label" in curve else []
     for axm, stage in zip(maps, ("preload", "maximum force")):
@@ -534,7 +575,7 @@ def rough_loop(curve: xr.Dataset) -> Figure:
         state = curve["contact_snapshot"].isel(snapshot=labels.index(stage)).values
         axm.imshow(state + 1, cmap=SNAPSHOT_CMAP, vmin=0, vmax=2, origin="lower",
                    interpolation="nearest")
-        axm.set_title(f"contact at {'the preload' if stage == 'preload' else 'F_ad'}",
+        axm.set_title("contact at " + ("the preload" if stage == "preload" else r"$F_{ad}$"),
                       fontsize=9)
     a = curve.attrs
     fig.suptitle(f"{a.get('layout')} brush, N = {a.get('n_pillars')}, "
@@ -567,7 +608,7 @@ def load_sharing(curve: xr.Dataset) -> Figure:
     ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="equal sharing")
     ax.axhline(0.0, color="0.7", lw=0.5)
     ax.set_xlabel(r"pillar height $z_p / d_K$")
-    ax.set_ylabel(r"pillar force at $F_{ad}$ / ($F_{ad}/N$)")
+    ax.set_ylabel(r"pillar force at $F_{ad}$ / ($F_{ad}/N$), tensile > 0")
     ax.legend(fontsize=7)
     a = curve.attrs
     ax.set_title(f"N = {a.get('n_pillars')}, " + rf"$\bar k$ = {float(a.get('kbar')):g}, "
@@ -659,11 +700,11 @@ def convergence(
             if touch.any():
                 grids = ", ".join(str(int(g)) for g in conv["grid"].values[touch])
                 flags.append(f"touching pillars (n = {grids})")
-            if flags:
-                ax.text(0.97, 0.05, ", ".join(flags), color="tab:red", ha="right",
-                        va="bottom", transform=ax.transAxes, fontsize="small")
+            if flags:  # between the title and the plot: on no point, no tick label
+                ax.text(0.5, 1.01, ", ".join(flags), color="tab:red", ha="center",
+                        va="bottom", transform=ax.transAxes, fontsize="x-small")
             ax.set_xlim(left=-0.02 * h_line[-1], right=h_line[-1])
-            ax.set_title(title, fontsize="small")
+            ax.set_title(title, fontsize="small", pad=12 if flags else 6)
             ax.set_ylabel(CONVERGENCE_LABELS.get(q, q))
             if row == n_rows - 1:
                 ax.set_xlabel("element size $h/L = 1/n$")
