@@ -1,10 +1,10 @@
-"""Cost of a rough, preloaded pull-off against today's flat one.
+"""Cost of a rough, preloaded pull-off against the flat one.
 
     python benchmarks/bench_rough.py                 # 16 x 16, kbar 0.455, 512^2
     python benchmarks/bench_rough.py --grid 256 --lookahead 0 0.001 0.01
 
 Prints operator applications, wall time, F_ad / F_K and W / W_K of the flat
-brush (today's pull-off from full contact) and of the rough brush
+brush (the pull-off from full contact) and of the rough brush
 (roughness S d_K, approach to P F_K, retraction) for each lookahead, with
 the rough runs' ratio of applications to the flat one.  Asserts nothing.
 Measured on one core (16 x 16, kbar 0.455, S = 1, P = 1, seed 0, 512^2):

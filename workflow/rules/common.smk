@@ -171,7 +171,7 @@ def kbar_tag(kbar):
 
 
 def rough_tag(roughness, preload, kbar_spread):
-    """File-name suffix of a rough brush; "" for today's flat brush (names unchanged)."""
+    """File-name suffix of a rough brush; "" for the flat brush (names unchanged)."""
     values = (float(roughness), float(preload), float(kbar_spread))
     if values == (0.0, 0.0, 0.0):
         return ""
@@ -274,7 +274,7 @@ def sweep_brushes(config):
 
 #: One curve file per case; every parameter that changes the curve is in its name,
 #: so that a sweep on another grid or filling factor never overwrites it.  The
-#: shape and rough suffixes are empty for today's flat brush of discs.
+#: shape and rough suffixes are empty for the flat brush of discs.
 CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{shape}{rough}"
 
 
