@@ -304,6 +304,17 @@ def _terminate(signum: int, frame: object) -> NoReturn:
     raise _Terminated
 
 
+def _on_sigterm(handler):
+    """Install a SIGTERM handler, returning the previous one; a no-op (None)
+    off the main thread, where Python allows none (`main` called from a thread)."""
+    if handler is None:
+        return None
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:
+        return None
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.curve import simulate
     from brushcore.data.io import check_output_path, write_curve
@@ -347,12 +358,12 @@ def _simulate(args: argparse.Namespace) -> int:
               file=sys.stderr)
         pin_threads(args.threads)
         # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
-        previous = signal.signal(signal.SIGTERM, _terminate)
+        previous = _on_sigterm(_terminate)
         try:
             ds = simulate(params, options, progress=progress, labels=labels)
             write_curve(ds, args.out)
         finally:
-            signal.signal(signal.SIGTERM, previous)
+            _on_sigterm(previous)
     except ParameterError as exc:
         _error(exc.in_terms_of(FLAGS, sep=" "), progress)
         return 2
