@@ -22,7 +22,7 @@ from typing import NoReturn
 from brushcore.numerics.cg import ConvergenceError
 from brushcore.data.joblog import EXIT_INTERRUPTED, INTERRUPTED
 from brushcore.model.labelmap import count_touching_pairs
-from brushcore.model.params import LAYOUTS, MAX_ASPECT, BrushParams
+from brushcore.model.params import LAYOUTS, MAX_ASPECT, MIN_KBAR, BrushParams
 from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.threads import MAX_THREADS
@@ -64,7 +64,7 @@ def _kbar(text: str) -> float:
         return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"{text!r} is not a number; allowed a number in [1e-10, inf], 'inf' means rigid"
+            f"{text!r} is not a number; allowed a number in [{MIN_KBAR:g}, inf], 'inf' means rigid"
         ) from None
 
 
@@ -180,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     rough.add_argument("--heights", type=_path, default=None, metavar="FILE",
                        help="pillar heights [d_K], one per pillar")
     rough.add_argument("--kbar-file", type=_path, default=None, metavar="FILE",
-                       help="pillar kbar in [1e-10, inf], one per pillar")
+                       help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar")
     rough.add_argument("--gap-map", type=_path, default=None, metavar="FILE",
                        help="extra gap of every element [d_K], grid x grid (rows y)")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")

@@ -61,7 +61,7 @@ BAD = [
     (["--layout", "random", "--pillars", "60", "--phi", "0.5"], "--pillars 60 .*fewer"),
     (["--threads", "0"], r"--threads 0 .*\[1, 256\]"),
     (["--threads", "100000"], r"--threads 100000 .*\[1, 256\]"),  # crashed FFTW's planner
-    (["--kbar", "1e-18"], r"--kbar 1e-18 is invalid: allowed a number in \[1e-10, inf\]"),
+    (["--kbar", "1e-18"], r"--kbar 1e-18 is invalid: allowed a number in \[1e-09, inf\]"),
     (["--seed", str(2**64)], r"--seed 18446744073709551616 .*\[0, 2\*\*63 - 1\]"),
     (["--roughness", "1e30"], r"--roughness 1e\+30 .*\[0, 1000\]"),  # hung the approach
     (["--h", "1e-200"], r"--h 1e-200 .*\[1e-30, 1e\+30\]"),

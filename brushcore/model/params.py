@@ -50,11 +50,14 @@ RANDOM_GAP_GRID = 512
 
 #: Ranges beyond which a run cannot mean anything and fails deep inside the
 #: solver (measured 2026-12-05): kbar 1e-14 left CG at 99 % error on random
-#: 16 (64^2) and 1e-18 made the pillar blocks singular, while 1e-10 to 1e-13
-#: run and agree on the soft plateau (the sweep goes down to 1e-6);
+#: 16 (64^2) and 1e-18 made the pillar blocks singular; below 1e-9 round-off
+#: in the soft springs breaks the ties of mirror-image pillars on the whole
+#: grid (regular 4 x 4 on 64^2 at 3e-10: W 3.9 % off the quadrant solve,
+#: within 1e-5 at 1e-9 on 32^2 to 128^2), so 1e-9 is the floor (the sweep
+#: goes down to 1e-6);
 #: roughness 1e30 d_K hung the approach (1e3 runs at once, each pillar then
 #: separate); e_star, dgamma or h beyond 1e+-100 overflowed.
-MIN_KBAR = 1e-10
+MIN_KBAR = 1e-9
 MAX_GRID = 8192
 MAX_ROUGH = 1e3  # roughness and |heights| [d_K], preload [F_K]
 MAX_KBAR_SPREAD = 100.0  # coefficient of variation
@@ -76,7 +79,7 @@ class BrushParams:
     n_pillars : number of pillars N >= 1 (a perfect square for "regular",
         rows x columns near the hexagonal aspect for "hexagonal", the
         file's count for "file").
-    kbar : normalised spring stiffness k / (E* L) in [1e-10, inf] (`MIN_KBAR`); inf = rigid.
+    kbar : normalised spring stiffness k / (E* L) in [1e-9, inf] (`MIN_KBAR`); inf = rigid.
     grid : elements per side n of the square L x L holding the pillars.
     phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
     seed : seed of numpy's Generator for "random", and for the heights and
@@ -113,7 +116,7 @@ class BrushParams:
     heights : protrusion of each pillar in units of d_K, each in [-1e3, 1e3],
         in label order (see `brushcore.model.layout.regular_centres`; larger reaches the
         substrate first); exclusive with ``roughness``.
-    kbar_values : kbar of each pillar in [1e-10, inf], label order; exclusive
+    kbar_values : kbar of each pillar in [1e-9, inf], label order; exclusive
         with ``kbar_spread`` (``kbar`` then only names the brush).
     gap_map : extra gap of every element, shape (grid, grid), in units of
         d_K, added below the pillar heights: element offset z_i = z_p -
@@ -246,6 +249,16 @@ class BrushParams:
         require(self.kbar_spread == 0 or math.isfinite(self.kbar), "kbar_spread",
                  self.kbar_spread, "0 for rigid pillars (kbar = inf)")
         n = self.n_pillars
+        if self.kbar_spread > 0 and self.kbar_values is None:
+            # The draws themselves must stay where the solver works, as values
+            # from a file must (a spread of 100 at kbar 1e-9 drew 1e-15).
+            from brushcore.model.rough import lognormal_kbar  # rough imports this module
+
+            low = float(lognormal_kbar(self.kbar, self.kbar_spread, n, self.seed).min())
+            require(low >= MIN_KBAR, "kbar_spread", self.kbar_spread,
+                     f"a spread whose draws stay at or above kbar {MIN_KBAR:g} (a smaller "
+                     "spread, a larger kbar or another seed)",
+                     f"seed {self.seed} draws kbar {low:.3g} at mean {self.kbar:g}")
         digest = hashlib.sha256()
         for name, shape, low in (("heights", (n,), None), ("kbar_values", (n,), MIN_KBAR),
                                  ("gap_map", (self.grid, self.grid), None)):
@@ -287,7 +300,7 @@ class BrushParams:
 
     @property
     def is_flat(self) -> bool:
-        """Today's problem: equal heights and springs, pulled from full contact."""
+        """The flat problem: equal heights and springs, pulled from full contact."""
         return (self.roughness == 0 and self.preload == 0 and self.kbar_spread == 0
                 and all(getattr(self, k) is None for k in ARRAY_FIELDS))
 
