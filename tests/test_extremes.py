@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -72,3 +73,16 @@ def test_random_layout_near_the_packing_limit():
     _fw(ds)
     with pytest.raises(ParameterError, match="n_pillars=40 is invalid .random layout"):
         simulate(BrushParams("random", 40, 1e-2, 64, phi=0.5, seed=0))
+
+
+def test_extreme_units_keep_float32_out_of_overflow():
+    """E* = 1e30 Pa with h = 1e-9 m lies in the units range, but its stresses
+    overflowed float32 in the preconditioner ("non-finite correction"): such
+    a random brush runs in double and gives the normalised results of units
+    of 1 (whose float32 run differs by round-off: 2e-7 measured)."""
+    base = BrushParams("random", 16, 1e-3, 64, seed=1)
+    ref = simulate(base)
+    far = simulate(replace(base, e_star=1e30, h=1e-9))
+    assert ref.attrs["fft_precision"] == "single" and far.attrs["fft_precision"] == "double"
+    for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+        assert float(far[name]) == pytest.approx(float(ref[name]), rel=1e-5), name

@@ -113,6 +113,19 @@ def test_suggested_grid_runs_every_brush_of_a_config():
                 build_labels(make(grid))
 
 
+def test_ellipses_are_resolved_across_their_minor_axis():
+    """The radius rule asks 2 elements of the semi-minor axis r / sqrt(aspect):
+    16 ellipses of aspect 10 at phi 0.03 have r = 3.15 on 129^2 but b = 1.0."""
+    args = dict(layout="regular", n_pillars=16, kbar=1e-3, phi=0.03, shape="ellipse",
+                aspect=10.0)
+    with pytest.raises(ParameterError, match=r"semi-minor axis spans 0.997 elements.*"
+                                             r"allowed grid >= 259"):
+        BrushParams(grid=129, **args)
+    assert BrushParams(grid=259, **args).narrowest_radius_elements >= 2.0
+    assert BrushParams(grid=129, **{**args, "shape": "disc", "aspect": 1.0}) \
+        .narrowest_radius_elements == pytest.approx(3.15, abs=0.01)
+
+
 def test_floor_even_when_coarse_is_allowed():
     """Below sqrt(2)/2 elements a pillar may cover no element centre; the hint is consistent."""
     with pytest.raises(ParameterError, match=r"grid >= \d+") as err:

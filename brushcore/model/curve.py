@@ -21,7 +21,8 @@ from brushcore.model.layout import build_labels, random_gap
 from brushcore.model.params import BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
-from brushcore.model.solve import fft_library_used, run, run_protocol_curve, single_transforms
+from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
+                                   single_transforms)
 from brushcore.numerics.backend import resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.protocol import (APPROACH, RETRACT, START, Waypoint, loop_energy,
@@ -281,6 +282,11 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                                  "0 when a protocol is given (its first waypoint is the load)")
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
                           for w in protocol)
+    # How far loads and height scatter reach, in F_K and d_K (a displacement
+    # waypoint is no measure: soft springs stretch far at small stresses).
+    forces = [abs(w.value) / fs for w in waypoints if w.kind == "force"]
+    span = max([params.preload, params.roughness, float(np.std(inputs.heights)) / ds_, *forces])
+    options = load_options(options, span)  # the attrs record the rtol that ran
     _, op, curve, applications = run_protocol_curve(
         params, waypoints, options, heights=inputs.heights, gap_map=inputs.gap_map,
         compliance=inputs.compliance, progress=progress, labels=labels)

@@ -239,7 +239,10 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
         found_as = {"n_pillars": f"it holds {exc.value} pillars",
                     "grid": f"it is {exc.value} x {exc.value} elements",
                     "phi": f"its pillars cover {exc.value:.4g} of it"}[exc.name]
-        allowed = (exc.allowed.replace("grid >=", "a map of side >=") if exc.name == "grid"
+        # A larger map helps only if its pillars grow with it: say so (a
+        # one-pixel pillar padded into a larger map stays one pixel).
+        allowed = (exc.allowed.replace("grid >=", "the layout drawn finer, its pillars scaled "
+                                       "with it: a map of side >=") if exc.name == "grid"
                    else "a filling factor in (0, 0.5]" if exc.name == "phi" else exc.allowed)
         raise _refuse(path, allowed, found_as + (f": {exc.reason}" if exc.reason else ""),
                       image_rule=exc.name == "phi") from None
