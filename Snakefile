@@ -20,6 +20,7 @@ check_config(config, workflow.source_path("workflow/schemas/config.schema.yaml")
 
 
 validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
+canonical_solver(config, workflow.source_path("workflow/schemas/config.schema.yaml"))
 check_cases(config)
 
 

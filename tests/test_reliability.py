@@ -571,3 +571,22 @@ def test_orphaned_job_stops_without_writing(tmp_path: Path) -> None:
             break
         time.sleep(0.05)
     assert result.read_text() == "75"
+
+
+def test_git_commit_says_dirty_for_an_edit_anywhere_in_the_package(monkeypatch) -> None:
+    """The "+dirty" check looked at brushcore/model only (where provenance.py
+    moved): an edit in numerics/ went unrecorded.  It asks git about the
+    whole package."""
+    import brushcore
+    from brushcore.model import provenance
+
+    asked = []
+
+    def fake_run(args, **kwargs):
+        asked.append(args)
+        out = "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/cg.py\n"
+        return subprocess.CompletedProcess(args, 0, stdout=out, stderr="")
+
+    monkeypatch.setattr(provenance.subprocess, "run", fake_run)
+    assert provenance.git_commit.__wrapped__() == "abc123+dirty"
+    assert asked[1][-1] == str(Path(brushcore.__file__).resolve().parent)

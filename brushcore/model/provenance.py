@@ -21,8 +21,9 @@ def version() -> str:
 
 @lru_cache(maxsize=1)
 def git_commit() -> str:
-    """Commit of the source tree brushcore runs from ("+dirty" if modified), or "unknown"."""
-    here = Path(__file__).resolve().parent
+    """Commit of the source tree brushcore runs from ("+dirty" if anything in
+    the package is modified), or "unknown"."""
+    here = Path(__file__).resolve().parents[1]  # the package, not this module's folder
     try:
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
                              text=True, timeout=10, check=True).stdout.strip()

@@ -108,6 +108,19 @@ class ConfigError(ValueError):
     """The config asks for something that cannot run; the message names the key."""
 
 
+def canonical_solver(config, schema_path):
+    """Put the solver options in the schema's order (in place, after `validate`
+    filled the defaults).  They reach every simulate job as a param, which
+    Snakemake compares as written: `solver: {cascade: local, rtol: 1.0e-4}`,
+    the defaults in another order, reran every finished curve.  The default
+    config's order is the schema's, so its curves keep their records."""
+    with open(schema_path) as fh:
+        order = list(yaml.safe_load(fh)["properties"]["solver"]["properties"])
+    solver = config["solver"]
+    config["solver"] = {k: solver[k] for k in order if k in solver} | {
+        k: v for k, v in solver.items() if k not in order}
+
+
 def check_cases(config):
     """Run every check that needs no solve, for every case, before any job starts.
 
