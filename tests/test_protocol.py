@@ -554,7 +554,7 @@ def test_per_pillar_inputs_are_exported_in_label_order():
 
 
 def test_spread_draws_are_reproducible_and_have_the_asked_moments():
-    from brushcore.model.rough import gaussian_heights, lognormal_kbar
+    from brushcore.model.draws import gaussian_heights, lognormal_kbar
 
     k = lognormal_kbar(0.4, 0.3, 200_000, seed=5)
     assert k.mean() == pytest.approx(0.4, rel=5e-3) and k.std() / k.mean() == pytest.approx(

@@ -17,6 +17,7 @@ from brushcore.validation import (ParameterError, is_integer, is_real, normalise
                                   require_switches)
 from brushcore.model.lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, nearest_hexagonal_counts
 from brushcore.model.shapes import SHAPES
+from brushcore.model.draws import lognormal_kbar
 from brushcore.model.theory import stiffness_from_kbar
 from brushcore.numerics.backend import BACKENDS
 
@@ -254,8 +255,6 @@ class BrushParams:
         if self.kbar_spread > 0 and self.kbar_values is None:
             # The draws themselves must stay where the solver works, as values
             # from a file must (a spread of 100 at kbar 1e-9 drew 1e-15).
-            from brushcore.model.rough import lognormal_kbar  # rough imports this module
-
             low = float(lognormal_kbar(self.kbar, self.kbar_spread, n, self.seed).min())
             require(low >= MIN_KBAR, "kbar_spread", self.kbar_spread,
                      f"a spread whose draws stay at or above kbar {MIN_KBAR:g} (a smaller "

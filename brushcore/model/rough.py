@@ -9,12 +9,12 @@ stiffness), so they do not depend on the random layout's draws.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from brushcore.model import theory
+from brushcore.model.draws import gaussian_heights, lognormal_kbar
 from brushcore.model.params import BrushParams
 from brushcore.validation import ParameterError
 
@@ -40,22 +40,6 @@ class PillarInputs:
     d_unit: float
     f_unit: float
     preload: float
-
-
-def lognormal_kbar(mean: float, cv: float, n: int, seed: int) -> np.ndarray:
-    """n lognormal values with the given mean and coefficient of variation."""
-    if cv == 0:
-        return np.full(n, mean)
-    s2 = math.log1p(cv * cv)
-    rng = np.random.default_rng([seed, 2])
-    return mean * np.exp(rng.normal(-0.5 * s2, math.sqrt(s2), n))
-
-
-def gaussian_heights(std: float, n: int, seed: int) -> np.ndarray:
-    """n heights of zero mean and standard deviation ``std`` (zeros for 0)."""
-    if std == 0:
-        return np.zeros(n)
-    return np.random.default_rng([seed, 1]).normal(0.0, std, n)
 
 
 def pillar_inputs(params: BrushParams, labels: np.ndarray) -> PillarInputs:
