@@ -1,5 +1,7 @@
 """Script of rule `aggregate`: all curve files -> results/sweep.nc."""
 
+import sys
+
 from brushcore.data.aggregate import CaseKey, build_sweep, write_sweep
 from brushcore.data.joblog import logged
 
@@ -13,6 +15,15 @@ def main(smk) -> None:
     )
     write_sweep(sweep, smk.output[0])
     print(sweep)
+    # (rtol may differ by design: large loads tighten it, see solve.load_options)
+    mixed = [name for name in ("simulation_git_commits", "precision", "cascade")
+             if "; " in str(sweep.attrs.get(name, "")) or ", " in str(sweep.attrs.get(name, ""))]
+    if mixed:  # on the terminal too: the log alone would hide it
+        note = (f"{smk.output[0]}: its curves differ in " + ", ".join(
+            f"{name} ({sweep.attrs[name]})" for name in mixed)
+            + "; `snakemake -R simulate` recomputes them alike")
+        print(note)
+        print(note, file=sys.__stderr__, flush=True)
 
 
 with logged(snakemake.log[0]):  # noqa: F821
