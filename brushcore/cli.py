@@ -292,8 +292,9 @@ class _Missing(Exception):
     """A flag that the chosen layout needs was not given."""
 
 
-class _Terminated(Exception):
-    """SIGTERM (kill, Slurm's scancel or time limit) arrived."""
+class _Terminated(BaseException):
+    """SIGTERM (kill, Slurm's scancel or time limit) arrived; like
+    KeyboardInterrupt, no ``except Exception`` may swallow it."""
 
 
 #: Exit status after SIGTERM (128 + 15), as shells report it.

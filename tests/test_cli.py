@@ -279,6 +279,18 @@ def test_full_disk_is_said_in_words(tmp_path, monkeypatch):
     assert err.value.errno == errno.ENOSPC
     assert not list(tmp_path.iterdir())
 
+    # Ctrl-C while writing stays Ctrl-C, even where the free space cannot be read
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    def gone(path):
+        raise FileNotFoundError(path)
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", interrupted)
+    monkeypatch.setattr(shutil, "disk_usage", gone)
+    with pytest.raises(KeyboardInterrupt):
+        io.write_dataset_atomic(ds, tmp_path / "a.nc", {})
+
 
 def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     out = tmp_path / "c.nc"

@@ -160,8 +160,8 @@ def test_values_beyond_what_can_run_are_refused(field, value, allowed):
     BrushParams("regular", 4, 1e-9, 32)
     # ... but not a spread whose draws fall under the kbar floor (they left CG
     # unconverged, or W 3.5-6 % off, where a file's values are refused)
-    with pytest.raises(ParameterError, match=r"^kbar_spread=100.0 is invalid \(seed 1 draws "
-                                             r"kbar .*allowed a spread whose draws stay"):
+    with pytest.raises(ParameterError, match=r"^kbar_spread=100.0 is invalid \(a draw reaches "
+                                             r"kbar .* seed \(1\)\): allowed a spread whose"):
         BrushParams("regular", 64, 1e-9, 128, kbar_spread=100.0, seed=1)
 
 

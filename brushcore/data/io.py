@@ -143,11 +143,14 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
         publish(tmp, path)
     except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
-        free = shutil.disk_usage(path.parent).free
-        if isinstance(exc, (OSError, RuntimeError)) and free < ds.nbytes:
-            # netCDF says only "HDF error" when the disk is full: say so
-            raise OSError(errno.ENOSPC, f"{free} bytes free on its disk, the data take up "
-                                        f"to {ds.nbytes}", str(path)) from exc
+        if isinstance(exc, (OSError, RuntimeError)):  # not Ctrl-C, SIGTERM or a bug
+            try:
+                free = shutil.disk_usage(path.parent).free
+            except OSError:
+                raise exc from None
+            if free < ds.nbytes:  # netCDF says only "HDF error" when the disk is full
+                raise OSError(errno.ENOSPC, f"{free} bytes free on its disk, the data take "
+                                            f"up to {ds.nbytes}", str(path)) from exc
         raise
     return path
 

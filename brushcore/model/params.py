@@ -259,7 +259,8 @@ class BrushParams:
             require(low >= MIN_KBAR, "kbar_spread", self.kbar_spread,
                      f"a spread whose draws stay at or above kbar {MIN_KBAR:g} (a smaller "
                      "spread, a larger kbar or another seed)",
-                     f"seed {self.seed} draws kbar {low:.3g} at mean {self.kbar:g}")
+                     f"a draw reaches kbar {low:.3g} at mean {self.kbar:g} with this seed "
+                     f"({self.seed})")
         digest = hashlib.sha256()
         for name, shape, low in (("heights", (n,), None), ("kbar_values", (n,), MIN_KBAR),
                                  ("gap_map", (self.grid, self.grid), None)):

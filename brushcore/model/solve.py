@@ -236,9 +236,9 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     return labels, op, curve, conv.applications - before + op.refined_applications
 
 
-#: Loads (preload, waypoints, in F_K) and offsets (roughness, heights, gap
-#: map, in d_K) up to this many units run at the rtol asked for; beyond, rtol
-#: shrinks in proportion (`load_options`).
+#: Loads (preload, force waypoints, in F_K) and height scatter (roughness,
+#: the standard deviation of given heights, in d_K) up to this many units run
+#: at the rtol asked for; beyond, rtol shrinks in proportion (`load_options`).
 LOAD_SPAN = 10.0
 
 

@@ -142,14 +142,18 @@ def check_cases(config):
     if twice:
         raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
     by_n = {int(e["n_pillars"]) for e in config.get("grid_by_n", [])}
-    makes = {}  # one brush per geometry: it does not depend on kbar
+    # One brush per geometry, at its smallest kbar: the layout does not
+    # depend on kbar, and a stiffness spread's draws are smallest there.
+    softest = {}
     for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
-        makes.setdefault((layout, n, seed, grid, phi, rough, shape), (
-            lambda g, layout=layout, n=n, kbar=kbar, seed=seed, phi=phi, rough=rough,
-            shape=shape: BrushParams(
-                layout, n, float(kbar), g, phi=phi, seed=seed,
-                allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
-                **parse_shape_tag(shape))))
+        key = (layout, n, seed, grid, phi, rough, shape)
+        softest[key] = min(float(kbar), softest.get(key, math.inf))
+    makes = {key: (lambda g, layout=key[0], n=key[1], kbar=kbar, seed=key[2], phi=key[4],
+                   rough=key[5], shape=key[6]: BrushParams(
+                       layout, n, kbar, g, phi=phi, seed=seed,
+                       allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
+                       **parse_shape_tag(shape)))
+             for key, kbar in softest.items()}
     for (layout, n, seed, grid, phi, rough, shape), make in makes.items():
         try:
             build_labels(hinted_params(make, grid))
