@@ -19,7 +19,10 @@ def test_random_layout_counts_gaps_phi(n_pillars):
     assert labels.max() + 1 == n_pillars
     assert np.unique(labels[labels >= 0]).size == n_pillars
     phi = np.count_nonzero(labels >= 0) / labels.size
-    assert abs(phi / 0.12 - 1) < 0.03, f"phi = {phi:.4f}"
+    # measured +0.002 % ... -0.16 % (N = 64 ... 1620): the discs' staircase
+    # averages out over many pillars; 1 % leaves room for other seeds, well
+    # inside the 5 % the discretisation rule allows one brush
+    assert abs(phi / 0.12 - 1) < 0.01, f"phi = {phi:.4f}"
     c = random_centres(n_pillars, p.side, p.pillar_radius, random_gap(p), p.seed)
     dist = np.hypot(*(c[:, None, :] - c[None, :, :]).transpose(2, 0, 1))
     np.fill_diagonal(dist, np.inf)

@@ -140,6 +140,8 @@ def soft_reference():
     f_c = float(single.force.max())
     _, _, flat, _ = run_protocol_curve(_soft(), preload_protocol(0.0))
     eps = 1.0 - float(flat.force.max()) / (4 * f_c)
+    # Neighbours always cost something, and less than the 7.5 % the dense
+    # solver finds for 16 pillars at phi 0.07 (closer, and more of them).
     assert 0 < eps < 0.05, eps
     return f_c, eps
 
