@@ -30,16 +30,25 @@ def _is_npy(path: Path) -> bool:
     return path.suffix.lower() == ".npy"
 
 
-def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
-    """(line number, values) of every non-empty line of a text file."""
+#: Said where a count is off and a comma stands between digits: "0,5" is
+#: read as two values (commas separate values), not as 0.5.
+_COMMA_HINT = "; commas separate values: write decimals with a point"
+
+
+def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
+    """(line number, values) of every non-empty line of a text file, and
+    `_COMMA_HINT` where a comma stands between digits ("" otherwise)."""
     try:
         text = path.read_text(encoding="utf-8-sig")  # a BOM is no character of line 1
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(name, str(path), "a readable text or .npy file",
                              type(exc).__name__ + ": " + str(exc).split(":")[0]) from None
-    rows = []
+    rows, hint = [], ""
     for number, line in enumerate(text.splitlines(), start=1):
-        line = line.split("#", 1)[0].replace(",", " ").strip()
+        line = line.split("#", 1)[0]
+        if re.search(r"\d,\d", line):
+            hint = _COMMA_HINT
+        line = line.replace(",", " ").strip()
         if not line:
             continue
         values = []
@@ -49,16 +58,7 @@ def _rows(path: Path, name: str) -> list[tuple[int, list[float]]]:
                                      f"line {number}: {token!r} is not a number")
             values.append(float(token))
         rows.append((number, values))
-    return rows
-
-
-def _comma_hint(path: Path) -> str:
-    """A hint where a count is off and the file has a comma between digits:
-    "0,5" is read as two values (commas separate values), not as 0.5."""
-    text = path.read_text(encoding="utf-8-sig", errors="replace")
-    data = "\n".join(line.split("#", 1)[0] for line in text.splitlines())
-    return "; commas separate values: write decimals with a point" \
-        if re.search(r"\d,\d", data) else ""
+    return rows, hint
 
 
 def _check_values(path: Path, name: str, where: str, values, positive: bool) -> None:
@@ -92,7 +92,7 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
         for i, value in enumerate(arr):
             _check_values(path, name, f"entry {i}", [float(value)], positive)
         return arr.astype(float)
-    rows = _rows(path, name)
+    rows, comma_hint = _rows(path, name)
     values, lines = [], []
     for number, row in rows:
         _check_values(path, name, f"line {number}", row, positive)
@@ -102,7 +102,7 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
         extra = f"; value {n_pillars + 1} is on line {lines[n_pillars]}" \
             if len(values) > n_pillars else ""
         raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
-                             f"it holds {len(values)}{extra}{_comma_hint(path)}")
+                             f"it holds {len(values)}{extra}{comma_hint}")
     return np.array(values)
 
 
@@ -120,11 +120,11 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
                                  f"element (y, x) = {tuple(int(i) for i in bad[0])} holds "
                                  f"{float(arr[tuple(bad[0])])!r}")
         return arr.astype(float)
-    rows = _rows(path, name)
+    rows, comma_hint = _rows(path, name)
     for number, row in rows:
         if len(row) != grid:
             raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
-                                 f"line {number} holds {len(row)} numbers{_comma_hint(path)}")
+                                 f"line {number} holds {len(row)} numbers{comma_hint}")
         for column, value in enumerate(row, start=1):
             _check_values(path, name, f"line {number}, column {column},", [value], False)
     if len(rows) != grid:
