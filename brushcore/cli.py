@@ -297,8 +297,9 @@ class _Terminated(BaseException):
     KeyboardInterrupt, no ``except Exception`` may swallow it."""
 
 
-#: Exit status after SIGTERM (128 + 15), as shells report it.
+#: Exit status after SIGTERM (128 + 15), as shells report it, and what is said.
 EXIT_TERMINATED = 143
+TERMINATED = "terminated; nothing written"
 
 
 def _terminate(signum: int, frame: object) -> NoReturn:
@@ -362,7 +363,12 @@ def _simulate(args: argparse.Namespace) -> int:
         previous = _on_sigterm(_terminate)
         try:
             ds = simulate(params, options, progress=progress, labels=labels)
-            write_curve(ds, args.out)
+            try:
+                write_curve(ds, args.out)
+            except OSError as exc:  # the disk filled up or the folder went away
+                _error(f"cannot write {args.out}: {exc.strerror or exc}; nothing written",
+                       progress)
+                return 1
         finally:
             _on_sigterm(previous)
     except ParameterError as exc:
@@ -378,11 +384,8 @@ def _simulate(args: argparse.Namespace) -> int:
         _error(INTERRUPTED, progress)
         return EXIT_INTERRUPTED
     except _Terminated:
-        _error(INTERRUPTED.replace("interrupted", "terminated"), progress)
+        _error(TERMINATED, progress)
         return EXIT_TERMINATED
-    except OSError as exc:  # the disk filled up or the folder went away while writing
-        _error(f"cannot write {args.out}: {exc.strerror or exc}; nothing written", progress)
-        return 1
     if progress is not None:
         progress.end_line()
     print(f"F_ad/F_K = {float(ds.adhesive_force_normalized):.4f}  "
