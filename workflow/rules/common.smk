@@ -1,6 +1,7 @@
 """Helpers shared by the rules: config checks, the job list and resource estimates."""
 
 import difflib
+import functools
 import math
 import re
 
@@ -20,8 +21,7 @@ def check_config(config, schema_path):
     reports the first error only, as "config key 'x': ...", with the closest
     known key for a typo.  Defaults are filled in afterwards by `validate`.
     """
-    with open(schema_path) as fh:
-        schema = yaml.safe_load(fh)
+    schema = _schema(schema_path)
     _exponent_numbers(config)
     error = jsonschema.exceptions.best_match(
         jsonschema.Draft202012Validator(schema).iter_errors(config)
@@ -55,12 +55,26 @@ def check_config(config, schema_path):
 _EXPONENT_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+")
 
 
+@functools.lru_cache(maxsize=None)
+def _schema(path):
+    """The config schema, read once for the checks that need it."""
+    with open(path) as fh:
+        return yaml.safe_load(fh)
+
+
+def _children(value):
+    """(key, item) of a config mapping or list; nothing for a plain value."""
+    if isinstance(value, dict):
+        return list(value.items())
+    if isinstance(value, (list, tuple)):
+        return list(enumerate(value))
+    return []
+
+
 def _exponent_numbers(value):
     """Turn "1e-8" into 1e-8 wherever the config holds it (in place), so that
     `kbar: [1e-6, 1e-3]` means what it says rather than failing as text."""
-    items = (value.items() if isinstance(value, dict) else
-             enumerate(value) if isinstance(value, list) else ())
-    for key, item in items:
+    for key, item in _children(value):
         if isinstance(item, str) and _EXPONENT_NUMBER.fullmatch(item.strip()):
             value[key] = float(item)
         else:
@@ -95,9 +109,7 @@ def _first_nan(value, where=""):
     would only fail as missing files at the end of planning."""
     if isinstance(value, float) and math.isnan(value):
         return where
-    items = (value.items() if isinstance(value, dict) else
-             enumerate(value) if isinstance(value, (list, tuple)) else ())
-    for key, item in items:
+    for key, item in _children(value):
         found = _first_nan(item, f"{where}.{key}" if where else str(key))
         if found is not None:
             return found
@@ -114,8 +126,7 @@ def canonical_solver(config, schema_path):
     Snakemake compares as written: `solver: {cascade: local, rtol: 1.0e-4}`,
     the defaults in another order, reran every finished curve.  The default
     config's order is the schema's, so its curves keep their records."""
-    with open(schema_path) as fh:
-        order = list(yaml.safe_load(fh)["properties"]["solver"]["properties"])
+    order = list(_schema(schema_path)["properties"]["solver"]["properties"])
     solver = config["solver"]
     config["solver"] = {k: solver[k] for k in order if k in solver} | {
         k: v for k, v in solver.items() if k not in order}
@@ -141,7 +152,7 @@ def check_cases(config):
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
         raise ConfigError(f"config key 'grid_by_n': N = {twice} listed more than once")
-    by_n = {int(e["n_pillars"]) for e in config.get("grid_by_n", [])}
+    by_n = set(named)
     # One brush per geometry, at its smallest kbar: the layout does not
     # depend on kbar, and a stiffness spread's draws are smallest there.
     softest = {}
