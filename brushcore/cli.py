@@ -319,12 +319,13 @@ def _on_sigterm(handler):
 
 def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.curve import simulate
-    from brushcore.data.io import check_output_path, write_curve
+    from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
     from brushcore.model.inputs import read_gap_map, read_pillar_values
     from brushcore.numerics.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
+    started = time.time()
     try:
         # Files are checked against the counts the plain parameters imply.
         base = dataclasses.replace(_brush_params(args), roughness=args.roughness,
@@ -369,6 +370,8 @@ def _simulate(args: argparse.Namespace) -> int:
                 _error(f"cannot write {args.out}: {exc.strerror or exc}; nothing written",
                        progress)
                 return 1
+            # what a run killed (kill -9, a node's crash) while writing --out left
+            remove_stale_temporaries(args.out, older_than=started)
         finally:
             _on_sigterm(previous)
     except ParameterError as exc:

@@ -34,6 +34,21 @@ def test_simulate_writes_a_complete_curve(tmp_path, capsys):
     assert [p.name for p in tmp_path.iterdir()] == ["c.nc"]  # no temporary left behind
 
 
+def test_a_killed_runs_temporary_is_removed_by_the_next(tmp_path):
+    """kill -9 while writing leaves a ``.c.nc.*.tmp``; the next run of the same
+    --out removes it, but not one written after it started (another writer's)."""
+    out = tmp_path / "c.nc"
+    killed = tmp_path / ".c.nc.killed.tmp"
+    killed.write_bytes(b"")
+    os.utime(killed, (time.time() - 60, time.time() - 60))
+    other = tmp_path / ".c.nc.other.tmp"
+    other.write_bytes(b"")
+    os.utime(other, (time.time() + 3600, time.time() + 3600))
+    assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                 "--grid", "48", "--out", str(out), "--quiet"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".c.nc.other.tmp", "c.nc"]
+
+
 def test_rigid_kbar_inf(tmp_path):
     out = tmp_path / "rigid.nc"
     assert main(["simulate", "--layout", "random", "--pillars", "5", "--kbar", "inf",

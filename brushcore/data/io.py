@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import math
 import os
 import shutil
 import tempfile
@@ -166,17 +167,28 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     return write_dataset_atomic(ds, path, _encoding(ds))
 
 
-def remove_stale_temporaries(path: str | os.PathLike) -> int:
+def remove_stale_temporaries(path: str | os.PathLike, older_than: float | None = None) -> int:
     """Delete temporary files that a killed `write_curve` left for ``path``.
 
     Safe when one writer owns ``path`` (one Snakemake job per output).
-    Returns the number of files removed.
+    ``older_than`` (seconds since the epoch) spares temporaries last written
+    at or after it, which a writer started since may still own (the command
+    line, where nothing guarantees one writer). Returns the number removed.
     """
     path = Path(path)
-    stale = list(path.parent.glob(f".{path.name}.*.tmp"))
+    stale = [tmp for tmp in path.parent.glob(f".{path.name}.*.tmp")
+             if older_than is None or _mtime(tmp) < older_than]
     for tmp in stale:
         tmp.unlink(missing_ok=True)
     return len(stale)
+
+
+def _mtime(path: Path) -> float:
+    """Last modification time [s since the epoch], +inf for a file gone meanwhile."""
+    try:
+        return path.stat().st_mtime
+    except FileNotFoundError:
+        return math.inf
 
 
 def read_curve(path: str | os.PathLike) -> xr.Dataset:

@@ -394,11 +394,14 @@ def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
         be computed, and the realised values.
     """
     counts = np.bincount(labels[labels >= 0], minlength=params.n_pillars)
-    r = params.pillar_radius_elements
+    # an ellipse's semi-minor axis, as the radius rule reads it: its
+    # equal-area radius would suggest a grid that still misses its centres
+    r = params.narrowest_radius_elements
+    what = "semi-minor axis" if params.shape == "ellipse" else "radius"
     if np.any(counts == 0):
         raise ParameterError(
             "grid", params.grid, f"grid >= {math.ceil(FLOOR_RADIUS_ELEMENTS * params.grid / r)}",
-            f"{int(np.sum(counts == 0))} pillars of radius {r:.3g} elements cover no "
+            f"{int(np.sum(counts == 0))} pillars of {what} {r:.3g} elements cover no "
             "element centre")
     phi_actual = float(counts.sum()) / labels.size
     error = phi_actual / params.phi - 1.0
@@ -407,4 +410,4 @@ def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
             "grid", params.grid, "a finer grid (or allow_coarse to run it anyway)",
             f"phi is realised as {phi_actual:.4g} instead of {params.phi:g} "
             f"({100 * error:+.1f} %, more than {100 * MAX_PHI_ERROR:g} %) with a pillar "
-            f"radius of {r:.3g} elements")
+            f"{what} of {r:.3g} elements")
