@@ -90,6 +90,49 @@ def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
     return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
 
 
+def _step_variables(displacement: np.ndarray, force: np.ndarray, area: np.ndarray,
+                    attached_pillars: np.ndarray, d_unit: float, f_unit: float,
+                    displacement_name: str) -> dict[str, xr.Variable]:
+    """The curve itself, per step, in SI and normalised (every curve file's)."""
+    return {
+        "displacement": _var("step", displacement, displacement_name, "m"),
+        "force": _var("step", force, "tensile normal force F", "N"),
+        "contact_area": _var("step", area, "real contact area", "m2"),
+        "attached_pillars": _var("step", attached_pillars.astype(np.int32),
+                                "pillars with attached elements", "1"),
+        "displacement_normalized": _var("step", displacement / d_unit,
+                                       "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
+        "force_normalized": _var("step", force / f_unit,
+                                "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)", "1"),
+    }
+
+
+def _result_variables(f_ad: float, d_ad: float, work: float, f_unit: float, w_unit: float,
+                      force_name: str, work_name: str) -> dict[str, xr.Variable]:
+    """F_ad, the d it is reached at and W, in SI and normalised (every curve file's)."""
+    return {
+        "adhesive_force": _var((), f_ad, force_name, "N"),
+        "adhesive_force_normalized": _var((), f_ad / f_unit, "F_ad / F_K", "1"),
+        "displacement_at_adhesive_force": _var((), d_ad, "d at the adhesive force", "m"),
+        "work_of_separation": _var((), work, work_name, "J"),
+        "work_of_separation_normalized": _var((), work / w_unit,
+                                             "W / W_K, W_K = 2 pi a0^2 dgamma", "1"),
+    }
+
+
+def _coords(params: BrushParams, steps: int, snapshots: int,
+            step_name: str) -> dict[str, xr.Variable]:
+    """Coordinates of every curve file: step, element centres, snapshot."""
+    coord = (np.arange(params.grid) + 0.5) * params.h
+    return {
+        "step": _var("step", np.arange(steps, dtype=np.int32), step_name, "1"),
+        "y": _var("y", coord, "element centre y", "m"),
+        "x": _var("x", coord, "element centre x", "m"),
+        "snapshot": _var("snapshot", np.arange(snapshots, dtype=np.int32),
+                        "contact snapshot index", "1"),
+    }
+
+
 def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
                area_total: float, *, events: int, steps: int, applications: int,
                cg_iterations: int, wall: float, title: str, references: str,
@@ -210,18 +253,10 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     pillar = detach >= 0
     states = np.where(pillar[None], (detach[None] > snaps[:, None, None]).astype(np.int8),
                       np.int8(-1)).astype(np.int8)
-    coord = (np.arange(params.grid) + 0.5) * h
 
     data = {
-        "displacement": _var("step", curve.displacement, "pull-off displacement d", "m"),
-        "force": _var("step", curve.force, "tensile normal force F", "N"),
-        "contact_area": _var("step", area, "real contact area", "m2"),
-        "attached_pillars": _var("step", curve.attached_pillars.astype(np.int32),
-                                "pillars with attached elements", "1"),
-        "displacement_normalized": _var("step", curve.displacement / ds_,
-                                       "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
-        "force_normalized": _var("step", curve.force / fs,
-                                "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)", "1"),
+        **_step_variables(curve.displacement, curve.force, area, curve.attached_pillars,
+                          ds_, fs, "pull-off displacement d"),
         "detachment_step": _var(("y", "x"), detach, "first step at which the element is "
                                "detached", "1", comment="-1 outside pillars"),
         "contact_snapshot": _var(("snapshot", "y", "x"), states, "contact state", "1",
@@ -230,13 +265,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "snapshot_step": _var("snapshot", snaps, "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
                                       {"long_name": "stage of the pull-off"}),
-        "adhesive_force": _var((), f_ad, "adhesive force (maximum tensile force)", "N"),
-        "adhesive_force_normalized": _var((), f_ad / fs, "F_ad / F_K", "1"),
-        "displacement_at_adhesive_force": _var((), float(curve.displacement[i_max]),
-                                              "d at the adhesive force", "m"),
-        "work_of_separation": _var((), work, "work of separation, integral of F dd", "J"),
-        "work_of_separation_normalized": _var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
-                                             "1"),
+        **_result_variables(f_ad, float(curve.displacement[i_max]), work, fs, ws,
+                            "adhesive force (maximum tensile force)",
+                            "work of separation, integral of F dd"),
     }
     attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
                        steps=int(curve.displacement.size), applications=applications,
@@ -244,14 +275,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                        title="Adhesive pull-off of a spring-mounted pillar brush",
                        references=REFERENCES, preconditioner=curve.preconditioner,
                        symmetry_fold=curve.symmetry_fold)
-    return xr.Dataset(data, coords={
-        "step": _var("step", np.arange(curve.displacement.size, dtype=np.int32),
-                    "step of the pull-off (one per solve)", "1"),
-        "y": _var("y", coord, "element centre y", "m"),
-        "x": _var("x", coord, "element centre x", "m"),
-        "snapshot": _var("snapshot", np.arange(snaps.size, dtype=np.int32),
-                        "contact snapshot index", "1"),
-    }, attrs=attrs)
+    return xr.Dataset(data, coords=_coords(params, curve.displacement.size, snaps.size,
+                                           "step of the pull-off (one per solve)"),
+                      attrs=attrs)
 
 
 def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOptions(),
@@ -296,13 +322,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     ws = theory.work_scale(area_total, dg)
     d, f = curve.displacement, curve.force
     ret = curve.retraction
-    if ret.any() and f[ret].max() > 0:
-        i_max = int(np.flatnonzero(ret)[np.argmax(f[ret])])
-        f_ad, d_ad, work = float(f[i_max]), float(d[i_max]), positive_work(d[ret], f[ret])
-    elif ret.any():  # a retraction that stays compressive: no tensile force, no work
-        i_max, f_ad, d_ad, work = -1, math.nan, math.nan, 0.0
-    else:  # a protocol that never retracts: no pull-off to report
-        i_max, f_ad, d_ad, work = -1, math.nan, math.nan, math.nan
+    i_max, f_ad, d_ad, work = _retraction_peak(d, f, ret)
     dissipated = loop_energy(d, f)
     area = curve.attached_elements * h * h
     n_pillars = op.n_pillars
@@ -315,15 +335,9 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
 
     # Contact maps at every waypoint and at F_ad (1 attached, 0 not, -1 no pillar).
     masks = list(curve.attached_at_waypoint) + [curve.attached_at_peak]
-    names = [f"waypoint {k}: {w.kind}" + (f" {w.value:g}" if w.kind != "separation" else "")
-             for k, w in enumerate(protocol if protocol is not None else waypoints)]
-    if protocol is None:
-        names[0] = "preload"
-        names[1] = "separated"
-    names.append("maximum force")
+    names = _snapshot_names(protocol)
     steps = list(curve.waypoint_step) + [i_max]
     states = np.stack([on_grid(m.astype(np.int8), -1, np.int8) for m in masks])
-    centre = pillar_centroids(labels, h)
     preload_step = int(curve.waypoint_step[0])
     in_contact = int(np.count_nonzero(np.bincount(
         pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
@@ -331,17 +345,9 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     if pillar_force is None or i_max < 0:
         pillar_force = np.full(n_pillars, np.nan)
 
-    coord = (np.arange(params.grid) + 0.5) * h
     data = {
-        "displacement": _var("step", d, "displacement d of the backing plate", "m"),
-        "force": _var("step", f, "tensile normal force F", "N"),
-        "contact_area": _var("step", area, "real contact area", "m2"),
-        "attached_pillars": _var("step", curve.attached_pillars.astype(np.int32),
-                                "pillars with attached elements", "1"),
-        "displacement_normalized": _var("step", d / ds_,
-                                       "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
-        "force_normalized": _var("step", f / fs, "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)",
-                                "1"),
+        **_step_variables(d, f, area, curve.attached_pillars, ds_, fs,
+                          "displacement d of the backing plate"),
         "branch": _var("step", curve.branch.astype(np.int32),
                       "index of the protocol waypoint being followed", "1",
                       comment="-1 at first touch"),
@@ -365,27 +371,12 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                              "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(names),
                                       {"long_name": "stage of the protocol"}),
-        "pillar_y": _var("pillar", centre[:, 0], "pillar centroid y", "m"),
-        "pillar_x": _var("pillar", centre[:, 1], "pillar centroid x", "m"),
-        "pillar_height": _var("pillar", inputs.heights, "pillar protrusion z_p "
-                             "(larger reaches the substrate first)", "m"),
-        "pillar_height_normalized": _var("pillar", inputs.heights / ds_, "z_p / d_K", "1"),
-        "pillar_kbar": _var("pillar", inputs.kbar, "pillar spring stiffness k_p / (E* L)",
-                           "1"),
-        "pillar_force_at_adhesive_force": _var("pillar", pillar_force,
-                                              "pillar force at F_ad (tensile positive)", "N"),
-        "pillar_let_go_displacement": _var("pillar", curve.let_go,
-                                          "d at which the pillar's last element detached",
-                                          "m", comment="NaN: never in contact"),
-        "adhesive_force": _var((), f_ad, "adhesive force (maximum tensile force of the "
-                              "last retraction)", "N"),
-        "adhesive_force_normalized": _var((), f_ad / fs, "F_ad / F_K", "1"),
-        "displacement_at_adhesive_force": _var((), d_ad, "d at the adhesive force",
-                                              "m"),
-        "work_of_separation": _var((), work, "work of separation, integral of max(F, 0) dd "
-                                  "over the last retraction", "J"),
-        "work_of_separation_normalized": _var((), work / ws, "W / W_K, W_K = 2 pi a0^2 dgamma",
-                                             "1"),
+        **_pillar_variables(pillar_centroids(labels, h), inputs.heights, inputs.kbar, ds_,
+                            pillar_force, curve.let_go),
+        **_result_variables(f_ad, d_ad, work, fs, ws,
+                            "adhesive force (maximum tensile force of the last retraction)",
+                            "work of separation, integral of max(F, 0) dd over the last "
+                            "retraction"),
         "dissipated_energy": _var((), dissipated, "energy dissipated over the protocol, "
                                  "integral of F dd", "J"),
         "dissipated_energy_normalized": _var((), dissipated / ws, "dissipated energy / W_K",
@@ -420,12 +411,52 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
                         "give every pillar's centroid",
     })
     return xr.Dataset(data, coords={
-        "step": _var("step", np.arange(d.size, dtype=np.int32),
-                    "step of the protocol (one per event or solve)", "1"),
-        "y": _var("y", coord, "element centre y", "m"),
-        "x": _var("x", coord, "element centre x", "m"),
-        "snapshot": _var("snapshot", np.arange(len(steps), dtype=np.int32),
-                        "contact snapshot index", "1"),
+        **_coords(params, d.size, len(steps), "step of the protocol (one per event or solve)"),
         "pillar": _var("pillar", np.arange(n_pillars, dtype=np.int32),
                       "pillar index (label order)", "1"),
     }, attrs=attrs)
+
+
+def _retraction_peak(d: np.ndarray, f: np.ndarray,
+                     retraction: np.ndarray) -> tuple[int, float, float, float]:
+    """Step, force [N], displacement [m] and work [J] of the last retraction's
+    pull-off: its largest tensile force and the integral of max(F, 0) dd.
+
+    A retraction that stays compressive has no tensile force (NaN, step -1)
+    and no work (0); a protocol that never retracts has neither (NaN).
+    """
+    if retraction.any() and f[retraction].max() > 0:
+        i_max = int(np.flatnonzero(retraction)[np.argmax(f[retraction])])
+        return (i_max, float(f[i_max]), float(d[i_max]),
+                positive_work(d[retraction], f[retraction]))
+    return -1, math.nan, math.nan, (0.0 if retraction.any() else math.nan)
+
+
+def _snapshot_names(protocol: Sequence[Waypoint] | None) -> list[str]:
+    """Labels of a protocol's contact snapshots: one per waypoint (as the user
+    gave it, normalised), then "maximum force"; the default protocol's two
+    waypoints read "preload" and "separated"."""
+    if protocol is None:
+        return ["preload", "separated", "maximum force"]
+    return [f"waypoint {k}: {w.kind}" + (f" {w.value:g}" if w.kind != "separation" else "")
+            for k, w in enumerate(protocol)] + ["maximum force"]
+
+
+def _pillar_variables(centre: np.ndarray, heights: np.ndarray, kbar: np.ndarray,
+                      d_unit: float, force_at_peak: np.ndarray,
+                      let_go: np.ndarray) -> dict[str, xr.Variable]:
+    """Per pillar: centroid [m], protrusion [m and d_K], k̄, force at F_ad [N]
+    and the displacement at which it let go [m]."""
+    return {
+        "pillar_y": _var("pillar", centre[:, 0], "pillar centroid y", "m"),
+        "pillar_x": _var("pillar", centre[:, 1], "pillar centroid x", "m"),
+        "pillar_height": _var("pillar", heights, "pillar protrusion z_p "
+                             "(larger reaches the substrate first)", "m"),
+        "pillar_height_normalized": _var("pillar", heights / d_unit, "z_p / d_K", "1"),
+        "pillar_kbar": _var("pillar", kbar, "pillar spring stiffness k_p / (E* L)", "1"),
+        "pillar_force_at_adhesive_force": _var("pillar", force_at_peak,
+                                              "pillar force at F_ad (tensile positive)", "N"),
+        "pillar_let_go_displacement": _var("pillar", let_go,
+                                          "d at which the pillar's last element detached",
+                                          "m", comment="NaN: never in contact"),
+    }
