@@ -271,6 +271,81 @@ def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
     return settled
 
 
+def _solve_stresses(op: BrushOperator, options: SolverOptions, x0: np.ndarray,
+                    threshold: float | None) -> tuple[np.ndarray, float, int]:
+    """Unit-displacement stresses of the attached elements [stress per length],
+    their error estimate (CG's tolerance, or where an early-decided cascade
+    round stopped) and the CG iterations taken.
+
+    With float32 transforms (`BrushOperator.can_refine`) decisions keep
+    PRECISION_BAND more margin, and a solve unsettled only by it goes on in
+    double.
+    """
+    xp = op.backend.xp
+    b = xp.ones(op.size, dtype=xp.float64)
+    stopped: list[float] = []
+    verdicts: list[bool] = []
+    tie = options.tie_rtol + options.lookahead
+
+    def conditions(band: float) -> tuple:
+        return ((_decides(threshold, xp, stopped, band)
+                 if threshold is not None and options.early_decisions else None),
+                _settles(threshold, tie, xp, verdicts, band) if options.settle_decisions
+                else None)
+    band = PRECISION_BAND if op.can_refine else 0.0  # float32 transforms
+    floor = SolverOptions.MIXED_MIN_RTOL if op.can_refine else SETTLE_FLOOR
+    x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter,
+                *conditions(band), floor)
+    if verdicts and not verdicts[-1] and not stopped and op.can_refine:
+        with op.refined():  # unsettled at float32's digits
+            x, more = pcg(op.apply, op.precondition, b, x, options.rtol,
+                          options.max_iter, *conditions(0.0), SETTLE_FLOOR)
+        it += more
+    return x, max(stopped + [options.rtol * float(xp.max(x))]), it
+
+
+class _Recorder:
+    """The curve as it is pulled: one row per solve or event, and the pillar
+    forces at the largest force so far."""
+
+    def __init__(self, op: BrushOperator, h: float) -> None:
+        self.op, self.h = op, h
+        xp = op.backend.xp
+        self.disp, self.force = [0.0], [0.0]
+        self.n_el, self.n_pil = [op.size], [int(xp.count_nonzero(op.counts))]
+        self.best = -np.inf
+        self.best_pillars = xp.zeros(op.n_pillars, dtype=xp.float64)
+
+    def __len__(self) -> int:
+        return len(self.disp)
+
+    def record(self, d: float, x: np.ndarray) -> None:
+        """A row at displacement ``d`` with unit-displacement stresses ``x``."""
+        xp = self.op.backend.xp
+        self.disp.append(d)
+        self.force.append(d * self.h * self.h * float(xp.sum(x)))
+        if self.force[-1] > self.best:  # one bincount per event: free next to a solve
+            self.best = self.force[-1]
+            self.best_pillars = d * self.h * self.h * self.op.pillar_sums(x)
+        self.n_el.append(self.op.size)
+        self.n_pil.append(int(xp.count_nonzero(self.op.counts)))
+
+    def curve(self, d: float, detach_step: np.ndarray, events: int,
+              cg_iterations: int) -> PullOffCurve:
+        """The curve after complete separation at ``d``, on the host."""
+        be = self.op.backend
+        self.disp.append(d)
+        self.force.append(0.0)
+        self.n_el.append(0)
+        self.n_pil.append(0)
+        # The only per-element data to cross from a device.
+        return PullOffCurve(np.asarray(self.disp), np.asarray(self.force),
+                            np.asarray(self.n_el), np.asarray(self.n_pil),
+                            be.to_host(detach_step), events, cg_iterations,
+                            be.to_host(self.best_pillars),
+                            preconditioner=self.op.preconditioner)
+
+
 def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions,
              progress: Progress | None = None) -> PullOffCurve:
     """Pull the brush off from full contact until every element has detached.
@@ -291,51 +366,20 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     xp = be.xp
     total = op.size
     detach_step = xp.full(total, -1, dtype=xp.int64)
-    disp, force, n_el, n_pil = [0.0], [0.0], [total], [int(xp.count_nonzero(op.counts))]
+    rows = _Recorder(op, h)
     cg_iters = 0
     events = 0
-    sigma1 = xp.zeros(total, dtype=xp.float64)  # unit-displacement stresses, warm start
     d = 0.0
 
     def solve(x0: np.ndarray, threshold: float | None = None) -> tuple[np.ndarray, float]:
-        """The stresses and their error estimate (CG's tolerance, or where an
-        early-decided cascade round stopped)."""
         nonlocal cg_iters
-        b = xp.ones(op.size, dtype=xp.float64)
-        stopped: list[float] = []
-        verdicts: list[bool] = []
-        tie = options.tie_rtol + options.lookahead
-
-        def conditions(band: float) -> tuple:
-            return ((_decides(threshold, xp, stopped, band)
-                     if threshold is not None and options.early_decisions else None),
-                    _settles(threshold, tie, xp, verdicts, band) if options.settle_decisions
-                    else None)
-        band = PRECISION_BAND if op.can_refine else 0.0  # float32 transforms
-        floor = SolverOptions.MIXED_MIN_RTOL if op.can_refine else SETTLE_FLOOR
         try:
-            x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter,
-                        *conditions(band), floor)
-            if verdicts and not verdicts[-1] and not stopped and op.can_refine:
-                with op.refined():  # unsettled at float32's digits
-                    x, more = pcg(op.apply, op.precondition, b, x, options.rtol,
-                                  options.max_iter, *conditions(0.0), SETTLE_FLOOR)
-                it += more
+            x, error, it = _solve_stresses(op, options, x0, threshold)
         except ConvergenceError as exc:
             raise ConvergenceError(f"{exc} at event {events}, d = {d:.6g}, "
                                    f"{op.size} of {total} elements attached") from None
         cg_iters += it
-        return x, max(stopped + [options.rtol * float(xp.max(x))])
-
-    best = [-np.inf, xp.zeros(op.n_pillars, dtype=xp.float64)]  # largest force and its pillar forces
-
-    def record(x: np.ndarray) -> None:
-        disp.append(d)
-        force.append(d * h * h * float(xp.sum(x)))
-        if force[-1] > best[0]:  # one bincount per event: free next to a solve
-            best[0], best[1] = force[-1], d * h * h * op.pillar_sums(x)
-        n_el.append(op.size)
-        n_pil.append(int(xp.count_nonzero(op.counts)))
+        return x, error
 
     local = options.cascade == "local" and op.has_local_solver
     backoff = _Backoff()
@@ -348,13 +392,14 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
         (`BlockInverse.detach`): the next global solve's warm start or the
         local cascade's state.
         """
-        step = len(disp)  # the next recorded step is the first without them
+        step = len(rows)  # the next recorded step is the first without them
         positions = be.flatnonzero(op.attached)[mask]
         be.put(detach_step, positions, step)
         updated = op.detach(mask, stress)
         return stress[~mask] if updated is None else updated
 
-    sigma1, error = solve(sigma1)
+    # unit-displacement stresses, warm started from zero
+    sigma1, error = solve(xp.zeros(total, dtype=xp.float64))
     while op.size:
         peak = float(xp.max(sigma1))
         if not np.isfinite(peak) or peak <= 0.0:
@@ -366,7 +411,7 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
                               f"before the current d = {d:.9g}")
         d = max(d, d_next)
         events += 1
-        record(sigma1)
+        rows.record(d, sigma1)
         mask = sigma1 >= peak * (1.0 - options.tie_rtol - options.lookahead)
         threshold = sigma_c * (1.0 - options.tie_rtol) / d
         # Re-solve at fixed d until no attached element exceeds sigma_c.
@@ -387,18 +432,10 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
                     continue  # decided without a global solve
             sigma1, error = solve(sigma1, threshold)
             solved, reference = (sigma1, xp.asarray(op.attached, copy=True)), None
-            record(sigma1)
+            rows.record(d, sigma1)
             mask = sigma1 >= threshold
             if not bool(xp.any(mask)):
                 break
         if progress is not None:
             progress(events, op.size, total)
-    # complete separation
-    disp.append(d)
-    force.append(0.0)
-    n_el.append(0)
-    n_pil.append(0)
-    # The curve comes back to the host: the only per-element data to cross.
-    return PullOffCurve(np.asarray(disp), np.asarray(force), np.asarray(n_el),
-                        np.asarray(n_pil), be.to_host(detach_step), events, cg_iters,
-                        be.to_host(best[1]), preconditioner=op.preconditioner)
+    return rows.curve(d, detach_step, events, cg_iters)
