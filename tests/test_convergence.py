@@ -159,6 +159,27 @@ def test_scattered_many_grids_kept_with_wider_error():
     assert e.error > e.gci, "Fs = 3 and the scatter widen the band beyond Roache's GCI"
 
 
+def test_a_fit_whose_finest_grids_diverge_is_flagged_not_asymptotic():
+    """The rigid 8 x 8 brush on 256-2048 (README): four grids fit p = 0.41, but
+    the three finest alone diverge (differences 0.0135 then 0.0170), so the
+    fit rests on the coarse grids: kept, flagged, with Fs = 3."""
+    h = 1.0 / np.array([256.0, 512.0, 1024.0, 2048.0])
+    e = extrapolate(h, [1.7262, 1.6998, 1.6863, 1.6693])
+    assert e.not_asymptotic and not e.ok and not e.poor_fit
+    assert e.safety_factor == 3.0
+    assert e.value == pytest.approx(1.628, abs=2e-3) and e.error == pytest.approx(0.13, abs=0.01)
+    clean = extrapolate(h, law(h, 1.0))  # a converging fine end: no flag, Fs 1.25
+    assert clean.ok and not clean.not_asymptotic and clean.safety_factor == 1.25
+    three = extrapolate(h[1:], [1.6998, 1.6863, 1.6693])  # three grids: poor fit, as before
+    assert three.poor_fit and not three.not_asymptotic
+
+
+def test_an_infinite_value_is_flagged_not_taken_for_a_grid_not_run():
+    h = 1.0 / np.array([256.0, 512.0, 1024.0, 2048.0])
+    e = extrapolate(h, [1.04, 1.02, 1.01, np.inf])
+    assert e.poor_fit and math.isnan(e.value) and e.n_grids == 4
+
+
 def test_large_residual_is_poor_fit():
     # Monotone, but not a power law: a kink a single h^p cannot follow.
     h = 1.0 / np.array([64.0, 128.0, 256.0, 512.0, 1024.0])
@@ -234,6 +255,9 @@ def test_sweep_dataset_round_trip(tmp_path):
     assert int(three[f"{q}_n_grids"]) == 3 and float(three["finest_grid"]) == 512
     assert float(three["pillar_radius_elements_finest"]) == pytest.approx(
         512 * math.sqrt(0.12 / (math.pi * 256)))
+    assert float(conv[f"{q}_safety_factor"].sel(n_pillars=64, kbar=1e-6, **sel)) == 1.25
+    assert "fewer than 3 grids" in conv[f"{q}_too_few_grids"].attrs["long_name"]
+    assert "about the extrapolated" in conv[f"{q}_error"].attrs["long_name"]
     osc = conv.sel(n_pillars=256, kbar=np.inf, **sel)
     assert int(osc[f"{q}_non_monotone"]) == 1 and np.isnan(float(osc[f"{q}_extrapolated"]))
     assert float(osc[q].sel(grid=1024)) == 1.88, "raw values are kept"

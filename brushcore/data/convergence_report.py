@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.data.convergence import (GRID_DIM, QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
-                                        touching_grids)
+from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, QUANTITIES, TOUCHING,
+                                        UNDER_RESOLVED_RADIUS, touching_grids)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
 
@@ -48,8 +48,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
             for s in ("extrapolated", "error", "order"):
                 row[s] = float(one[f"{q}_{s}"])
-            flags = [f for f in ("non_monotone", "poor_fit", "too_few_grids")
-                     if int(one[f"{q}_{f}"])]
+            flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
             if row["radius_elements_finest"] < UNDER_RESOLVED_RADIUS:
                 flags.append("under_resolved")
             elif float(one["pillar_radius_elements_coarsest"]) < UNDER_RESOLVED_RADIUS:

@@ -29,7 +29,7 @@ from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import finest_grid, flat_slice, shape_slice, snapshots
-from brushcore.data.convergence import (QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
+from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
                                         touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
@@ -693,8 +693,8 @@ def convergence(
                 ax.errorbar([0.0], [f0], yerr=[err], fmt="s", color="C1", capsize=3)
                 ax.text(0.03, 0.95, f"$f_0$ = {f0:.4g} ± {err:.2g}, p = {p:.2f}",
                         ha="left", va="top", transform=ax.transAxes, fontsize="small")
-            flags = [f.replace("_", " ") for f in ("non_monotone", "poor_fit", "too_few_grids")
-                     if int(conv[f"{q}_{f}"].sel(case))]
+            flags = [f.replace("_", " ") for f in FIT_FLAGS
+                     if f"{q}_{f}" in conv and int(conv[f"{q}_{f}"].sel(case))]
             if math.isfinite(radius) and radius < UNDER_RESOLVED_RADIUS:
                 flags.append(f"under-resolved ({radius:.1f} el./radius)")
             if touch.any():
