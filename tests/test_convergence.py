@@ -463,3 +463,26 @@ def test_table_says_when_the_fit_rests_on_an_under_resolved_grid(radii, flag):
                        coords=coords)
     table = convergence_table(extrapolate_sweep(sweep))
     assert set(table["flags"]) == {flag}, table
+
+
+def test_summary_gives_the_seed_count_and_a_t_interval():
+    """Three random seeds: the sample SD and Student's t (4.30 for 3 seeds, not
+    1.96); a missing seed is said, not silently left out of the mean."""
+    from brushcore.data.summary import seed_note, value_at
+
+    f = np.array([2.178679, 2.011135, 2.075292])  # random 64 at kbar 1e-4, 256^2
+    dims = ("layout", "n_pillars", "kbar", "seed")
+    sweep = xr.Dataset({"adhesive_force_normalized": (dims, f.reshape(1, 1, 1, 3))},
+                       coords={"layout": ["random"], "n_pillars": [64], "kbar": [1e-4],
+                               "seed": [0, 1, 2]})
+    note = seed_note(sweep, "adhesive_force_normalized", "random", 64, 1e-4)
+    sd = np.std(f, ddof=1)
+    assert f"SD {sd:.2g}" in note and "mean of 3 seeds" in note
+    assert f"+- {4.3027 * sd / math.sqrt(3):.2g}" in note
+    sweep["adhesive_force_normalized"][0, 0, 0, 2] = np.nan
+    assert "(1 of 3 seeds missing)" in seed_note(sweep, "adhesive_force_normalized",
+                                                 "random", 64, 1e-4)
+    assert value_at(sweep, "adhesive_force_normalized", "random", 64, 1e-4) == \
+        pytest.approx(f[:2].mean())
+    one = sweep.isel(seed=[0])
+    assert seed_note(one, "adhesive_force_normalized", "random", 64, 1e-4) == ""

@@ -242,8 +242,10 @@ def fig6(sweep: xr.Dataset) -> Figure:
             low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
             x, y, lo, hi = _break_before_rigid(x_inf, _kbar_x(series.kbar, x_inf), series,
                                                low, high)
+            seeds = int(runs.notnull().any("kbar").sum())  # seeds this brush ran
             ax.errorbar(x, y, yerr=[y - lo, hi - y], marker="o", ms=4, capsize=2,
-                        color=colors[n], label=f"N = {n}")
+                        color=colors[n], label=f"N = {n}" + (
+                            f" (mean, min-max of {seeds} seeds)" if seeds > 1 else ""))
         _kbar_axes(ax, _panel_title(index, layout), FAD_LABEL, kbars, x_inf)
         if not brushes:
             _no_data(ax, f"no {layout} runs")

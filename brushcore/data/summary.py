@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from scipy import stats
 
 from brushcore.model import theory
 from brushcore.data.aggregate import GRID_DIM
@@ -45,6 +46,29 @@ def seed_mean(sweep: xr.Dataset, name: str, layout: str, n_pillars: int) -> xr.D
         sweep = finest_grid(sweep[keep])
     values = sweep[name].sel(layout=layout, n_pillars=n_pillars)
     return values.mean("seed", skipna=True).dropna("kbar")
+
+
+def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> str:
+    """How many seeds a seed mean rests on, and their scatter, as a note:
+    "" for a sweep of one seed; else "F_ad mean of k seeds, SD s, 95 % t-interval
+    +- t s / sqrt(k)" (sample SD, Student's t with k - 1 degrees of freedom:
+    4.30 for three seeds, not 1.96), saying when seeds are missing."""
+    if sweep.sizes.get("seed", 1) < 2 or layout not in sweep.layout:
+        return ""
+    runs = sweep[name].sel(layout=layout, n_pillars=n_pillars)
+    hit = np.flatnonzero(np.isclose(runs.kbar.values, kbar, rtol=1e-9, atol=0.0))
+    if not hit.size:
+        return ""
+    values = runs.isel(kbar=hit[0]).values.ravel()
+    values = values[np.isfinite(values)]
+    k, total = int(values.size), int(sweep.sizes["seed"])
+    missing = f" ({total - k} of {total} seeds missing)" if k < total else ""
+    if k < 2:
+        return f"; F_ad of {k} seed{missing}"
+    sd = float(np.std(values, ddof=1))
+    half = float(stats.t.ppf(0.975, k - 1)) * sd / math.sqrt(k)
+    return (f"; F_ad mean of {k} seeds, SD {_fmt(sd, 2)}, 95 % t-interval +- {_fmt(half, 2)}"
+            + missing)
 
 
 def value_at(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> float:
@@ -197,9 +221,10 @@ def headline_rows(
         rigid = kbar > PAPER_RIGID_KBAR
         rows.append(Row("F_ad at the stiffest kbar (rigid limit)", layout, str(n), _fmt(kbar),
                         _fmt(force), "slightly above 1.7" if rigid and _papers(layout, n) else "",
-                        "Fig. 6, kbar > 1" if rigid else
-                        f"NOT RIGID: the stiffest kbar run is {_fmt(kbar)}, the paper's rigid "
-                        f"range is kbar > {PAPER_RIGID_KBAR:g}"))
+                        ("Fig. 6, kbar > 1" if rigid else
+                         f"NOT RIGID: the stiffest kbar run is {_fmt(kbar)}, the paper's rigid "
+                         f"range is kbar > {PAPER_RIGID_KBAR:g}")
+                        + seed_note(sweep, "adhesive_force_normalized", layout, n, kbar)))
     plateau_n, plateau_f = [], []
     reached_by = {(layout, n): on_plateau(sweep, layout, n) for layout, n in brushes}
     for layout, n in brushes:
@@ -211,9 +236,10 @@ def headline_rows(
         rows.append(Row("N^1/4 / F_ad on the soft plateau (softest kbar)", layout, str(n),
                         _fmt(kbar), _fmt(float(theory.soft_limit(n)) / force),
                         "1.2-1.3" if reached and _papers(layout, n) else "",
-                        "Fig. 7" if reached else
-                        f"NOT ON THE PLATEAU: the two softest kbar differ by more than "
-                        f"{PLATEAU_RTOL:.0%}; run softer kbar (left out of the fit)"))
+                        ("Fig. 7" if reached else
+                         f"NOT ON THE PLATEAU: the two softest kbar differ by more than "
+                         f"{PLATEAU_RTOL:.0%}; run softer kbar (left out of the fit)")
+                        + seed_note(sweep, "adhesive_force_normalized", layout, n, kbar)))
     fit = fit_soft_prefactor(plateau_n, plateau_f)
     rows.append(Row("N^1/4 / F_ad, fit over all N", "all", "", "", _fmt(fit["ratio"]),
                     "1.2-1.3", f"free power-law exponent {_fmt(fit['exponent'])} (eq. 6: 0.25)"
