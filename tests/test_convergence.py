@@ -281,6 +281,17 @@ def test_sweep_dataset_round_trip(tmp_path):
     assert csv.read_text().count("\n") == 9
 
 
+def test_each_quantity_names_its_own_finest_grid():
+    sweep = _sweep()
+    w = "work_of_separation_normalized"
+    sweep[w][0, 0, 0, 0, 3] = np.nan  # W not on 1024 where F_ad is
+    conv = extrapolate_sweep(sweep).sel(layout="regular", seed=0, n_pillars=64, kbar=1e-6)
+    assert float(conv["finest_grid"]) == 1024
+    assert float(conv["adhesive_force_normalized_finest_grid"]) == 1024
+    assert float(conv[f"{w}_finest_grid"]) == 512
+    assert float(conv[f"{w}_finest"]) == float(sweep[w][0, 0, 0, 0, 2])
+
+
 def test_table_flags_touching_pillars():
     """A case whose pillars share an element edge on some grid (random discs
     coarser than 512^2) is flagged; a count of 0 or a grid not run is not."""

@@ -459,6 +459,17 @@ def _end_index(values: np.ndarray, end: int) -> int:
     return int(idx[end]) if idx.size else -1
 
 
+def _end_grid(sweep: xr.Dataset, values: xr.DataArray,
+              position: int) -> tuple[xr.DataArray, xr.DataArray]:
+    """Per case, the index along ``grid`` and the n of the coarsest (``position``
+    0) or finest (-1) grid where ``values`` is finite (-1 and NaN where none)."""
+    at = xr.apply_ufunc(_end_index, values, kwargs={"end": position},
+                        input_core_dims=[[GRID_DIM]], vectorize=True, output_dtypes=[np.int64])
+    grid_n = xr.where(at >= 0, sweep[GRID_DIM].isel({GRID_DIM: at.clip(min=0)}, drop=True),
+                      np.nan)
+    return at, grid_n.astype(np.float64)
+
+
 def extrapolate_sweep(
     sweep: xr.Dataset,
     quantities: Sequence[str] = QUANTITIES,
@@ -480,11 +491,12 @@ def extrapolate_sweep(
     -------
     xarray.Dataset
         On the case dimensions: ``{q}_extrapolated``, ``{q}_error``,
-        ``{q}_order``, ``{q}_coefficient``, ``{q}_finest``, ``{q}_spread``, ``{q}_gci``,
-        ``{q}_n_grids`` and the int8 flags ``{q}_non_monotone``,
-        ``{q}_poor_fit``, ``{q}_too_few_grids``; the raw values ``{q}`` on
-        (cases..., grid); ``finest_grid`` and ``pillar_radius_elements_finest``
-        of the finest grid run, ``pillar_radius_elements_coarsest`` of the
+        ``{q}_order``, ``{q}_coefficient``, ``{q}_finest`` (on
+        ``{q}_finest_grid``), ``{q}_spread``, ``{q}_gci``, ``{q}_n_grids``,
+        ``{q}_safety_factor`` and the int8 flags ``{q}_{flag}`` for each of
+        `FIT_FLAGS`; the raw values ``{q}`` on (cases..., grid);
+        ``finest_grid`` and ``pillar_radius_elements_finest`` of the finest
+        grid run (first quantity), ``pillar_radius_elements_coarsest`` of the
         coarsest; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs``
         on (cases..., grid) where the sweep has it.
 
@@ -524,18 +536,20 @@ def extrapolate_sweep(
                 attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
             out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
         out[q] = raw.copy()
+        # {q}_finest comes from here: NaN on a grid where the other quantity
+        # is finite (a protocol without retraction has no W) moves it
+        out[f"{q}_finest_grid"] = _end_grid(sweep, raw, -1)[1].assign_attrs(
+            units="1", long_name=f"elements per side n of the finest grid with a finite {q}")
     # Finest and coarsest grid run per case (finite first quantity), and their
     # resolution: the fit rests on the coarsest as much as on the finest.
     anyq = sweep[quantities[0]]
     for end, position in (("finest", -1), ("coarsest", 0)):
-        at = xr.apply_ufunc(_end_index, anyq, kwargs={"end": position},
-                            input_core_dims=[[GRID_DIM]], vectorize=True,
-                            output_dtypes=[np.int64])
+        at, grid_n = _end_grid(sweep, anyq, position)
         idx = at.clip(min=0)
-        grid_n = xr.where(at >= 0, sweep[GRID_DIM].isel({GRID_DIM: idx}, drop=True), np.nan)
         if end == "finest":
-            out["finest_grid"] = grid_n.astype(np.float64).assign_attrs(
-                units="1", long_name="elements per side n of the finest grid run")
+            out["finest_grid"] = grid_n.assign_attrs(
+                units="1", long_name=f"elements per side n of the finest grid run (with a "
+                                     f"finite {quantities[0]})")
         if "pillar_radius_elements" in sweep:
             rad = sweep["pillar_radius_elements"].isel({GRID_DIM: idx}, drop=True)
             rad = xr.where(at >= 0, rad, np.nan)
