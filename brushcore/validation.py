@@ -85,12 +85,20 @@ def require_switches(obj: object, names: tuple[str, ...], allowed: str) -> None:
 def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...]) -> None:
     """Turn NumPy scalars of a frozen dataclass into Python int / float in place.
 
-    Users loop over ``np.array([64, 128])``; the checks and the netCDF
-    attributes want plain Python numbers.  Anything else is left for the
-    range checks to refuse.
+    Users loop over ``np.array([64, 128])``, take ``DataArray.values`` (a 0-d
+    array) or ``np.linspace`` grids (64.0, as the workflow's config may
+    write it); the checks and the netCDF attributes want plain Python
+    numbers.  Anything else (64.5, text, arrays) is left for the range
+    checks to refuse.
     """
+    for name in (*integers, *reals):
+        value = getattr(obj, name)
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            object.__setattr__(obj, name, value[()])
     for name in integers:
         value = getattr(obj, name)
+        if is_real(value) and not is_integer(value) and float(value).is_integer():
+            value = int(value)  # 64.0, as JSON Schema and the config take it
         if is_integer(value):
             object.__setattr__(obj, name, int(value))
     for name in reals:

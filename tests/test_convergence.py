@@ -15,6 +15,7 @@ from brushcore.data.convergence import (
     is_monotone,
 )
 from brushcore.data.convergence_report import convergence_table, write_tables
+from brushcore.validation import ParameterError
 
 F0, C = 1.7, 0.8
 
@@ -216,6 +217,11 @@ def test_bad_input_raises():
         extrapolate([0.1, -0.2, 0.3], [1, 2, 3])
     with pytest.raises(ValueError, match="min_grids"):
         ConvergenceOptions(min_grids=2)
+    for bad in ({"safety_factor": math.nan}, {"trusted_order": (2.0, 1.0)},
+                {"max_relative_residual": -1.0}, {"order_bounds": (0.0, 3.0)},
+                {"safety_factor": 4.0}):
+        with pytest.raises(ParameterError, match=next(iter(bad))):
+            ConvergenceOptions(**bad)
 
 
 def _sweep() -> xr.Dataset:

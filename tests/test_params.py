@@ -24,10 +24,15 @@ def test_numpy_scalars_are_accepted_and_normalised():
     for grid in np.array([64, 128]):  # what users write
         assert BrushParams("regular", 16, 0.1, grid).grid == int(grid)
     assert SolverOptions(rtol=np.float64(1e-5), max_iter=np.int32(10)).max_iter == 10
+    # DataArray.values gives 0-d arrays, np.linspace integral floats (the
+    # workflow's config takes 64.0 as 64 too)
+    q = BrushParams("regular", np.array(16), np.array(0.1), np.linspace(64, 128, 2)[0])
+    assert q == BrushParams("regular", 16, 0.1, 64) and type(q.grid) is int
 
 
-@pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.0), ("grid", "64"),
-                                         ("kbar", np.bool_(True))])
+@pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.5), ("grid", "64"),
+                                         ("kbar", np.bool_(True)), ("grid", np.array([64])),
+                                         ("seed", float("inf"))])
 def test_non_numbers_are_still_refused(field, value):
     args = {"layout": "regular", "n_pillars": 16, "kbar": 0.1, "grid": 64, field: value}
     with pytest.raises(ParameterError, match=field):

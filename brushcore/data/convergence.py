@@ -101,6 +101,7 @@ import xarray as xr
 from scipy import optimize
 
 from brushcore.model import provenance
+from brushcore.validation import is_integer, is_real, require
 
 #: Results the workflow extrapolates.
 QUANTITIES = ("adhesive_force_normalized", "work_of_separation_normalized")
@@ -161,14 +162,23 @@ class ConvergenceOptions:
     flat_rtol: float = 1e-12
 
     def __post_init__(self) -> None:
-        if self.min_grids < 3:
-            raise ValueError(f"min_grids={self.min_grids} is invalid: allowed >= 3")
-        lo, hi = self.order_range
-        if not 0 <= lo < hi:
-            raise ValueError(f"order_range={self.order_range} is invalid: allowed 0 <= low < high")
-        blo, bhi = self.order_bounds
-        if not 0 < blo < bhi:
-            raise ValueError(f"order_bounds={self.order_bounds} is invalid: allowed 0 < low < high")
+        require(is_integer(self.min_grids) and self.min_grids >= 3, "min_grids",
+                self.min_grids, "an integer >= 3 (three unknowns f0, C, p)")
+        for name in ("order_range", "trusted_order", "order_bounds"):
+            pair = getattr(self, name)
+            require(len(pair) == 2 and all(is_real(v) and math.isfinite(v) for v in pair)
+                    and 0 <= pair[0] < pair[1] and (name != "order_bounds" or pair[0] > 0),
+                    name, pair, "(low, high) with 0 <= low < high"
+                    + (", low > 0" if name == "order_bounds" else ""))
+        for name in ("safety_factor", "scattered_safety_factor", "max_relative_residual"):
+            value = getattr(self, name)
+            require(is_real(value) and math.isfinite(value) and value > 0, name, value,
+                    "a finite number > 0")
+        require(self.safety_factor <= self.scattered_safety_factor, "safety_factor",
+                self.safety_factor, f"at most scattered_safety_factor "
+                f"({self.scattered_safety_factor:g})")
+        require(is_real(self.flat_rtol) and 0 <= self.flat_rtol < 1, "flat_rtol",
+                self.flat_rtol, "a number in [0, 1)")
 
 
 @dataclass(frozen=True)
