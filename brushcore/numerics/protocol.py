@@ -39,7 +39,7 @@ from brushcore.numerics.backend import namespace
 from brushcore.numerics.cg import ConvergenceError, pcg_image
 from brushcore.numerics.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
-from brushcore.validation import is_real, require
+from brushcore.validation import is_real, normalise, require
 from brushcore.numerics.pulloff import Progress, SolverError, pull_off
 
 APPROACH, START, RETRACT = -1, 0, 1
@@ -71,6 +71,7 @@ class Waypoint:
     value: float = 0.0
 
     def __post_init__(self) -> None:
+        normalise(self, (), ("value",))  # np.float32 and 0-d arrays become floats
         require(self.kind in KINDS, "waypoint kind", self.kind, f"one of {KINDS}")
         require(is_real(self.value) and np.isfinite(self.value), "waypoint value", self.value,
                 "a finite number")
