@@ -485,6 +485,21 @@ def test_gpu_backend_requests_one_card_per_curve(repo_copy: Path, tmp_path: Path
     assert jobs and {_slurm_gpu_flags(j) for j in jobs} == {""}, jobs
 
 
+def test_slurm_profile_submits_one_simulation_a_job(repo_copy: Path) -> None:
+    """A failed bundle loses its finished members' curves (Snakemake cleans up
+    every member of a failed group job), so the profile bundles nothing by
+    default: 11 simulations, 11 Slurm jobs; --group-components bundles on purpose."""
+    test = ("-n", "--forceall", "--profile", "workflow/profiles/slurm",
+            "--configfile", "config/test.yaml")
+    alone = snakemake(repo_copy, *test)
+    assert alone.returncode == 0, output(alone)
+    assert planned_simulations(output(alone)) == 11
+    assert output(alone).count("Group job sims") == 11, output(alone)
+    bundled = snakemake(repo_copy, *test, "--group-components", "sims=4")
+    assert bundled.returncode == 0, output(bundled)
+    assert output(bundled).count("Group job sims") == 3, output(bundled)
+
+
 def test_unknown_backend_key_is_refused(repo_copy: Path, tmp_path: Path) -> None:
     assert_refused_at_plan_time(repo_copy, tmp_path, {"backend": "tpu"},
                                 "config key 'backend': 'tpu' is not one of")
