@@ -5,6 +5,7 @@ snakemake --cores 2 --configfile config/test.yaml   # a tiny sweep
 snakemake --cores 2 --configfile config/convergence.yaml   # mesh refinement
 """
 
+from snakemake.logging import logger
 from snakemake.utils import min_version, validate
 
 min_version("9.0")
@@ -22,6 +23,8 @@ check_config(config, workflow.source_path("workflow/schemas/config.schema.yaml")
 validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
 canonical_solver(config, workflow.source_path("workflow/schemas/config.schema.yaml"))
 check_cases(config)
+if clipped_runtimes(config):
+    logger.warning(clipped_runtimes(config))
 
 
 report: "workflow/report/workflow.rst"

@@ -7,6 +7,7 @@ runs, lint and config validation, which start no job.
 
 from __future__ import annotations
 
+import inspect
 import math
 import re
 import shutil
@@ -425,10 +426,10 @@ def test_rough_keys_plan_suffixed_curves_and_leave_flat_names(repo_copy: Path,
 
 def test_rough_curves_get_the_time_their_approach_takes(repo_copy: Path,
                                                        tmp_path: Path) -> None:
-    """A rough brush's approach is one event per element touching down, so
-    its time limit grows as n^5 where a flat pull-off's grows as n^3: on
-    1024^2, 485 min against 125 (the rough 8 x 8 brush needs about 6 h
-    there, README); a flat preload or a stiffness spread is a flat pull-off."""
+    """A rough brush's approach is one event per element touching down: on
+    1024^2 it asks for 3 x the rough 8 x 8 brush's estimated 6 h (README),
+    1085 min; a flat preload or a stiffness spread is a flat pull-off on the
+    whole grid, 3 x random 64's 666 s plus 5 min, 39 min."""
     config = tmp_path / "rough.yaml"
     config.write_text(yaml.safe_dump({"regular": [16], "random": [], "kbar": [0.01],
                                       "grid": 1024, "fig5": {"n_pillars": 16, "kbar": [0.01]},
@@ -437,11 +438,86 @@ def test_rough_curves_get_the_time_their_approach_takes(repo_copy: Path,
                      str(config), "--forceall")
     text = output(proc)
     assert proc.returncode == 0, text
-    jobs = re.findall(r"^rule simulate:\n\s*output: results/curves/regular/(\S+)\.nc"
-                      r".*?^( *resources: [^\n]*)$", text, flags=re.MULTILINE | re.DOTALL)
-    limits = {name: _simulate_resources(line)[0]["runtime"] for name, line in jobs}
-    assert limits == {"N16_kbar0.01_seed0_grid1024_phi0.12_S0.0_P1.0_C0.0": "125",
-                      "N16_kbar0.01_seed0_grid1024_phi0.12_S0.5_P1.0_C0.0": "485"}, limits
+    limits = {name: res["runtime"] for name, res in _planned_resources(text).items()}
+    assert limits == {"regular/N16_kbar0.01_seed0_grid1024_phi0.12_S0.0_P1.0_C0.0": "39",
+                      "regular/N16_kbar0.01_seed0_grid1024_phi0.12_S0.5_P1.0_C0.0": "1085"}, limits
+
+
+def test_time_and_memory_requests_follow_the_measured_curves(repo_copy: Path,
+                                                             tmp_path: Path) -> None:
+    """3 x the slowest curve measured at each grid and kind, plus 5 min: the
+    flat regular brushes (mirror quadrant) ask for far less than the random
+    ones at 1024^2 and 2048^2 (12 and 52 min against 39 and 575), and memory
+    keeps a margin over the measured 2.7 GiB at 2048^2 without asking for 17 GB."""
+    config = tmp_path / "grids.yaml"
+    config.write_text(yaml.safe_dump({"regular": [16], "random": [16], "kbar": [0.01],
+                                      "grid": [512, 1024, 2048],
+                                      "fig5": {"n_pillars": 16, "kbar": [0.01]}}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config), "--forceall")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    asked = {name: (int(res["runtime"]), int(res["mem_mb"]))
+             for name, res in _planned_resources(text).items()}
+    assert asked == {
+        "regular/N16_kbar0.01_seed0_grid512_phi0.12": (7, 1150),
+        "regular/N16_kbar0.01_seed0_grid1024_phi0.12": (12, 5600),
+        "regular/N16_kbar0.01_seed0_grid2048_phi0.12": (52, 7400),
+        "random/N16_kbar0.01_seed0_grid512_phi0.12": (10, 1150),
+        "random/N16_kbar0.01_seed0_grid1024_phi0.12": (39, 5600),
+        "random/N16_kbar0.01_seed0_grid2048_phi0.12": (575, 7400),
+    }, asked
+    assert "slurm_max_runtime_min" not in text  # no cap, no warning
+
+
+def test_runtime_cap_clips_every_request_and_says_so(repo_copy: Path, tmp_path: Path) -> None:
+    """slurm_max_runtime_min clips each request above it (random 2048^2:
+    575 -> 300 min), leaves the others and warns at plan time."""
+    config = tmp_path / "cap.yaml"
+    config.write_text(yaml.safe_dump({"regular": [], "random": [16], "kbar": [0.01],
+                                      "grid": [1024, 2048], "slurm_max_runtime_min": 300,
+                                      "fig5": {"n_pillars": 16, "kbar": [0.01]}}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config), "--forceall")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    limits = {name: res["runtime"] for name, res in _planned_resources(text).items()}
+    assert limits == {"random/N16_kbar0.01_seed0_grid1024_phi0.12": "39",
+                      "random/N16_kbar0.01_seed0_grid2048_phi0.12": "300",
+                      "regular/N16_kbar0.01_seed0_grid1024_phi0.12": "12",
+                      "regular/N16_kbar0.01_seed0_grid2048_phi0.12": "52"}, limits
+    assert ("slurm_max_runtime_min = 300 clips the time limit of 1 of 4 simulations (the "
+            "largest: 575 min for results/curves/random/N16_kbar0.01_seed0_grid2048_phi0.12"
+            ".nc)") in text, text
+
+
+def test_a_retry_asks_for_twice_the_time_and_the_same_memory() -> None:
+    """Snakemake gives a resource function the attempt, not the cause of the
+    failure: the retry doubles the time (within the cap) and keeps the memory."""
+    common = _common_rules()
+    runtime = common["simulate_runtime"]({})
+    capped = common["simulate_runtime"]({"slurm_max_runtime_min": 60})
+    wildcards = type("Wildcards", (), {"layout": "random", "shape": "", "rough": "",
+                                       "grid": "1024"})()
+    assert [runtime(wildcards, attempt) for attempt in (1, 2)] == [39, 78]
+    assert [capped(wildcards, attempt) for attempt in (1, 2)] == [39, 60]
+    assert common["simulate_mem_mb"](wildcards) == 5600
+    assert list(inspect.signature(common["simulate_mem_mb"]).parameters) == ["wildcards"]
+
+
+def _common_rules() -> dict:
+    """The functions of workflow/rules/common.smk (plain Python), as the Snakefile sees them."""
+    scope: dict = {}
+    path = REPO / "workflow/rules/common.smk"
+    exec(compile(path.read_text(), str(path), "exec"), scope)  # noqa: S102 - our own rules
+    return scope
+
+
+def _planned_resources(text: str) -> dict[str, dict[str, str]]:
+    """Curve name (layout/stem) -> resources of every planned simulate job."""
+    jobs = re.findall(r"^rule simulate:\n\s*output: results/curves/(\S+)\.nc"
+                      r".*?^ *resources: ([^\n]*)$", text, flags=re.MULTILINE | re.DOTALL)
+    return {name: dict(item.split("=", 1) for item in line.split(", ")) for name, line in jobs}
 
 
 def _simulate_resources(text: str) -> list[dict[str, str]]:

@@ -330,16 +330,21 @@ def named_case(case):
             shape[1:] if shape else "disc", float(phi)]
 
 
-def simulate_mem_mb(wildcards, attempt):
-    """Memory of one simulation [MB], doubled on a retry.
+def simulate_mem_mb(wildcards):
+    """Memory of one simulation [MB], the same on every attempt.
 
-    Measured peak RSS at grid 512: 0.18-0.31 GB, 0.56 GB for 48 x 48 pillars
-    (pillar-interaction matrices); FFT buffers scale with n^2.  Finer grids
-    may hold up to 4 GB of per-pillar block inverses (BlockInverse.fits).
+    Measured peak RSS (README, "Speed and memory"): at most 0.6 GB at grid
+    512, 1.05 GiB for a flat curve and 3.4 GB for the rough 8 x 8 brush at
+    1024, 2.7 GiB at 2048 (random 1620).  Granted: 1 GB, the FFT buffers at
+    150 MB x (n/512)^2, and above 512 the 4 GB that per-pillar block inverses
+    may take (`BlockInverse.fits`): 1.15 GB at 512, 5.6 GB at 1024, 7.4 GB
+    at 2048.  Snakemake tells a resource function the attempt, not why the
+    last one failed, and a time limit is the likelier cause with these
+    margins: a retry asks for more time (`simulate_runtime`), not memory.
     """
     grid = int(wildcards.grid)
     blocks = 4000 if grid > 512 else 0
-    return int(400 + 800 * (grid / 512) ** 2 + blocks) * attempt
+    return int(1000 + 150 * (grid / 512) ** 2 + blocks)
 
 
 def simulate_gpus(config):
@@ -358,19 +363,101 @@ def simulate_gres(config):
     return "gpu:1" if simulate_gpus(config) else ""
 
 
-def simulate_runtime(wildcards, attempt):
-    """Wall-time limit of one simulation [min], doubled on a retry.
+#: The slowest curve measured [s, one thread] by job kind and grid, on the
+#: 2-core AMD EPYC development machine (README, "Speed and memory" and
+#: "Rough, graded and preloaded brushes"; docs/SPEED.md).  Where only a
+#: two-thread time exists (2048^2) the one-thread bound is twice it.
+#: "mirror": flat regular brushes of discs, solved on one quadrant; 1024:
+#: 8 x 8 rigid 123 s; 2048: 531 s on one thread (48 x 48), 461 s on two
+#: (16 x 16, k 1e-4).  "whole": every other flat brush (random, hexagonal,
+#: other shapes, a flat preload or a stiffness spread) on the whole grid; 512:
+#: the paper sweep's slowest, 1.6 min; 1024: random 64 at k 1e-6 666 s
+#: (hexagonal 8 x 8 622 s); 2048: random 1620 at k 1e-5, about 95 min on two
+#: threads (extrapolated from 15 min).  "rough": roughness > 0, contact made
+#: element by element on the approach; 256: 116.5 s (config/rough.yaml);
+#: 512: the rough 8 x 8 brush 416.5 s; 1024: about 6 h (estimated from the
+#: rate of its first 12 min, not run).
+SLOWEST_CURVE_S = {
+    "mirror": {512: 30, 1024: 125, 2048: 922},
+    "whole": {512: 100, 1024: 670, 2048: 11400},
+    "rough": {256: 120, 512: 420, 1024: 21600},
+}
+#: Beyond the measured grids a curve's time grows as n^3 (solves ~ n, each
+#: ~ n^2 log n), a rough one's as n^5 (also ~ n^2 more contact events).
+RUNTIME_EXPONENT = {"mirror": 3, "whole": 3, "rough": 5}
+#: Margin over the slowest measured curve: nodes 2-3x slower than the
+#: development machine, and 1.3x between days on one machine.
+RUNTIME_SAFETY = 3
+#: Minutes for what is not the curve: Python's and the nested Snakemake's
+#: start, FFTW planning on a fresh node, the shared file system's latency.
+RUNTIME_OVERHEAD_MIN = 5
 
-    Measured at grid 512 on one core: 2-150 s per curve; the cost grows
-    about as n^3 (solves ~ n, each ~ n^2 log n).  A rough brush (roughness
-    > 0) makes contact element by element on its way to the preload, one
-    event each, so it grows about as n^5: the rough 8 x 8 brush (S 0.5,
-    P 1, kbar 1e-3) took 7 min at 512 and needs about 6 h at 1024 by the
-    rate of its first 12 min (README, "Rough, graded and preloaded
-    brushes"): 20 and 485 min granted.
+
+def curve_kind(layout, shape, rough):
+    """The `SLOWEST_CURVE_S` kind of a curve from its wildcards (shape and rough suffixes)."""
+    if parse_rough_tag(rough).get("roughness", 0.0) > 0:
+        return "rough"
+    return "mirror" if layout == "regular" and not shape and not rough else "whole"
+
+
+def slowest_curve_s(kind, grid):
+    """The slowest curve of `kind` on `grid` [s]: measured, interpolated on a log-log
+    scale between measured grids, or scaled by `RUNTIME_EXPONENT` beyond them."""
+    measured = SLOWEST_CURVE_S[kind]
+    grids = sorted(measured)
+    if grid in measured:
+        return float(measured[grid])
+    if grid < grids[0] or grid > grids[-1]:
+        edge = grids[0] if grid < grids[0] else grids[-1]
+        return measured[edge] * (grid / edge) ** RUNTIME_EXPONENT[kind]
+    upper = next(g for g in grids if g > grid)
+    lower = grids[grids.index(upper) - 1]
+    slope = math.log(measured[upper] / measured[lower]) / math.log(upper / lower)
+    return measured[lower] * (grid / lower) ** slope
+
+
+def curve_minutes(layout, shape, rough, grid):
+    """Time limit of a curve's first attempt [min]: `RUNTIME_SAFETY` x the
+    slowest measured curve of its kind and grid, plus `RUNTIME_OVERHEAD_MIN`.
+
+    1024^2: 12 min regular, 39 min random, 18 h rough; 2048^2: 52 min
+    regular, 9.6 h random.  The time does not shrink with `threads`: the
+    measurements are on one thread, and a second gains at most 2x.
     """
-    rough = parse_rough_tag(wildcards.rough).get("roughness", 0.0) > 0
-    return int(5 + 15 * (int(wildcards.grid) / 512) ** (5 if rough else 3)) * attempt
+    seconds = RUNTIME_SAFETY * slowest_curve_s(curve_kind(layout, shape, rough), grid)
+    return math.ceil(RUNTIME_OVERHEAD_MIN + seconds / 60)
+
+
+def simulate_runtime(config):
+    """The simulate rule's `runtime` [min]: `curve_minutes`, doubled on a retry
+    (a time limit is the likelier cause of a failure), clipped to the config's
+    `slurm_max_runtime_min` (`clipped_runtimes` warns at plan time)."""
+    cap = config.get("slurm_max_runtime_min")
+
+    def runtime(wildcards, attempt):
+        minutes = attempt * curve_minutes(wildcards.layout, wildcards.shape, wildcards.rough,
+                                          int(wildcards.grid))
+        return minutes if cap is None else min(minutes, int(cap))
+
+    return runtime
+
+
+def clipped_runtimes(config):
+    """The plan-time warning for curves whose first attempt asks for more than
+    `slurm_max_runtime_min`, or None: how many, and the largest request."""
+    cap = config.get("slurm_max_runtime_min")
+    if cap is None:
+        return None
+    asked = [(curve_minutes(layout, shape, rough, grid), curve_file(
+                 layout, n, kbar, seed, grid, phi, rough, shape))
+             for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config)]
+    over = sorted((a for a in asked if a[0] > int(cap)), reverse=True)
+    if not over:
+        return None
+    minutes, name = over[0]
+    return (f"slurm_max_runtime_min = {cap} clips the time limit of {len(over)} of "
+            f"{len(asked)} simulations (the largest: {minutes} min for {name}); a curve "
+            f"that needs longer is killed at {cap} min (its retry too) and writes nothing")
 
 
 ROUGH_FIGURES = ("rough_roughness", "rough_preload")

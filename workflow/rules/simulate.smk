@@ -18,7 +18,7 @@ rule simulate:
     threads: config["threads"]
     resources:
         mem_mb=simulate_mem_mb,
-        runtime=simulate_runtime,
+        runtime=simulate_runtime(config),
         gpu=simulate_gpus(config),
         gres=simulate_gres(config),
     params:
