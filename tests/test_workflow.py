@@ -576,6 +576,16 @@ def test_slurm_profile_submits_one_simulation_a_job(repo_copy: Path) -> None:
     assert output(bundled).count("Group job sims") == 3, output(bundled)
 
 
+def test_slurm_profile_checks_status_within_min_job_age() -> None:
+    """squeue lists a finished job for MinJobAge seconds, and the plugin (2.8)
+    takes a job missing from it for one still running: it checks at most
+    every 180 s and uses squeue only where MinJobAge >= 3 x the first
+    interval, which must therefore be at least 60 s."""
+    profile = yaml.safe_load((REPO / "workflow/profiles/slurm/config.yaml").read_text())
+    assert profile["slurm-status-command"] == "squeue"
+    assert 3 * profile["slurm-init-seconds-before-status-checks"] >= 180
+
+
 def test_unknown_backend_key_is_refused(repo_copy: Path, tmp_path: Path) -> None:
     assert_refused_at_plan_time(repo_copy, tmp_path, {"backend": "tpu"},
                                 "config key 'backend': 'tpu' is not one of")
