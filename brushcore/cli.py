@@ -12,7 +12,6 @@ import argparse
 import dataclasses
 import difflib
 import re
-import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -20,7 +19,8 @@ from pathlib import Path
 from typing import NoReturn
 
 from brushcore.numerics.cg import ConvergenceError
-from brushcore.data.joblog import EXIT_INTERRUPTED, INTERRUPTED
+from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTED, Terminated,
+                                   on_sigterm, terminate)
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.params import LAYOUTS, MAX_ASPECT, MIN_KBAR, BrushParams
 from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
@@ -292,29 +292,8 @@ class _Missing(Exception):
     """A flag that the chosen layout needs was not given."""
 
 
-class _Terminated(BaseException):
-    """SIGTERM (kill, Slurm's scancel or time limit) arrived; like
-    KeyboardInterrupt, no ``except Exception`` may swallow it."""
-
-
-#: Exit status after SIGTERM (128 + 15), as shells report it, and what is said.
-EXIT_TERMINATED = 143
+#: What SIGTERM makes the command say (it exits with `EXIT_TERMINATED`).
 TERMINATED = "terminated; nothing written"
-
-
-def _terminate(signum: int, frame: object) -> NoReturn:
-    raise _Terminated
-
-
-def _on_sigterm(handler):
-    """Install a SIGTERM handler, returning the previous one; a no-op (None)
-    off the main thread, where Python allows none (`main` called from a thread)."""
-    if handler is None:
-        return None
-    try:
-        return signal.signal(signal.SIGTERM, handler)
-    except ValueError:
-        return None
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -361,7 +340,7 @@ def _simulate(args: argparse.Namespace) -> int:
               file=sys.stderr)
         pin_threads(args.threads)
         # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
-        previous = _on_sigterm(_terminate)
+        previous = on_sigterm(terminate)
         try:
             ds = simulate(params, options, progress=progress, labels=labels)
             try:
@@ -373,7 +352,7 @@ def _simulate(args: argparse.Namespace) -> int:
             # what a run killed (kill -9, a node's crash) while writing --out left
             remove_stale_temporaries(args.out, older_than=started)
         finally:
-            _on_sigterm(previous)
+            on_sigterm(previous)
     except ParameterError as exc:
         _error(exc.in_terms_of(FLAGS, sep=" "), progress)
         return 2
@@ -386,7 +365,7 @@ def _simulate(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         _error(INTERRUPTED, progress)
         return EXIT_INTERRUPTED
-    except _Terminated:
+    except Terminated:
         _error(TERMINATED, progress)
         return EXIT_TERMINATED
     if progress is not None:

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -537,6 +538,59 @@ def test_interrupted_job_logs_one_line_and_exits_130(tmp_path: Path, capfd) -> N
     assert log.read_text() == "working\ninterrupted; nothing written\n"
     err = capfd.readouterr().err
     assert err.strip() == f"{log}: interrupted; nothing written" and "Traceback" not in err
+
+
+def test_terminated_job_logs_where_it_stood_and_exits_143(tmp_path: Path, capfd) -> None:
+    """SIGTERM (Slurm's time limit, scancel) inside a workflow script: one
+    line saying where the curve stood, status 143, no traceback."""
+    from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm
+
+    log = tmp_path / "job.log"
+    clock = CurveClock()
+    clock(12, 750, 1000)  # the curve's last event so far
+    with pytest.raises(SystemExit) as stop:
+        with logged(log), stops_on_sigterm(clock.where):
+            print("working")
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(30)  # the handler interrupts this
+    assert stop.value.code == 143
+    assert log.read_text() == (
+        "working\nterminated (SIGTERM: scancel or the time limit) at event 12, 25.0 % of the "
+        "contact detached, after 0 s; nothing written\n")
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handler is gone again
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def test_simulate_script_killed_by_sigterm_writes_no_curve(tmp_path: Path) -> None:
+    """The workflow's simulate script, killed as at a Slurm time limit: its
+    log ends with the one line, it exits 143 and leaves no curve file."""
+    out, log = tmp_path / "curve.nc", tmp_path / "job.log"
+    job = textwrap.dedent(f"""
+        import runpy
+        from types import SimpleNamespace
+        smk = SimpleNamespace(
+            threads=1, log=[{str(log)!r}], output=[{str(out)!r}],
+            wildcards=SimpleNamespace(layout="random", n_pillars="1620", kbar="1e-05",
+                                      grid="512", phi="0.12", seed="0"),
+            config={{"allow_coarse": False, "backend": "cpu"}},
+            params=SimpleNamespace(solver={{}}, rough={{}}, shape={{}}))
+        runpy.run_path({str(REPO / "workflow/scripts/simulate.py")!r},
+                       init_globals={{"snakemake": smk}})
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", job])
+    for _ in range(600):  # the job has built its brush and started the curve
+        if log.exists() and "thread(s), backend cpu" in log.read_text():
+            break
+        time.sleep(0.05)
+    time.sleep(3.0)
+    proc.terminate()
+    assert proc.wait(timeout=60) == 143
+    lines = log.read_text().splitlines()
+    assert len(lines) == 2 and "Traceback" not in log.read_text(), lines
+    assert re.fullmatch(r"terminated \(SIGTERM: scancel or the time limit\) (at event \d+, "
+                        r"[\d.]+ % of the contact detached|before the first event), after \d+ s; "
+                        r"nothing written", lines[1]), lines
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["job.log"]
 
 
 def test_orphaned_job_stops_without_writing(tmp_path: Path) -> None:

@@ -4,16 +4,88 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
+import time
 import traceback
 from collections.abc import Callable, Iterator
 from contextlib import redirect_stderr, redirect_stdout
+from typing import NoReturn
 
 #: Exit status after Ctrl-C (128 + SIGINT), as shells report it.
 EXIT_INTERRUPTED = 130
 INTERRUPTED = "interrupted; nothing written"
 #: Exit status of a job whose Snakemake is gone (EX_TEMPFAIL: run it again).
 EXIT_ORPHANED = 75
+#: Exit status after SIGTERM (128 + 15), as shells report it.
+EXIT_TERMINATED = 143
+
+
+class Terminated(BaseException):
+    """SIGTERM (kill, Slurm's scancel or time limit) arrived; like
+    KeyboardInterrupt, no ``except Exception`` may swallow it."""
+
+
+def terminate(signum: int, frame: object) -> NoReturn:
+    """SIGTERM handler: raise `Terminated` where the program is."""
+    raise Terminated
+
+
+def on_sigterm(handler):
+    """Install a SIGTERM handler, returning the previous one; a no-op (None)
+    off the main thread, where Python allows none (`main` called from a thread)."""
+    if handler is None:
+        return None
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:
+        return None
+
+
+class CurveClock:
+    """Where a job's curve stands, for the line a killed job leaves.
+
+    A progress callback (``progress(events, attached, total)``, called after
+    each event) that records the last event and the share of contact
+    elements detached; the clock starts when it is made.
+    """
+
+    def __init__(self) -> None:
+        self.started = time.monotonic()
+        self.events: int | None = None
+        self.detached = 0.0
+
+    def __call__(self, events: int, attached: int, total: int) -> None:
+        self.events = events
+        self.detached = 1.0 - attached / total if total else 0.0
+
+    def where(self) -> str:
+        """'at event E, P % of the contact detached, after T s' (or 'before the first event')."""
+        at = ("before the first event" if self.events is None else
+              f"at event {self.events}, {100 * self.detached:.1f} % of the contact detached")
+        return f"{at}, after {time.monotonic() - self.started:.0f} s"
+
+
+@contextlib.contextmanager
+def stops_on_sigterm(where: Callable[[], str]) -> Iterator[None]:
+    """SIGTERM inside the block stops it with one line and status 143.
+
+    Slurm sends SIGTERM at a job's time limit (and on ``scancel``), then
+    SIGKILL; without a handler the job's log ended wherever the work was.
+    The line, printed to stdout (the job's log under `logged`), says
+    ``terminated (SIGTERM: scancel or the time limit) <where()>; nothing
+    written``, true of a block that publishes its output only at its end,
+    as `write_curve` does (atomically, its temporary removed on any exit).
+    """
+    previous = on_sigterm(terminate)
+    try:
+        yield
+    except Terminated:
+        print(f"terminated (SIGTERM: scancel or the time limit) {where()}; nothing written",
+              flush=True)
+        raise SystemExit(EXIT_TERMINATED) from None
+    finally:
+        on_sigterm(previous)
 
 
 def parent_watch() -> Callable[..., None]:

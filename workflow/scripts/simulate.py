@@ -7,16 +7,22 @@ import os
 for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_name] = str(snakemake.threads)  # noqa: F821
 
-from brushcore.data.joblog import logged  # noqa: E402 - light; the rest is imported under it
+# light; the rest is imported under the log and the SIGTERM handler
+from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm  # noqa: E402
 
 
-def main(smk) -> None:
+def main(smk, clock: CurveClock) -> None:
     from brushcore import BrushParams, SolverOptions, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.numerics.threads import pin_threads
 
     orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
+
+    def progress(events: int, attached: int, total: int) -> None:
+        clock(events, attached, total)  # for the line a SIGTERM leaves
+        orphaned()
+
     check_output_path(smk.output[0])  # an unwritable folder fails now, not after the solve
     remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)
@@ -34,7 +40,7 @@ def main(smk) -> None:
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
-    curve = simulate(params, SolverOptions(**smk.params.solver), progress=orphaned)
+    curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress)
     orphaned()
     write_curve(curve, smk.output[0])
     print(
@@ -46,5 +52,7 @@ def main(smk) -> None:
     )
 
 
-with logged(snakemake.log[0]):  # noqa: F821
-    main(snakemake)  # noqa: F821
+# Slurm's time limit and scancel send SIGTERM: one line in the log, status 143, no curve.
+clock = CurveClock()
+with logged(snakemake.log[0]), stops_on_sigterm(clock.where):  # noqa: F821
+    main(snakemake, clock)  # noqa: F821
