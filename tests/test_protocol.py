@@ -369,6 +369,49 @@ def test_empty_protocol_is_refused():
         simulate(FLAT, protocol=[])
 
 
+def _fattened(labels: np.ndarray) -> np.ndarray:
+    """``labels`` with every pillar grown by one row (the audit's t11.py)."""
+    below = np.roll(labels, 1, axis=0)
+    grow = (labels < 0) & (below >= 0)
+    out = labels.copy()
+    out[grow] = below[grow]
+    return out
+
+
+@pytest.mark.parametrize("params", [FLAT, replace(FLAT, roughness=0.1, preload=0.5)],
+                         ids=["flat", "protocol"])
+@pytest.mark.parametrize("make", [
+    lambda lab, p: _fattened(lab),  # right count and shape: ran with the default hash
+    lambda lab, p: np.roll(lab, 3, axis=1),
+    lambda lab, p: build_labels(BrushParams("regular", 9, 0.01, p.grid)),  # failed mid-run
+    lambda lab, p: lab[::2, ::2],  # failed after the whole pull-off
+    lambda lab, p: lab.astype(float) + 0.5,
+    lambda lab, p: [[0, 1], [2]],
+], ids=["fattened", "shifted", "nine_pillars", "32x32", "float", "ragged"])
+def test_a_label_map_other_than_the_parameters_own_is_refused(params, make, monkeypatch):
+    from brushcore import ParameterError
+    from brushcore.model import curve
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("solved before refusing the labels")
+    monkeypatch.setattr(curve, "run", no_solve)
+    monkeypatch.setattr(curve, "run_protocol_curve", no_solve)
+    labels = make(build_labels(params), params)
+    with pytest.raises(ParameterError, match=r"^labels=.* is invalid \(.*layout='file'.*\): "
+                                             r"allowed None or the map build_labels\(params\)"):
+        simulate(params, labels=labels)
+    with pytest.raises(ParameterError, match=r"^labels="):
+        curve.simulate_protocol(params, labels=labels)
+
+
+def test_the_parameters_own_label_map_is_accepted():
+    """The CLI passes the map it built and printed: same curve, same hash."""
+    a = simulate(FLAT)
+    b = simulate(FLAT, labels=build_labels(FLAT).astype(np.int64))
+    assert float(b.adhesive_force) == float(a.adhesive_force)
+    assert b.attrs["parameter_hash"] == a.attrs["parameter_hash"]
+
+
 # --- numerics ---------------------------------------------------------------------------
 
 def _soft_blocks(compliance: float, seed: int, detached: float):
@@ -513,12 +556,15 @@ def test_rigid_rough_brush_loses_with_roughness_and_regains_with_preload():
     assert high[0] > low[0] and high[1] >= low[1], (low, high)
 
 
-def test_transposing_layout_and_heights_changes_nothing():
+def test_transposing_layout_and_heights_changes_nothing(tmp_path):
+    from brushcore.model.layout_file import file_params, save_label_map
+
     params = BrushParams("regular", 16, 0.05, 64, roughness=0.2, preload=0.3, seed=4)
-    labels = build_labels(params)
+    path = save_label_map(build_labels(params).T, tmp_path / "transposed.npy")
     double = SolverOptions(precision="double")  # invariance up to round-off
     a = simulate(params, double)
-    b = simulate(params, double, labels=np.ascontiguousarray(labels.T))  # labels carry the heights
+    # the labels carry the heights (drawn from the seed, in label order)
+    b = simulate(file_params(path, 0.05, roughness=0.2, preload=0.3, seed=4), double)
     for name in ("adhesive_force", "work_of_separation", "dissipated_energy"):
         assert float(b[name]) == pytest.approx(float(a[name]), rel=1e-8), name
     assert np.allclose(b.pillar_y.values, a.pillar_x.values)

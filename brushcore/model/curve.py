@@ -186,6 +186,44 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
     }
 
 
+def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
+    """The label map of ``params`` (`build_labels`), refusing any other map handed in.
+
+    A caller that built the map already (the CLI prints what it realised)
+    may pass it; building it again costs under 0.1 s even at 2048^2.  Any
+    other map would run a brush that ``params`` and the curve's
+    ``parameter_hash`` do not describe; a layout of one's own is a file
+    layout (``layout="file"``, `brushcore.model.layout_file.file_params`).
+
+    Raises
+    ------
+    ParameterError
+        For ``labels`` when it differs from ``build_labels(params)``, and as
+        `build_labels` for a layout that cannot be built.
+    """
+    built = build_labels(params)
+    if labels is None:
+        return built
+    try:
+        given = np.asarray(labels)
+        same = given.shape == built.shape and bool(np.array_equal(given, built))
+    except (TypeError, ValueError):  # ragged lists and other non-arrays
+        given, same = None, False
+    if not same:
+        shown = (f"<{type(labels).__name__}>" if given is None or given.ndim != 2 else
+                 f"<{given.shape[0]} x {given.shape[1]} map"
+                 + (f", {np.count_nonzero(given != built)} elements differing from "
+                    "build_labels(params)>" if given.shape == built.shape else ">"))
+        raise ParameterError(
+            "labels", shown,
+            "None or the map build_labels(params) gives (a "
+            f"{built.shape[0]} x {built.shape[1]} map of {params.n_pillars} pillars)",
+            "another map would run a brush the parameters and parameter_hash do not "
+            "describe; a layout of one's own goes through layout='file' "
+            "(brushcore.model.layout_file.file_params)")
+    return built
+
+
 #: The papers every curve file cites.
 REFERENCES = ("He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
               "Facta Univ. Mech. Eng. 13 (2015) 3")
@@ -197,7 +235,8 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
              backend: str | None = None) -> xr.Dataset:
     """Pull-off curve, adhesive force and work of separation as a Dataset.
 
-    ``labels`` (optional) is the label map to use, see `run`.  ``backend``
+    ``labels`` (optional) is the label map ``params`` builds, for a caller that
+    built it already: any other map is refused (`own_labels`).  ``backend``
     ("cpu" or "gpu"), when given, overrides ``params.backend``; "gpu" needs
     CuPy and a visible CUDA device, checked before any work (ParameterError
     naming what is missing).  GPU curves agree with CPU ones within CG
@@ -219,7 +258,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     params : the brush (geometry, stiffness, heights, preload)
     options : solver tolerances and switches (default `SolverOptions()`)
     progress : called as progress(events, attached, total) after each event
-    labels : label map to use instead of the one ``params`` builds
+    labels : the label map ``params`` builds (`build_labels`), or None; any
+        other map is refused: a layout of one's own goes through
+        ``layout="file"``
     protocol : waypoints, normalised (above); None for the default
     backend : "cpu" or "gpu", overriding ``params.backend``
 
@@ -227,17 +268,18 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     ------
     ParameterError
         Before any solve, for a layout or discretisation that cannot run,
-        an empty protocol or a missing GPU.
+        ``labels`` other than the parameters' own map, an empty protocol or
+        a missing GPU.
     """
     if protocol is not None and not len(protocol):
         raise ParameterError("protocol", list(protocol), "at least one Waypoint")
     if backend is not None:
         params = replace(params, backend=backend)
     resolve_backend(params.backend)  # a missing CuPy or card fails before any work
+    labels = own_labels(params, labels)
     if protocol is not None or not params.is_flat:
-        return simulate_protocol(params, options, progress, labels, protocol)
+        return _simulate_protocol(params, options, progress, labels, protocol)
     t0 = time.perf_counter()
-    labels = build_labels(params) if labels is None else labels
     detach, curve, applications = run(params, options, progress, labels)
     wall = time.perf_counter() - t0
     h, es, dg = params.h, params.e_star, params.dgamma
@@ -293,11 +335,19 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     pillar (dimension ``pillar``, label order) centre, height, kbar, force
     at F_ad and let-go displacement; scalars ``dissipated_energy`` (the
     integral of F dd over the whole loop) and ``pillars_in_contact_at_preload``.
-    Waypoint values in ``protocol`` are normalised (F_K, d_K).
+    Waypoint values in ``protocol`` are normalised (F_K, d_K); ``labels``
+    is None or the parameters' own map, as in `simulate`.
     """
-    backend = resolve_backend(params.backend)  # before any work
+    resolve_backend(params.backend)  # before any work
+    return _simulate_protocol(params, options, progress, own_labels(params, labels),
+                              protocol)
+
+
+def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Progress | None,
+                       labels: np.ndarray, protocol: Sequence[Waypoint] | None) -> xr.Dataset:
+    """`simulate_protocol` on the label map `own_labels` returned."""
+    backend = resolve_backend(params.backend)
     t0 = time.perf_counter()
-    labels = build_labels(params) if labels is None else labels
     inputs = pillar_inputs(params, labels)
     fs, ds_ = inputs.f_unit, inputs.d_unit
     if protocol is None:
