@@ -189,3 +189,24 @@ def test_no_grid_suggested_past_the_largest():
     with pytest.raises(ParameterError, match=r"allowed none up to 8192 resolves these pillars: "
                                              "fewer pillars or a larger filling factor$"):
         BrushParams("regular", 4, 1.0, 32, phi=1e-300)
+
+
+def test_a_pickled_copy_is_validated_and_keeps_its_arrays_read_only():
+    """Pickle copies arrays writeable and skips __post_init__: a worker's copy
+    (multiprocessing, joblib) could be changed past validation with the old
+    hash (heights zeroed: F_ad 1.792 against 0.129, same parameter_hash)."""
+    import pickle
+
+    p = BrushParams("regular", 16, 0.01, 64, heights=np.linspace(-0.2, 0.2, 16),
+                    kbar_values=np.geomspace(1e-3, 1e-1, 16), gap_map=np.zeros((64, 64)),
+                    backend="cpu")
+    q = pickle.loads(pickle.dumps(p))
+    assert q == p and hash(q) == hash(p) and q.inputs_digest == p.inputs_digest
+    assert q.as_attrs() == p.as_attrs()
+    for name in ("heights", "kbar_values", "gap_map"):
+        assert np.array_equal(getattr(q, name), getattr(p, name)), name
+        assert not getattr(q, name).flags.writeable, name
+    with pytest.raises(ValueError, match="read-only"):
+        q.heights[:] = 0
+    flat = BrushParams("random", 9, math.inf, 64, seed=3, allow_coarse=True)
+    assert pickle.loads(pickle.dumps(flat)) == flat

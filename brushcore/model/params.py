@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -130,7 +130,9 @@ class BrushParams:
         by `simulate` before any work.
 
     Arrays are copied, stored read-only, and compared through their digest
-    (``inputs_digest``), so equal parameters compare and hash equal.
+    (``inputs_digest``), so equal parameters compare and hash equal.  A
+    pickled copy is built through the constructor again (validated, arrays
+    read-only).
 
     Integer and real parameters accept NumPy scalars and are stored as
     Python ``int`` / ``float``.  Dimensional parameters are in one
@@ -299,6 +301,13 @@ class BrushParams:
                  self.kbar_spread, "0 when kbar_values are given (they are exclusive)")
         object.__setattr__(self, "inputs_digest", digest.hexdigest()[:16]
                            if any(getattr(self, k) is not None for k in ARRAY_FIELDS) else "")
+
+    def __reduce__(self) -> tuple[type, tuple]:
+        """Pickle as a call of the constructor on the init fields, so that
+        unpickling (multiprocessing, joblib) validates again and stores the
+        arrays read-only: pickle copies an array writeable, and a default
+        dataclass unpickles without ``__post_init__``."""
+        return type(self), tuple(getattr(self, f.name) for f in fields(self) if f.init)
 
     @property
     def is_flat(self) -> bool:
