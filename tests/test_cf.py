@@ -84,3 +84,24 @@ def test_sweep_with_shapes_and_hexagonal_is_cf_clean(curve_files, tmp_path):
     assert "shape" in sweep.dims and "case_shape" in sweep.coords
     write_sweep(sweep, sweep_nc)
     assert cf_errors(sweep_nc, tmp_path) == []
+
+
+def test_sweep_from_curve_files_with_and_without_pillar_variables(curve_files, tmp_path):
+    """Flat curve files have per-pillar variables since 2026-12-05; a sweep of
+    older files (without them) and newer ones is the sweep of newer ones."""
+    import xarray as xr
+
+    from brushcore.data.io import read_curve
+
+    older = tmp_path / "older.nc"
+    ds = read_curve(curve_files[0])
+    assert "pillar_force_at_adhesive_force" in ds and ds.sizes["pillar"] == 4
+    ds = ds.drop_dims("pillar")
+    del ds.attrs["pillar_order"], ds.attrs["content_sha256"]
+    write_curve(ds, older)
+    mixed = build_sweep([older, *curve_files[1:]], keep_snapshots=[("regular", 4)])
+    new = build_sweep(curve_files, keep_snapshots=[("regular", 4)])
+    xr.testing.assert_identical(mixed.drop_attrs(), new.drop_attrs())
+    sweep_nc = tmp_path / "sweep_mixed.nc"
+    write_sweep(mixed, sweep_nc)
+    assert cf_errors(sweep_nc, tmp_path) == []

@@ -601,6 +601,52 @@ def test_per_pillar_inputs_are_exported_in_label_order():
     assert np.all(np.isfinite(ds.pillar_let_go_displacement.values))
 
 
+@pytest.mark.parametrize("params", [FLAT, BrushParams("random", 16, 0.01, 64, seed=3)],
+                         ids=["regular_quadrant", "random"])
+def test_flat_pull_off_exports_pillar_forces_that_sum_to_f_ad(params):
+    ds = simulate(params)
+    assert ds.attrs["symmetry_fold"] == (4 if params.layout == "regular" else 1)
+    force = ds.pillar_force_at_adhesive_force
+    assert force.dims == ("pillar",) and force.attrs["units"] == "N"
+    assert np.array_equal(ds.pillar.values, np.arange(16))
+    assert float(force.sum()) == pytest.approx(float(ds.adhesive_force), rel=1e-9)
+    assert np.all(force.values > 0)
+    assert np.all(np.isfinite(ds.pillar_let_go_displacement.values))
+
+
+def test_flat_pillar_variables_are_the_protocols():
+    """Same names, units and long names as a protocol's file, and the same
+    values as the preloaded run (which is this pull-off on the whole grid);
+    the quadrant solve unfolds them to the right pillars."""
+    whole = simulate(FLAT, SolverOptions(symmetry=False))
+    protocol = simulate(replace(FLAT, preload=1.5))
+    folded = simulate(FLAT)
+    for name in ("pillar_y", "pillar_x", "pillar_force_at_adhesive_force",
+                 "pillar_let_go_displacement"):
+        assert whole[name].attrs == protocol[name].attrs, name
+        assert np.allclose(whole[name].values, protocol[name].values, rtol=1e-9), name
+        assert np.allclose(folded[name].values, whole[name].values, rtol=1e-4), name
+    assert whole.pillar.attrs == protocol.pillar.attrs
+    assert whole.attrs["pillar_order"] == protocol.attrs["pillar_order"]
+    # the corner pillars carry more than the middle ones (measured 26.02 and 25.16)
+    force = folded.pillar_force_at_adhesive_force.values
+    assert force[0] > force[5] * 1.02
+
+
+@pytest.mark.parametrize("kbar, spread", [(1e-8, 1e-6), (1e-4, 1e-3)])
+def test_soft_separated_pillars_share_the_load_equally(kbar, spread):
+    """Springs much softer than the half space carry the load: every pillar
+    of a separated soft brush pulls F_ad / N; what is left is the elastic
+    coupling, of order kbar (regular 3 x 3, phi 0.05, 64^2: spread 1.1e-8
+    at kbar 1e-8, 1.1e-4 at 1e-4; no mirror fold, the middle pillar crosses
+    both mid-lines)."""
+    ds = simulate(BrushParams("regular", 9, kbar, 64, phi=0.05))
+    force = ds.pillar_force_at_adhesive_force.values
+    assert ds.attrs["symmetry_fold"] == 1
+    assert np.ptp(force) / force.mean() < spread
+    assert force.mean() == pytest.approx(float(ds.adhesive_force) / 9, rel=1e-12)
+
+
 def test_spread_draws_are_reproducible_and_have_the_asked_moments():
     from brushcore.model.draws import gaussian_heights, lognormal_kbar
 
@@ -754,6 +800,8 @@ def test_loop_and_load_sharing_figures_show_the_curve():
     y = sharing.axes[0].collections[0].get_offsets()[:, 1]
     # pillar forces at F_ad add up to F_ad: the mean of F_p / (F_ad / N) is 1
     assert np.mean(y) == pytest.approx(1.0, rel=1e-6)
+    flat = figures.load_sharing(simulate(FLAT))  # forces only, at height 0
+    assert np.mean(flat.axes[0].collections[0].get_offsets()[:, 1]) == pytest.approx(1.0)
 
 
 def test_large_loads_tighten_the_tolerance():

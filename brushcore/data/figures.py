@@ -592,6 +592,8 @@ def load_sharing(curve: xr.Dataset) -> Figure:
     Forces are in units of the mean pillar force at F_ad (F_ad / N), heights
     in d_K; colour is the pillar's kbar.  Equal load sharing is the line at 1;
     a rough stiff brush loads its tallest pillars, a soft one spreads the load.
+    A flat pull-off's file holds the forces alone: its pillars stand at
+    height 0 on the brush's kbar.
     """
     fig = _new_figure(5.0, 3.8)
     ax = fig.subplots()
@@ -600,8 +602,10 @@ def load_sharing(curve: xr.Dataset) -> Figure:
         return fig
     force = curve["pillar_force_at_adhesive_force"].values
     mean = float(curve["adhesive_force"]) / force.size
-    height = curve["pillar_height_normalized"].values
-    kbar = curve["pillar_kbar"].values
+    flat = "pillar_height_normalized" not in curve
+    height = np.zeros(force.size) if flat else curve["pillar_height_normalized"].values
+    kbar = (np.full(force.size, float(curve.attrs["kbar"])) if flat
+            else curve["pillar_kbar"].values)
     finite = np.isfinite(kbar)
     art = ax.scatter(height, force / mean, c=np.where(finite, kbar, np.nan), s=12,
                      cmap="viridis", label="pillars")

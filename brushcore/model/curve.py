@@ -250,6 +250,11 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     d_K, the units of the curve's normalised variables.  See
     `simulate_protocol` for the extra outputs.
 
+    Per pillar (dimension ``pillar``, label order: attribute ``pillar_order``)
+    the file holds the centroid (``pillar_y``, ``pillar_x``), the force at
+    F_ad (``pillar_force_at_adhesive_force``, summing to F_ad) and the d at
+    which the pillar let go (``pillar_let_go_displacement``).
+
     Signs: d > 0 pulls the brush away, F > 0 is tensile.  Normalised values
     follow the paper (eqs. 20-24) with A the discretised real contact area.
 
@@ -295,6 +300,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     pillar = detach >= 0
     states = np.where(pillar[None], (detach[None] > snaps[:, None, None]).astype(np.int8),
                       np.int8(-1)).astype(np.int8)
+    # The step without a pillar's last element: the same d as a protocol's let-go.
+    last = np.zeros(params.n_pillars, dtype=np.int64)
+    np.maximum.at(last, labels[pillar], detach[pillar])
 
     data = {
         **_step_variables(curve.displacement, curve.force, area, curve.attached_pillars,
@@ -307,6 +315,8 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "snapshot_step": _var("snapshot", snaps, "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
                                       {"long_name": "stage of the pull-off"}),
+        **_pillar_results(pillar_centroids(labels, h), curve.pillar_force_at_peak,
+                          curve.displacement[last]),
         **_result_variables(f_ad, float(curve.displacement[i_max]), work, fs, ws,
                             "adhesive force (maximum tensile force)",
                             "work of separation, integral of F dd"),
@@ -317,9 +327,11 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                        title="Adhesive pull-off of a spring-mounted pillar brush",
                        references=REFERENCES, preconditioner=curve.preconditioner,
                        symmetry_fold=curve.symmetry_fold)
-    return xr.Dataset(data, coords=_coords(params, curve.displacement.size, snaps.size,
-                                           "step of the pull-off (one per solve)"),
-                      attrs=attrs)
+    attrs["pillar_order"] = PILLAR_ORDER
+    return xr.Dataset(data, coords={
+        **_coords(params, curve.displacement.size, snaps.size,
+                  "step of the pull-off (one per solve)"),
+        "pillar": _pillar_coord(params.n_pillars)}, attrs=attrs)
 
 
 def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOptions(),
@@ -332,8 +344,9 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     touch), ``direction`` (-1 approach, 0 first touch, +1 retraction) and
     ``retraction`` (1 on the last retraction branch, where ``adhesive_force``
     and ``work_of_separation`` = integral of max(F, 0) dd are taken); per
-    pillar (dimension ``pillar``, label order) centre, height, kbar, force
-    at F_ad and let-go displacement; scalars ``dissipated_energy`` (the
+    pillar (dimension ``pillar``, label order), beside the centroid, force
+    at F_ad and let-go displacement every curve file has, height and kbar;
+    scalars ``dissipated_energy`` (the
     integral of F dd over the whole loop) and ``pillars_in_contact_at_preload``.
     Waypoint values in ``protocol`` are normalised (F_K, d_K); ``labels``
     is None or the parameters' own map, as in `simulate`.
@@ -455,15 +468,11 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         "force_unit_F_K": fs,
         "preload_force": float(-waypoints[0].value) if waypoints[0].kind == "force" else 0.0,
         "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
-        "pillar_order": "label order: regular brushes row-major, pillar i*sqrt(N)+j at "
-                        "((i+1/2) L/sqrt(N), (j+1/2) L/sqrt(N)) along (y, x); random brushes "
-                        "in placement order; other layouts as labelled; pillar_y, pillar_x "
-                        "give every pillar's centroid",
+        "pillar_order": PILLAR_ORDER,
     })
     return xr.Dataset(data, coords={
         **_coords(params, d.size, len(steps), "step of the protocol (one per event or solve)"),
-        "pillar": _var("pillar", np.arange(n_pillars, dtype=np.int32),
-                      "pillar index (label order)", "1"),
+        "pillar": _pillar_coord(n_pillars),
     }, attrs=attrs)
 
 
@@ -492,21 +501,46 @@ def _snapshot_names(protocol: Sequence[Waypoint] | None) -> list[str]:
             for k, w in enumerate(protocol)] + ["maximum force"]
 
 
-def _pillar_variables(centre: np.ndarray, heights: np.ndarray, kbar: np.ndarray,
-                      d_unit: float, force_at_peak: np.ndarray,
-                      let_go: np.ndarray) -> dict[str, xr.Variable]:
-    """Per pillar: centroid [m], protrusion [m and d_K], k̄, force at F_ad [N]
-    and the displacement at which it let go [m]."""
+#: The attribute ``pillar_order`` of every curve file: what the dimension ``pillar`` follows.
+PILLAR_ORDER = ("label order: regular brushes row-major, pillar i*sqrt(N)+j at "
+                "((i+1/2) L/sqrt(N), (j+1/2) L/sqrt(N)) along (y, x); random brushes "
+                "in placement order; other layouts as labelled; pillar_y, pillar_x "
+                "give every pillar's centroid")
+
+
+def _pillar_coord(n_pillars: int) -> xr.Variable:
+    """The coordinate ``pillar``: pillar index in label order."""
+    return _var("pillar", np.arange(n_pillars, dtype=np.int32), "pillar index (label order)",
+                "1")
+
+
+def _pillar_results(centre: np.ndarray, force_at_peak: np.ndarray,
+                    let_go: np.ndarray) -> dict[str, xr.Variable]:
+    """Per pillar, in every curve file: centroid [m], force at F_ad [N] and the
+    displacement at which it let go [m]."""
     return {
         "pillar_y": _var("pillar", centre[:, 0], "pillar centroid y", "m"),
         "pillar_x": _var("pillar", centre[:, 1], "pillar centroid x", "m"),
-        "pillar_height": _var("pillar", heights, "pillar protrusion z_p "
-                             "(larger reaches the substrate first)", "m"),
-        "pillar_height_normalized": _var("pillar", heights / d_unit, "z_p / d_K", "1"),
-        "pillar_kbar": _var("pillar", kbar, "pillar spring stiffness k_p / (E* L)", "1"),
         "pillar_force_at_adhesive_force": _var("pillar", force_at_peak,
                                               "pillar force at F_ad (tensile positive)", "N"),
         "pillar_let_go_displacement": _var("pillar", let_go,
                                           "d at which the pillar's last element detached",
                                           "m", comment="NaN: never in contact"),
+    }
+
+
+def _pillar_variables(centre: np.ndarray, heights: np.ndarray, kbar: np.ndarray,
+                      d_unit: float, force_at_peak: np.ndarray,
+                      let_go: np.ndarray) -> dict[str, xr.Variable]:
+    """Per pillar in a protocol's file: `_pillar_results` with the protrusion
+    [m and d_K] and k̄ after the centroid."""
+    results = _pillar_results(centre, force_at_peak, let_go)
+    centroid = {name: results.pop(name) for name in ("pillar_y", "pillar_x")}
+    return {
+        **centroid,
+        "pillar_height": _var("pillar", heights, "pillar protrusion z_p "
+                             "(larger reaches the substrate first)", "m"),
+        "pillar_height_normalized": _var("pillar", heights / d_unit, "z_p / d_K", "1"),
+        "pillar_kbar": _var("pillar", kbar, "pillar spring stiffness k_p / (E* L)", "1"),
+        **results,
     }
