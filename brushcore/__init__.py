@@ -16,6 +16,7 @@ The package is layered; imports point down only:
 - ``brushcore.cli`` on top, and ``brushcore.validation`` (the error type) below all.
 """
 
+from brushcore.data.io import read_curve, write_curve
 from brushcore.model import theory
 from brushcore.model.curve import simulate
 from brushcore.model.params import BrushParams
@@ -23,4 +24,5 @@ from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.protocol import Waypoint
 from brushcore.validation import ParameterError
 
-__all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "simulate", "theory"]
+__all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "read_curve",
+           "simulate", "theory", "write_curve"]

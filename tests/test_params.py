@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -210,3 +211,29 @@ def test_a_pickled_copy_is_validated_and_keeps_its_arrays_read_only():
         q.heights[:] = 0
     flat = BrushParams("random", 9, math.inf, 64, seed=3, allow_coarse=True)
     assert pickle.loads(pickle.dumps(flat)) == flat
+
+
+def test_top_level_exports_what_a_notebook_needs():
+    import brushcore
+    from brushcore.data import io
+
+    assert brushcore.read_curve is io.read_curve and brushcore.write_curve is io.write_curve
+    assert {"read_curve", "write_curve"} <= set(brushcore.__all__)
+
+
+def test_from_layout_file_takes_count_grid_and_phi_from_the_file(tmp_path):
+    """As --layout file does; BrushParams itself wanted phi=0.1201171875 typed out."""
+    from brushcore.model.layout_file import save_label_map
+
+    regular = BrushParams("regular", 16, 0.01, 64)
+    labels = build_labels(regular)
+    path = save_label_map(labels, tmp_path / "lab.npy")
+    p = BrushParams.from_layout_file(path, 0.01, seed=2, h=1e-6)
+    assert (p.layout, p.n_pillars, p.grid, p.layout_file) == ("file", 16, 64, str(path))
+    assert p.phi == np.count_nonzero(labels >= 0) / 64**2 and p.seed == 2 and p.h == 1e-6
+    assert np.array_equal(build_labels(p), labels)
+    assert BrushParams.from_layout_file(path, kbar=0.01, grid=64) == replace(p, h=1.0, seed=0)
+    with pytest.raises(ParameterError, match=r"^n_pillars=9 is invalid: allowed 16, the value"):
+        BrushParams.from_layout_file(path, 0.01, n_pillars=9)
+    with pytest.raises(ParameterError, match=r"^layout_file="):
+        BrushParams.from_layout_file(tmp_path / "missing.npy", 0.01)
