@@ -237,3 +237,60 @@ def test_from_layout_file_takes_count_grid_and_phi_from_the_file(tmp_path):
         BrushParams.from_layout_file(path, 0.01, n_pillars=9)
     with pytest.raises(ParameterError, match=r"^layout_file="):
         BrushParams.from_layout_file(tmp_path / "missing.npy", 0.01)
+
+
+def _tilt(grid: int) -> np.ndarray:
+    """A gap map rising along x [d_K]."""
+    return np.add.outer(np.zeros(grid), 0.00274 * (np.arange(grid) + 0.5))
+
+
+_GRADED_KBAR = np.geomspace(1e-3, 1e-1, 16)
+_GRADED_KBAR[3] = math.inf  # one rigid pillar
+
+
+@pytest.mark.parametrize("params", [
+    BrushParams("regular", 16, math.inf, 32, allow_coarse=True),  # a 0/1 switch in the file
+    BrushParams("random", 9, 0.455, 64, seed=3),
+    BrushParams("regular", 16, 0.01, 64, roughness=0.2, preload=0.5, seed=2),
+    BrushParams("regular", 16, 0.01, 64, preload=0.5,
+                heights=np.random.default_rng(1).normal(size=16) * 0.3),
+    BrushParams("regular", 16, 0.01, 64, kbar_values=_GRADED_KBAR, gap_map=_tilt(64)),
+], ids=["flat_coarse", "random", "rough_preloaded", "heights", "graded_gap_map"])
+def test_a_curve_file_gives_its_parameters_back(params, tmp_path):
+    """Rebuilt from the file: equal, same arrays bit for bit, same parameter_hash
+    (x * d_K / d_K differs from x in 14 % of draws: given arrays are stored as given)."""
+    from brushcore import read_curve, simulate, write_curve
+
+    ds = simulate(params)
+    write_curve(ds, tmp_path / "c.nc")
+    back = BrushParams.from_curve(read_curve(tmp_path / "c.nc"))
+    assert back == params and back.as_attrs() == params.as_attrs()
+    for name in ("heights", "kbar_values", "gap_map"):
+        given, rebuilt = getattr(params, name), getattr(back, name)
+        assert (given is None) == (rebuilt is None), name
+        assert given is None or np.array_equal(rebuilt, given), name
+    assert simulate(back).attrs["parameter_hash"] == ds.attrs["parameter_hash"]
+    if not params.inputs_digest:
+        assert BrushParams.from_attrs(ds.attrs) == params
+
+
+def test_from_attrs_needs_the_curve_for_arrays_and_switches_of_0_or_1():
+    attrs = {**BrushParams("regular", 16, 0.01, 64).as_attrs(), "backend": "gpu",
+             "rtol": 1e-6}  # a run's other attributes are ignored
+    assert BrushParams.from_attrs({**attrs, "allow_coarse": np.int64(1)}).allow_coarse is True
+    assert BrushParams.from_attrs(attrs).backend == "cpu"
+    with pytest.raises(ParameterError, match=r"^allow_coarse=np.int64\(2\) is invalid"):
+        BrushParams.from_attrs({**attrs, "allow_coarse": np.int64(2)})
+    with pytest.raises(ParameterError, match=r"^inputs_digest='0123' is invalid .*from_curve"):
+        BrushParams.from_attrs({**attrs, "inputs_digest": "0123"})
+
+
+def test_from_curve_refuses_arrays_it_cannot_rebuild():
+    from brushcore import simulate
+
+    ds = simulate(BrushParams("regular", 4, 0.01, 32, heights=[0.1, 0.0, -0.1, 0.2]))
+    with pytest.raises(ParameterError, match=r"^inputs_digest=.*lacks pillar_height_normalized"):
+        BrushParams.from_curve(ds.drop_vars("pillar_height_normalized"))
+    shifted = ds.assign(pillar_height_normalized=ds.pillar_height_normalized * (1 + 1e-15))
+    with pytest.raises(ParameterError, match=r"^inputs_digest=.*do not reproduce it"):
+        BrushParams.from_curve(shifted)

@@ -434,8 +434,12 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                              "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(names),
                                       {"long_name": "stage of the protocol"}),
-        **_pillar_variables(pillar_centroids(labels, h), inputs.heights, inputs.kbar, ds_,
-                            pillar_force, curve.let_go),
+        # Given arrays as given, bit for bit (x * d_K / d_K is not always x):
+        # `BrushParams.from_curve` rebuilds them and their inputs_digest.
+        **_pillar_variables(pillar_centroids(labels, h), inputs.heights,
+                            (inputs.heights / ds_ if params.heights is None
+                             else np.array(params.heights)),
+                            inputs.kbar, pillar_force, curve.let_go),
         **_result_variables(f_ad, d_ad, work, fs, ws,
                             "adhesive force (maximum tensile force of the last retraction)",
                             "work of separation, integral of max(F, 0) dd over the last "
@@ -454,7 +458,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     if inputs.gap_map is not None:
         data["gap_map"] = _var(("y", "x"), inputs.gap_map, "extra gap of each element", "m")
         # In d_K, as BrushParams(gap_map=...) and --gap-map take it back.
-        data["gap_map_normalized"] = _var(("y", "x"), inputs.gap_map / ds_,
+        data["gap_map_normalized"] = _var(("y", "x"), np.array(params.gap_map),
                                           "extra gap of each element / d_K", "1")
     attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
                        steps=int(d.size), applications=applications,
@@ -529,18 +533,18 @@ def _pillar_results(centre: np.ndarray, force_at_peak: np.ndarray,
     }
 
 
-def _pillar_variables(centre: np.ndarray, heights: np.ndarray, kbar: np.ndarray,
-                      d_unit: float, force_at_peak: np.ndarray,
+def _pillar_variables(centre: np.ndarray, heights: np.ndarray, normalized: np.ndarray,
+                      kbar: np.ndarray, force_at_peak: np.ndarray,
                       let_go: np.ndarray) -> dict[str, xr.Variable]:
     """Per pillar in a protocol's file: `_pillar_results` with the protrusion
-    [m and d_K] and k̄ after the centroid."""
+    [m] and ``normalized`` [d_K], and k̄, after the centroid."""
     results = _pillar_results(centre, force_at_peak, let_go)
     centroid = {name: results.pop(name) for name in ("pillar_y", "pillar_x")}
     return {
         **centroid,
         "pillar_height": _var("pillar", heights, "pillar protrusion z_p "
                              "(larger reaches the substrate first)", "m"),
-        "pillar_height_normalized": _var("pillar", heights / d_unit, "z_p / d_K", "1"),
+        "pillar_height_normalized": _var("pillar", normalized, "z_p / d_K", "1"),
         "pillar_kbar": _var("pillar", kbar, "pillar spring stiffness k_p / (E* L)", "1"),
         **results,
     }

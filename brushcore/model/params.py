@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
@@ -329,6 +330,72 @@ class BrushParams:
 
         return file_params(path, kbar, **fields)
 
+    @classmethod
+    def from_attrs(cls, attrs: Mapping[str, object]) -> BrushParams:
+        """The parameters a curve file's attributes record (`as_attrs`).
+
+        Switches stored as 0/1 (netCDF has no booleans) become bools; the
+        run's ``backend`` is left at "cpu" (not part of the problem).
+
+        Raises
+        ------
+        ParameterError
+            For ``inputs_digest`` when the run was given per-pillar or
+            per-element arrays, which only the curve's variables hold (use
+            `from_curve`), and as the constructor for values out of range.
+        """
+        digest = attrs.get("inputs_digest", "")
+        require(digest == "", "inputs_digest", digest,
+                "'' (no per-pillar arrays) for from_attrs",
+                "the run was given heights, kbar_values or gap_map, which only the curve's "
+                "variables hold: BrushParams.from_curve(ds) reads them")
+        return cls(**_fields_of(attrs))
+
+    @classmethod
+    def from_curve(cls, ds: object) -> BrushParams:
+        """The parameters of a curve (a Dataset from `simulate` or `read_curve`),
+        arrays included: `from_attrs`, plus ``heights``, ``kbar_values`` and
+        ``gap_map`` from ``pillar_height_normalized``, ``pillar_kbar`` and
+        ``gap_map_normalized`` [d_K] where the attribute ``inputs_digest``
+        says arrays were given; which ones, and that the values are
+        bit for bit those given, is checked against that digest.
+
+        Raises
+        ------
+        ParameterError
+            For ``inputs_digest`` when the curve's variables do not reproduce
+            it (variables missing, or a file written before they were
+            stored as given, 2026-12-05), and as `from_attrs`.
+        """
+        attrs = dict(ds.attrs)
+        digest = attrs.pop("inputs_digest", "")
+        fields = _fields_of(attrs)
+        if digest == "":
+            return cls(**fields)
+        # Which arrays were given is not recorded apart from the digest: try
+        # what the file can hold (a gap map's variable is written only if given).
+        found = {name: np.asarray(ds[var].values) for name, var in
+                 (("heights", "pillar_height_normalized"), ("kbar_values", "pillar_kbar"),
+                  ("gap_map", "gap_map_normalized")) if var in ds}
+        optional = [n for n in ("heights", "kbar_values") if n in found]
+        for mask in range(2 ** len(optional)):
+            chosen = {n: found[n] for k, n in enumerate(optional) if mask >> k & 1}
+            if "gap_map" in found:
+                chosen["gap_map"] = found["gap_map"]
+            try:
+                candidate = cls(**fields, **chosen) if chosen else None
+            except ParameterError:  # heights beside roughness, say: not this set
+                continue
+            if candidate is not None and candidate.inputs_digest == digest:
+                return candidate
+        missing = [var for var in ("pillar_height_normalized", "pillar_kbar") if var not in ds]
+        raise ParameterError(
+            "inputs_digest", digest, "a digest the curve's own variables reproduce",
+            (f"the curve lacks {', '.join(missing)}" if missing else
+             "its pillar_height_normalized, pillar_kbar and gap_map_normalized do not "
+             "reproduce it (files written before 2026-12-05 store heights and gap maps "
+             "rounded)") + "; pass the arrays to BrushParams(**attrs, heights=...) yourself")
+
     def __reduce__(self) -> tuple[type, tuple]:
         """Pickle as a call of the constructor on the init fields, so that
         unpickling (multiprocessing, joblib) validates again and stores the
@@ -397,6 +464,21 @@ class BrushParams:
 
 #: Per-pillar and per-element inputs (arrays) of `BrushParams`.
 ARRAY_FIELDS = ("heights", "kbar_values", "gap_map")
+
+
+def _fields_of(attrs: Mapping[str, object]) -> dict[str, object]:
+    """The scalar `BrushParams` fields among a curve file's attributes, 0/1
+    switches as bools (netCDF has no booleans; other values are left for
+    the constructor to refuse)."""
+    out = {}
+    for f in fields(BrushParams):
+        if not f.init or f.name in ARRAY_FIELDS or f.name == "backend" or f.name not in attrs:
+            continue
+        value = attrs[f.name]
+        if isinstance(f.default, bool) and is_integer(value) and value in (0, 1):
+            value = bool(value)
+        out[f.name] = value
+    return out
 #: Rough-brush fields and the defaults that give the flat brush.
 ROUGH_DEFAULTS = {"roughness": 0.0, "preload": 0.0, "kbar_spread": 0.0, "inputs_digest": ""}
 ROUGH_FIELDS = tuple(ROUGH_DEFAULTS)
