@@ -412,6 +412,43 @@ def test_the_parameters_own_label_map_is_accepted():
     assert b.attrs["parameter_hash"] == a.attrs["parameter_hash"]
 
 
+@pytest.mark.parametrize("args, kwargs, message", [
+    ((FLAT, None), {}, r"^options=None is invalid: allowed a SolverOptions: SolverOptions\(\)"),
+    ((FLAT, {"rtol": 1e-6}), {},
+     r"^options=\{'rtol': 1e-06\} is invalid: allowed a SolverOptions"),
+    ((SolverOptions(), FLAT), {}, r"^params='<SolverOptions>' is invalid: allowed a BrushParams"),
+    ((FLAT,), {"protocol": Waypoint("separation")},
+     (r"^protocol=Waypoint\(kind='separation', value=0.0\) is invalid \(a single Waypoint: "
+      r"put it in a list\): allowed None or a list of Waypoint, e.g. \[Waypoint\('force', "
+      r"-1.0\)")),
+    ((FLAT,), {"protocol": [("force", -1.0), ("separation", 0.0)]},
+     r"^protocol=\[\('force', -1.0\), .* \(element 0 is a tuple: write Waypoint\(kind, value\)\)"),
+    ((FLAT,), {"protocol": [Waypoint("force", -1.0), {"kind": "separation"}]},
+     r"^protocol=.* \(element 1 is a dict: write Waypoint"),
+    ((FLAT,), {"protocol": "separation"},
+     r"^protocol='separation' is invalid: allowed None or a list"),
+], ids=["options_none", "options_dict", "swapped", "bare_waypoint", "tuples", "dict", "str"])
+def test_containers_of_the_wrong_kind_are_refused_before_any_work(args, kwargs, message,
+                                                                   monkeypatch):
+    """They were TypeError and AttributeError from inside simulate."""
+    from brushcore import ParameterError
+    from brushcore.model import curve
+
+    def no_work(*a, **k):
+        raise AssertionError("built the layout before refusing")
+    monkeypatch.setattr(curve, "build_labels", no_work)
+    with pytest.raises(ParameterError, match=message):
+        simulate(*args, **kwargs)
+    with pytest.raises(ParameterError, match=message):
+        curve.simulate_protocol(*args, **kwargs)
+
+
+def test_a_tuple_of_waypoints_is_a_protocol():
+    listed = simulate(FLAT, protocol=[Waypoint("force", -0.5), Waypoint("separation")])
+    tupled = simulate(FLAT, protocol=(Waypoint("force", -0.5), Waypoint("separation")))
+    assert float(tupled.adhesive_force) == float(listed.adhesive_force)
+
+
 # --- numerics ---------------------------------------------------------------------------
 
 def _soft_blocks(compliance: float, seed: int, detached: float):

@@ -186,6 +186,52 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
     }
 
 
+#: How a protocol is written, for the refusals of other containers.
+PROTOCOL_EXAMPLE = "[Waypoint('force', -1.0), Waypoint('separation')]"
+
+
+def check_arguments(params: object, options: object, protocol: object) -> None:
+    """Refuse containers `simulate` cannot read, before any work: ``params``
+    not a BrushParams (swapped arguments), ``options`` not a SolverOptions
+    (None, a dict), ``protocol`` not None or a non-empty list or tuple of
+    Waypoint (a bare Waypoint, tuples, dicts).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``params``, ``options`` or ``protocol`` and what is allowed.
+    """
+    if not isinstance(params, BrushParams):
+        raise ParameterError("params", _shown(params), "a BrushParams, the first argument "
+                             "(simulate(params, options))")
+    if not isinstance(options, SolverOptions):
+        raise ParameterError("options", _shown(options),
+                             "a SolverOptions: SolverOptions() for the defaults, "
+                             "SolverOptions(rtol=1e-6) to change one")
+    if protocol is None:
+        return
+    if isinstance(protocol, Waypoint):
+        raise ParameterError("protocol", protocol, f"None or a list of Waypoint, e.g. "
+                             f"{PROTOCOL_EXAMPLE}", "a single Waypoint: put it in a list")
+    if not isinstance(protocol, (list, tuple)):
+        raise ParameterError("protocol", _shown(protocol),
+                             f"None or a list of Waypoint, e.g. {PROTOCOL_EXAMPLE}")
+    if not protocol:
+        raise ParameterError("protocol", list(protocol), "at least one Waypoint")
+    for k, leg in enumerate(protocol):
+        if not isinstance(leg, Waypoint):
+            raise ParameterError("protocol", _shown(protocol),
+                                 f"a list of Waypoint, e.g. {PROTOCOL_EXAMPLE}",
+                                 f"element {k} is a {type(leg).__name__}: write "
+                                 "Waypoint(kind, value)")
+
+
+def _shown(value: object) -> object:
+    """A value for a refusal: itself if short, else its type."""
+    text = repr(value)
+    return value if len(text) <= 80 else f"<{type(value).__name__}>"
+
+
 def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
     """The label map of ``params`` (`build_labels`), refusing any other map handed in.
 
@@ -272,12 +318,12 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     Raises
     ------
     ParameterError
-        Before any solve, for a layout or discretisation that cannot run,
-        ``labels`` other than the parameters' own map, an empty protocol or
-        a missing GPU.
+        Before any solve, for arguments of the wrong kind (``params``,
+        ``options``, ``protocol``: `check_arguments`), a layout or
+        discretisation that cannot run, ``labels`` other than the
+        parameters' own map, an empty protocol or a missing GPU.
     """
-    if protocol is not None and not len(protocol):
-        raise ParameterError("protocol", list(protocol), "at least one Waypoint")
+    check_arguments(params, options, protocol)
     if backend is not None:
         params = replace(params, backend=backend)
     resolve_backend(params.backend)  # a missing CuPy or card fails before any work
@@ -351,6 +397,7 @@ def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOption
     Waypoint values in ``protocol`` are normalised (F_K, d_K); ``labels``
     is None or the parameters' own map, as in `simulate`.
     """
+    check_arguments(params, options, protocol)
     resolve_backend(params.backend)  # before any work
     return _simulate_protocol(params, options, progress, own_labels(params, labels),
                               protocol)
