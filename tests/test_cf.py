@@ -50,6 +50,13 @@ def test_sweep_is_cf_clean(curve_files, tmp_path):
     sweep_nc = tmp_path / "sweep.nc"
     sweep = build_sweep(curve_files, keep_snapshots=[("regular", 4)])
     assert "case_kbar" in sweep.coords  # the snapshot cases are in the file checked
+    # regular brushes run double, random ones float32: which case ran which
+    assert sweep.attrs["fft_precision"] == "double; single"
+    precision = sweep["run_fft_precision"].sel(seed=0, grid=64)
+    assert precision.sel(layout="regular", n_pillars=16, kbar=float("inf")) == "double"
+    assert precision.sel(layout="random", n_pillars=4, kbar=1.0) == "single"
+    assert precision.sel(layout="random", n_pillars=16, kbar=1.0) == ""  # not run
+    assert "run_rtol" not in sweep  # the same for every curve: an attribute only
     write_sweep(sweep, sweep_nc)
     assert cf_errors(sweep_nc, tmp_path) == []
 

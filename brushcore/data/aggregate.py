@@ -376,7 +376,28 @@ def build_sweep(
         if values:
             sweep.attrs[name] = (next(iter(values.values())) if len(values) == 1
                                  else "; ".join(sorted(values)))
-    return sweep
+    return sweep.assign(_varying_settings(curves, coords, dims))
+
+
+def _varying_settings(curves: dict, coords: dict[str, np.ndarray],
+                      dims: Sequence[str]) -> dict[str, xr.DataArray]:
+    """``run_{name}`` per case for each solver setting and the commit that
+    differ between curves (a protocol's rtol shrinks with its load; regular
+    brushes run double and random ones float32; a resumed sweep may mix
+    versions): the joined attribute says that they differ, this says where.
+    Text, "" where no curve ran."""
+    out = {}
+    for name in (*SOLVER_ATTRIBUTES, "git_commit"):
+        if len({str(c.attrs.get(name, "")) for _, c in curves.values()}) < 2:
+            continue
+        values = np.full(tuple(len(coords[d]) for d in dims), "", dtype=object)
+        for key, (_, curve) in curves.items():
+            values[_index(coords, key, dims)] = str(curve.attrs.get(name, ""))
+        out[f"run_{name}"] = xr.DataArray(
+            values.astype(str), dims=dims,
+            attrs={"long_name": f"{name} the curve ran with (it differs between curves; "
+                                "'' where none ran)"})
+    return out
 
 
 def _attribute(curve: xr.Dataset, name: str) -> float:
