@@ -430,15 +430,10 @@ def test_rough_curves_get_the_time_their_approach_takes(repo_copy: Path,
     1024^2 it asks for 3 x the rough 8 x 8 brush's estimated 6 h (README),
     1085 min; a flat preload or a stiffness spread is a flat pull-off on the
     whole grid, 3 x random 64's 666 s plus 5 min, 39 min."""
-    config = tmp_path / "rough.yaml"
-    config.write_text(yaml.safe_dump({"regular": [16], "random": [], "kbar": [0.01],
-                                      "grid": 1024, "fig5": {"n_pillars": 16, "kbar": [0.01]},
-                                      "roughness": [0.0, 0.5], "preload": [1.0]}))
-    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
-                     str(config), "--forceall")
-    text = output(proc)
-    assert proc.returncode == 0, text
-    limits = {name: res["runtime"] for name, res in _planned_resources(text).items()}
+    _, planned = _plan_resources(repo_copy, tmp_path, {
+        "regular": [16], "random": [], "kbar": [0.01], "grid": 1024,
+        "fig5": {"n_pillars": 16, "kbar": [0.01]}, "roughness": [0.0, 0.5], "preload": [1.0]})
+    limits = {name: res["runtime"] for name, res in planned.items()}
     assert limits == {"regular/N16_kbar0.01_seed0_grid1024_phi0.12_S0.0_P1.0_C0.0": "39",
                       "regular/N16_kbar0.01_seed0_grid1024_phi0.12_S0.5_P1.0_C0.0": "1085"}, limits
 
@@ -449,16 +444,10 @@ def test_time_and_memory_requests_follow_the_measured_curves(repo_copy: Path,
     flat regular brushes (mirror quadrant) ask for far less than the random
     ones at 1024^2 and 2048^2 (12 and 52 min against 39 and 575), and memory
     keeps a margin over the measured 2.7 GiB at 2048^2 without asking for 17 GB."""
-    config = tmp_path / "grids.yaml"
-    config.write_text(yaml.safe_dump({"regular": [16], "random": [16], "kbar": [0.01],
-                                      "grid": [512, 1024, 2048],
-                                      "fig5": {"n_pillars": 16, "kbar": [0.01]}}))
-    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
-                     str(config), "--forceall")
-    text = output(proc)
-    assert proc.returncode == 0, text
-    asked = {name: (int(res["runtime"]), int(res["mem_mb"]))
-             for name, res in _planned_resources(text).items()}
+    text, planned = _plan_resources(repo_copy, tmp_path, {
+        "regular": [16], "random": [16], "kbar": [0.01], "grid": [512, 1024, 2048],
+        "fig5": {"n_pillars": 16, "kbar": [0.01]}})
+    asked = {name: (int(res["runtime"]), int(res["mem_mb"])) for name, res in planned.items()}
     assert asked == {
         "regular/N16_kbar0.01_seed0_grid512_phi0.12": (7, 1150),
         "regular/N16_kbar0.01_seed0_grid1024_phi0.12": (12, 5600),
@@ -473,15 +462,10 @@ def test_time_and_memory_requests_follow_the_measured_curves(repo_copy: Path,
 def test_runtime_cap_clips_every_request_and_says_so(repo_copy: Path, tmp_path: Path) -> None:
     """slurm_max_runtime_min clips each request above it (random 2048^2:
     575 -> 300 min), leaves the others and warns at plan time."""
-    config = tmp_path / "cap.yaml"
-    config.write_text(yaml.safe_dump({"regular": [], "random": [16], "kbar": [0.01],
-                                      "grid": [1024, 2048], "slurm_max_runtime_min": 300,
-                                      "fig5": {"n_pillars": 16, "kbar": [0.01]}}))
-    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
-                     str(config), "--forceall")
-    text = output(proc)
-    assert proc.returncode == 0, text
-    limits = {name: res["runtime"] for name, res in _planned_resources(text).items()}
+    text, planned = _plan_resources(repo_copy, tmp_path, {
+        "regular": [], "random": [16], "kbar": [0.01], "grid": [1024, 2048],
+        "slurm_max_runtime_min": 300, "fig5": {"n_pillars": 16, "kbar": [0.01]}})
+    limits = {name: res["runtime"] for name, res in planned.items()}
     assert limits == {"random/N16_kbar0.01_seed0_grid1024_phi0.12": "39",
                       "random/N16_kbar0.01_seed0_grid2048_phi0.12": "300",
                       "regular/N16_kbar0.01_seed0_grid1024_phi0.12": "12",
@@ -511,6 +495,19 @@ def _common_rules() -> dict:
     path = REPO / "workflow/rules/common.smk"
     exec(compile(path.read_text(), str(path), "exec"), scope)  # noqa: S102 - our own rules
     return scope
+
+
+def _plan_resources(repo_copy: Path, tmp_path: Path,
+                    settings: dict) -> tuple[str, dict[str, dict[str, str]]]:
+    """Dry-run the test config with ``settings`` on top: Snakemake's output
+    and the resources of every planned simulate job (`_planned_resources`)."""
+    config = tmp_path / "settings.yaml"
+    config.write_text(yaml.safe_dump(settings))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config), "--forceall")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    return text, _planned_resources(text)
 
 
 def _planned_resources(text: str) -> dict[str, dict[str, str]]:
