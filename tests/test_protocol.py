@@ -338,8 +338,9 @@ def test_protocol_that_never_retracts_reports_no_pull_off(tmp_path):
     from brushcore.data.io import read_curve, write_curve
 
     heights = np.array([0.2, 0.0, -0.1, 0.05, 0.15, -0.2, 0.0, 0.1, -0.05])
-    ds = simulate(BrushParams("regular", 9, 0.003, 48, heights=heights),
-                  protocol=[Waypoint("force", -1.0)])
+    with pytest.warns(UserWarning, match="never retracts: adhesive_force and work"):
+        ds = simulate(BrushParams("regular", 9, 0.003, 48, heights=heights),
+                      protocol=[Waypoint("force", -1.0)])
     assert not ds.retraction.values.any()
     for name in ("adhesive_force_normalized", "work_of_separation_normalized",
                  "displacement_at_adhesive_force"):

@@ -7,6 +7,7 @@ import datetime as dt
 import hashlib
 import math
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -433,6 +434,10 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     d, f = curve.displacement, curve.force
     ret = curve.retraction
     i_max, f_ad, d_ad, work = _retraction_peak(d, f, ret)
+    if not ret.any():  # a loading-only protocol is legitimate, but say why F_ad is NaN
+        warnings.warn("the protocol never retracts: adhesive_force and work_of_separation "
+                      "are NaN (end it with Waypoint('separation') for a pull-off)",
+                      stacklevel=3)
     dissipated = loop_energy(d, f)
     area = curve.attached_elements * h * h
     n_pillars = op.n_pillars
