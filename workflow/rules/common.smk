@@ -189,27 +189,24 @@ def check_cases(config):
 
 
 def check_cluster_threads(config, cores, jobs, main):
-    """Stop a cluster run whose `cores` differs from the config's `threads`.
+    """Stop a run with `--jobs` whose `cores` would cut the config's `threads`.
 
-    With a cluster executor (`jobs` given: `--jobs`, the Slurm profile's
-    `jobs`) Snakemake caps every rule's threads at `cores`, and the job asks
-    Slurm for that many CPUs: a larger `threads` would be cut down without a
-    word.  A larger `cores` sizes a bundle of simulations as if its members
-    ran side by side, where they run one after another (README, "How jobs
-    are bundled").  `main`: only the Snakemake that plans the run checks
-    (the ones inside a Slurm job run with the node's cores).
+    With `jobs` given (`--jobs`, the Slurm profile's `jobs`) Snakemake caps
+    every rule's threads at `cores`, and on a cluster the job asks Slurm for
+    that many CPUs: `threads: 2` under the profile's `cores: 1` ran one
+    thread without a word.  (The Snakefile cannot see the executor while it
+    is read, so a local run with `--jobs` and too few `--cores` stops too;
+    its threads would be cut all the same.)  A larger `cores` is harmless:
+    a job asks for `threads` CPUs.  `main`: only the Snakemake that plans
+    the run checks (the ones inside a Slurm job run with the node's cores).
     """
     threads = int(config["threads"])
-    if jobs is None or not main or cores is None or int(cores) == threads:
+    if jobs is None or not main or cores is None or int(cores) >= threads:
         return
-    why = (f"each Slurm job would ask for {cores} CPU(s) and run {cores} thread(s), "
-           f"not {threads}"
-           if int(cores) < threads else
-           "a bundle of simulations would be sized as if its members ran side by side")
     raise ConfigError(
-        f"config key 'threads': {threads}, but Snakemake's cores is {cores}, and on a "
-        f"cluster the two must agree ({why}): set `cores: {threads}` in the profile or "
-        f"pass --cores {threads}")
+        f"config key 'threads': {threads}, but Snakemake's cores is {cores}, which caps "
+        f"every job at {cores} thread(s) (and on a cluster {cores} CPU(s)): set "
+        f"`cores: {threads}` in the profile or pass --cores {threads}")
 
 
 #: Deterministic layouts: their label maps are built at plan time, and a flat
