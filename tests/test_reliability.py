@@ -555,8 +555,8 @@ def test_terminated_job_logs_where_it_stood_and_exits_143(tmp_path: Path, capfd)
             time.sleep(30)  # the handler interrupts this
     assert stop.value.code == 143
     assert log.read_text() == (
-        "working\nterminated (SIGTERM: scancel or the time limit) at event 12, 25.0 % of the "
-        "contact detached, after 0 s; nothing written\n")
+        "working\nterminated (SIGTERM: scancel or the time limit) at event 12, 750 of 1000 "
+        "pillar elements in contact, after 0 s; nothing written\n")
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # the handler is gone again
     assert "Traceback" not in capfd.readouterr().err
 
@@ -588,8 +588,8 @@ def test_simulate_script_killed_by_sigterm_writes_no_curve(tmp_path: Path) -> No
     lines = log.read_text().splitlines()
     assert len(lines) == 2 and "Traceback" not in log.read_text(), lines
     assert re.fullmatch(r"terminated \(SIGTERM: scancel or the time limit\) (at event \d+, "
-                        r"[\d.]+ % of the contact detached|before the first event), after \d+ s; "
-                        r"nothing written", lines[1]), lines
+                        r"\d+ of \d+ pillar elements in contact|before the first event), "
+                        r"after \d+ s; nothing written", lines[1]), lines
     assert sorted(p.name for p in tmp_path.iterdir()) == ["job.log"]
 
 

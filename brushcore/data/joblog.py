@@ -46,23 +46,26 @@ class CurveClock:
     """Where a job's curve stands, for the line a killed job leaves.
 
     A progress callback (``progress(events, attached, total)``, called after
-    each event) that records the last event and the share of contact
-    elements detached; the clock starts when it is made.
+    each event) that records the last event and the pillar elements in
+    contact; the clock starts when it is made.  Counts, not a share
+    detached: a rough brush's approach attaches elements.
     """
 
     def __init__(self) -> None:
         self.started = time.monotonic()
         self.events: int | None = None
-        self.detached = 0.0
+        self.attached = 0
+        self.total = 0
 
     def __call__(self, events: int, attached: int, total: int) -> None:
-        self.events = events
-        self.detached = 1.0 - attached / total if total else 0.0
+        self.events, self.attached, self.total = events, attached, total
 
     def where(self) -> str:
-        """'at event E, P % of the contact detached, after T s' (or 'before the first event')."""
+        """'at event E, A of T pillar elements in contact, after S s' (or
+        'before the first event, after S s')."""
         at = ("before the first event" if self.events is None else
-              f"at event {self.events}, {100 * self.detached:.1f} % of the contact detached")
+              f"at event {self.events}, {self.attached} of {self.total} pillar elements in "
+              "contact")
         return f"{at}, after {time.monotonic() - self.started:.0f} s"
 
 

@@ -1,0 +1,61 @@
+"""The workflow's simulate job: one (layout, N, kbar, seed, shape, ...) -> one curve file.
+
+`workflow/scripts/simulate.py` only calls `run_job`: Snakemake reruns every
+finished curve when a rule's script changes (its "code" trigger), and not
+when a module it imports does, so the job's logic lives here.
+"""
+
+from __future__ import annotations
+
+from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm
+
+
+def run_job(smk) -> None:
+    """Run the job Snakemake describes (``snakemake`` of a script rule):
+    its log, its SIGTERM line (Slurm's time limit, scancel: status 143, no
+    curve) and the curve file."""
+    clock = CurveClock()
+    with logged(smk.log[0]), stops_on_sigterm(clock.where):
+        _simulate(smk, clock)
+
+
+def _simulate(smk, clock: CurveClock) -> None:
+    """Build the brush from the job's wildcards and params, pull it off, write the curve."""
+    from brushcore import BrushParams, SolverOptions, simulate
+    from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
+    from brushcore.data.joblog import parent_watch
+    from brushcore.numerics.threads import pin_threads
+
+    orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
+
+    def progress(events: int, attached: int, total: int) -> None:
+        clock(events, attached, total)  # for the line a SIGTERM leaves
+        orphaned()
+
+    check_output_path(smk.output[0])  # an unwritable folder fails now, not after the solve
+    remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
+    pin_threads(smk.threads)
+    w = smk.wildcards
+    params = BrushParams(
+        layout=w.layout,
+        n_pillars=int(w.n_pillars),
+        kbar=float(w.kbar),
+        grid=int(w.grid),
+        phi=float(w.phi),
+        seed=int(w.seed),
+        allow_coarse=bool(smk.config["allow_coarse"]),
+        backend=smk.config["backend"],
+        **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
+        **smk.params.shape,  # shape, aspect, orientation; {} for discs
+    )
+    print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
+    curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress)
+    orphaned()
+    write_curve(curve, smk.output[0])
+    print(
+        f"F_ad = {float(curve['adhesive_force_normalized']):.6g}, "
+        f"W = {float(curve['work_of_separation_normalized']):.6g} (normalised), "
+        f"{curve.attrs.get('events')} events, {curve.attrs.get('wall_time_s', float('nan')):.3g} s; "
+        f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements, "
+        f"phi realised {curve.attrs['phi_actual']:.4g}"
+    )
