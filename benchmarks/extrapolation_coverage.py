@@ -9,8 +9,9 @@ from grid to grid is of that size), for true orders p = 0.5 ... 1.5.  For
 each case it prints the share of fits kept (not flagged meaningless), and
 among those the share whose band f0 +- U holds the true f0 (what the error
 is for), whose band finest +- U holds it (what it is not for), the share
-of all draws kept *and* covered, the median U / f0, and the share kept
-with the `not_asymptotic` flag.  The Monte Carlo standard error of a
+of all draws kept *and* covered, the median U / f0, and the share of all
+draws flagged `not_asymptotic` (its false-alarm rate: the data follow the
+power law, and only the scatter makes the fine end diverge).  The Monte Carlo standard error of a
 share s over k fits is sqrt(s (1 - s) / k): about 1 % at 1,000 draws.
 """
 

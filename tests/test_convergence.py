@@ -503,3 +503,5 @@ def test_summary_gives_the_seed_count_and_a_t_interval():
         pytest.approx(f[:2].mean())
     one = sweep.isel(seed=[0])
     assert seed_note(one, "adhesive_force_normalized", "random", 64, 1e-4) == ""
+    lattice = sweep.assign_coords(layout=["regular"])  # seed 0 only, by design
+    assert seed_note(lattice, "adhesive_force_normalized", "regular", 64, 1e-4) == ""

@@ -35,7 +35,7 @@ Method
   - Fs = 1.25 only where the observed order is one the data can be trusted
     with (``trusted_order``, 0.5 ... 1.1: Eca & Hoekstra's band about the
     expected order, here 1), the values are monotone and (four or more
-    grids) the three finest converge on their own; otherwise Fs = 3, and
+    grids) the three finest do not diverge; otherwise Fs = 3, and
     the correction |f1 - f0| is the larger of those with the observed
     order and with the nearest trusted one (Roache's Fs = 3 where the order
     is not confirmed; an observed p of 3.9 would otherwise give the tightest
@@ -60,9 +60,10 @@ Method
   ``poor_fit`` (order outside ``order_range``, no positive order (the
   differences grow under refinement), an rms residual above
   ``max_relative_residual`` of the range of f, or an infinite value),
-  ``not_asymptotic`` (four or more grids whose three finest values alone
-  oscillate or diverge: the fit rests on the coarse grids; the value is
-  kept, with Fs = 3).
+  ``not_asymptotic`` (four or more grids whose three finest values move
+  apart ever faster, monotone with no positive order: the fit rests on the
+  coarse grids; the value is kept, with Fs = 3; an oscillating fine end is
+  ``non_monotone``).
   Where a flag makes (1) meaningless, f0 and the error are NaN; the order
   that was observed is kept (negative when the differences grow under
   refinement, on three grids), NaN when none was (oscillation, no root
@@ -371,10 +372,11 @@ def extrapolate(
         # Converged to rounding: nothing to extrapolate, and no order to observe.
         return result(value=finest, error=0.0, gci=0.0, resid=0.0)
     monotone = is_monotone(f, atol=flat)
-    # Four or more grids: does the fine end converge on its own?  A fit can
-    # follow the coarse grids while the three finest diverge (8 x 8 rigid on
-    # 256-2048: p 0.41 over four, differences growing over the finest three).
-    fine_end = n > 3 and not _converging(h[:3], f[:3], flat, opts.order_bounds)
+    # Four or more grids: does the fine end diverge?  A fit can follow the
+    # coarse grids while the three finest move apart ever faster (8 x 8 rigid
+    # on 256-2048: p 0.41 over four, differences growing over the finest
+    # three).  An oscillating fine end is already non_monotone.
+    fine_end = n > 3 and _diverging(h[:3], f[:3], flat, opts.order_bounds)
     if not monotone and n == 3:
         # Three points that oscillate admit no f0 + C h^p with p > 0.
         return result(non_monotone=True)
@@ -417,16 +419,14 @@ def extrapolate(
                   non_monotone=not monotone, not_asymptotic=fine_end)
 
 
-def _converging(h: np.ndarray, f: np.ndarray, flat: float,
-                bounds: tuple[float, float]) -> bool:
-    """Whether three values (finest first) converge: equal to rounding, or
-    monotone with a positive observed order."""
-    if np.all(np.abs(np.diff(f)) <= flat):
-        return True
-    if not is_monotone(f, atol=flat):
+def _diverging(h: np.ndarray, f: np.ndarray, flat: float,
+               bounds: tuple[float, float]) -> bool:
+    """Whether three monotone values (finest first) move apart ever faster
+    under refinement: no positive observed order."""
+    if np.all(np.abs(np.diff(f)) <= flat) or not is_monotone(f, atol=flat):
         return False
     p = _three_grid_order(h, f, bounds)
-    return bool(np.isfinite(p) and p > 0)
+    return not (np.isfinite(p) and p > 0)
 
 
 # ---------------------------------------------------------------------------
@@ -450,8 +450,8 @@ _OUTPUTS = {
     "non_monotone": ("{q} oscillates under refinement (1 = yes)", True),
     "poor_fit": ("{q} does not follow f0 + C h^p with a plausible order (1 = yes)", True),
     "too_few_grids": ("fewer than {min_grids} grids with a finite {q} (1 = yes)", True),
-    "not_asymptotic": ("the three finest grids alone show no convergence of {q} (they "
-                       "oscillate or their differences grow; 1 = yes)", True),
+    "not_asymptotic": ("{q} on the three finest grids moves apart ever faster (their "
+                       "differences grow under refinement; 1 = yes)", True),
 }
 
 

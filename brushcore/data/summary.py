@@ -49,12 +49,12 @@ def seed_mean(sweep: xr.Dataset, name: str, layout: str, n_pillars: int) -> xr.D
 
 
 def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> str:
-    """How many seeds a seed mean rests on, and their scatter, as a note:
-    "" for a sweep of one seed; else "F_ad mean of k seeds, SD s, 95 % t-interval
+    """How many seeds a random brush's seed mean rests on, and their scatter,
+    as a note: "" for a sweep of one seed or another layout; else "F_ad mean of k seeds, SD s, 95 % t-interval
     +- t s / sqrt(k)" (sample SD, Student's t with k - 1 degrees of freedom:
     4.30 for three seeds, not 1.96), saying when seeds are missing."""
-    if sweep.sizes.get("seed", 1) < 2 or layout not in sweep.layout:
-        return ""
+    if sweep.sizes.get("seed", 1) < 2 or layout != "random" or layout not in sweep.layout:
+        return ""  # flat lattices run seed 0 only: nothing drawn, nothing missing
     runs = sweep[name].sel(layout=layout, n_pillars=n_pillars)
     hit = np.flatnonzero(np.isclose(runs.kbar.values, kbar, rtol=1e-9, atol=0.0))
     if not hit.size:
