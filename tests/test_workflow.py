@@ -489,6 +489,23 @@ def test_a_retry_asks_for_twice_the_time_and_the_same_memory() -> None:
     assert list(inspect.signature(common["simulate_mem_mb"]).parameters) == ["wildcards"]
 
 
+def test_time_requests_follow_the_solver_settings() -> None:
+    """symmetry: false solves a regular brush on the whole grid, exact mode's
+    global cascades run 4-6x longer, double transforms 1.5x on a random
+    brush: the requests follow (2048^2: regular 52 min by default)."""
+    runtime = _common_rules()["simulate_runtime"]
+    regular = type("Wildcards", (), {"layout": "regular", "shape": "", "rough": "",
+                                     "grid": "2048"})()
+    random = type("Wildcards", (), {"layout": "random", "shape": "", "rough": "",
+                                    "grid": "1024"})()
+    assert runtime({})(regular, 1) == 52  # 5 + 3 x 922 s
+    assert runtime({"solver": {"symmetry": False}})(regular, 1) == 575  # 5 + 3 x 11,400 s
+    exact = {"solver": {"rtol": 1e-8, "cascade": "global", "precision": "double"}}
+    assert runtime(exact)(regular, 1) == 282  # 5 + 6 x 3 x 922 s
+    assert runtime(exact)(random, 1) == 307  # 5 + 6 x 1.5 x 3 x 670 s
+    assert runtime({"solver": {"precision": "double"}})(random, 1) == 56  # 5 + 1.5 x 3 x 670 s
+
+
 def _common_rules() -> dict:
     """The functions of workflow/rules/common.smk (plain Python), as the Snakefile sees them."""
     scope: dict = {}

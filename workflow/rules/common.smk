@@ -414,11 +414,32 @@ RUNTIME_SAFETY = 3
 RUNTIME_OVERHEAD_MIN = 5
 
 
-def curve_kind(layout, shape, rough):
-    """The `SLOWEST_CURVE_S` kind of a curve from its wildcards (shape and rough suffixes)."""
+#: How much slower than the defaults the config's solver settings run: the
+#: paper's global cascades or a reference tolerance (exact mode: the rigid
+#: 8 x 8 brush at 2048^2 took 40 min against 379 s, 6.3x; a regular brush
+#: at 256^2 3.9x), and double-precision transforms where random brushes
+#: would run single (45 % more job time over the sweep's random curves).
+EXACT_SLOWDOWN = 6.0
+DOUBLE_SLOWDOWN = 1.5
+
+
+def curve_kind(layout, shape, rough, solver=None):
+    """The `SLOWEST_CURVE_S` kind of a curve from its wildcards (shape and rough
+    suffixes) and the config's solver settings (``symmetry: false`` solves a
+    regular brush on the whole grid)."""
     if parse_rough_tag(rough).get("roughness", 0.0) > 0:
         return "rough"
-    return "mirror" if layout == "regular" and not shape and not rough else "whole"
+    folded = (solver or {}).get("symmetry", True)
+    return "mirror" if layout == "regular" and not shape and not rough and folded else "whole"
+
+
+def solver_slowdown(solver, kind):
+    """Factor on a curve's time for the config's solver settings (see
+    `EXACT_SLOWDOWN`, `DOUBLE_SLOWDOWN`); 1 for the defaults."""
+    solver = solver or {}
+    exact = solver.get("cascade", "local") == "global" or float(solver.get("rtol", 1e-4)) < 1e-6
+    double = kind == "whole" and solver.get("precision", "auto") == "double"
+    return (EXACT_SLOWDOWN if exact else 1.0) * (DOUBLE_SLOWDOWN if double else 1.0)
 
 
 def slowest_curve_s(kind, grid):
@@ -437,15 +458,18 @@ def slowest_curve_s(kind, grid):
     return measured[lower] * (grid / lower) ** slope
 
 
-def curve_minutes(layout, shape, rough, grid):
+def curve_minutes(layout, shape, rough, grid, solver=None):
     """Time limit of a curve's first attempt [min]: `RUNTIME_SAFETY` x the
-    slowest measured curve of its kind and grid, plus `RUNTIME_OVERHEAD_MIN`.
+    slowest measured curve of its kind and grid, times `solver_slowdown` of
+    the config's ``solver`` settings, plus `RUNTIME_OVERHEAD_MIN`.
 
-    1024^2: 12 min regular, 39 min random, 18 h rough; 2048^2: 52 min
-    regular, 9.6 h random.  The time does not shrink with `threads`: the
-    measurements are on one thread, and a second gains at most 2x.
+    With the default solver: 1024^2 12 min regular, 39 min random, 18 h
+    rough; 2048^2 52 min regular, 9.6 h random.  The time does not shrink
+    with `threads`: the measurements are on one thread, and a second gains
+    at most 2x.
     """
-    seconds = RUNTIME_SAFETY * slowest_curve_s(curve_kind(layout, shape, rough), grid)
+    kind = curve_kind(layout, shape, rough, solver)
+    seconds = (RUNTIME_SAFETY * slowest_curve_s(kind, grid) * solver_slowdown(solver, kind))
     return math.ceil(RUNTIME_OVERHEAD_MIN + seconds / 60)
 
 
@@ -457,7 +481,7 @@ def simulate_runtime(config):
 
     def runtime(wildcards, attempt):
         minutes = attempt * curve_minutes(wildcards.layout, wildcards.shape, wildcards.rough,
-                                          int(wildcards.grid))
+                                          int(wildcards.grid), config.get("solver"))
         return minutes if cap is None else min(minutes, int(cap))
 
     return runtime
@@ -469,7 +493,7 @@ def clipped_runtimes(config):
     cap = config.get("slurm_max_runtime_min")
     if cap is None:
         return None
-    asked = [(curve_minutes(layout, shape, rough, grid), curve_file(
+    asked = [(curve_minutes(layout, shape, rough, grid, config.get("solver")), curve_file(
                  layout, n, kbar, seed, grid, phi, rough, shape))
              for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config)]
     over = sorted((a for a in asked if a[0] > int(cap)), reverse=True)
