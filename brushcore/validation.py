@@ -97,7 +97,8 @@ def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...]) ->
             object.__setattr__(obj, name, value[()])
     for name in integers:
         value = getattr(obj, name)
-        if is_real(value) and not is_integer(value) and float(value).is_integer():
+        if (is_real(value) and not is_integer(value) and float(value).is_integer()
+                and abs(value) < 2.0**63):  # 1e20 stays as typed, for the range check to name
             value = int(value)  # 64.0, as JSON Schema and the config take it
         if is_integer(value):
             object.__setattr__(obj, name, int(value))

@@ -179,6 +179,12 @@ def test_an_infinite_value_is_flagged_not_taken_for_a_grid_not_run():
     h = 1.0 / np.array([256.0, 512.0, 1024.0, 2048.0])
     e = extrapolate(h, [1.04, 1.02, 1.01, np.inf])
     assert e.poor_fit and math.isnan(e.value) and e.n_grids == 4
+    sweep = _sweep()
+    sweep["adhesive_force_normalized"][0, 0, 0, 0, 3] = np.inf
+    conv = extrapolate_sweep(sweep).sel(layout="regular", seed=0, n_pillars=64, kbar=1e-6)
+    q = "adhesive_force_normalized"
+    assert int(conv[f"{q}_poor_fit"]) == 1
+    assert float(conv[f"{q}_finest_grid"]) == 1024 and np.isinf(float(conv[f"{q}_finest"]))
 
 
 def test_large_residual_is_poor_fit():
@@ -217,9 +223,10 @@ def test_bad_input_raises():
         extrapolate([0.1, -0.2, 0.3], [1, 2, 3])
     with pytest.raises(ValueError, match="min_grids"):
         ConvergenceOptions(min_grids=2)
+    assert ConvergenceOptions(min_grids=np.int64(4)).min_grids == 4
     for bad in ({"safety_factor": math.nan}, {"trusted_order": (2.0, 1.0)},
                 {"max_relative_residual": -1.0}, {"order_bounds": (0.0, 3.0)},
-                {"safety_factor": 4.0}):
+                {"safety_factor": 4.0}, {"order_range": 1.0}):
         with pytest.raises(ParameterError, match=next(iter(bad))):
             ConvergenceOptions(**bad)
 

@@ -33,7 +33,7 @@ def test_numpy_scalars_are_accepted_and_normalised():
 
 @pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.5), ("grid", "64"),
                                          ("kbar", np.bool_(True)), ("grid", np.array([64])),
-                                         ("seed", float("inf"))])
+                                         ("seed", float("inf")), ("seed", 1e20)])
 def test_non_numbers_are_still_refused(field, value):
     args = {"layout": "regular", "n_pillars": 16, "kbar": 0.1, "grid": 64, field: value}
     with pytest.raises(ParameterError, match=field):

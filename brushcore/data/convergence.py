@@ -102,7 +102,7 @@ import xarray as xr
 from scipy import optimize
 
 from brushcore.model import provenance
-from brushcore.validation import is_integer, is_real, require
+from brushcore.validation import is_integer, is_real, normalise, require
 
 #: Results the workflow extrapolates.
 QUANTITIES = ("adhesive_force_normalized", "work_of_separation_normalized")
@@ -163,11 +163,14 @@ class ConvergenceOptions:
     flat_rtol: float = 1e-12
 
     def __post_init__(self) -> None:
+        normalise(self, ("min_grids",), ("safety_factor", "scattered_safety_factor",
+                                         "max_relative_residual", "flat_rtol"))
         require(is_integer(self.min_grids) and self.min_grids >= 3, "min_grids",
                 self.min_grids, "an integer >= 3 (three unknowns f0, C, p)")
         for name in ("order_range", "trusted_order", "order_bounds"):
             pair = getattr(self, name)
-            require(len(pair) == 2 and all(is_real(v) and math.isfinite(v) for v in pair)
+            require(isinstance(pair, (tuple, list)) and len(pair) == 2
+                    and all(is_real(v) and math.isfinite(v) for v in pair)
                     and 0 <= pair[0] < pair[1] and (name != "order_bounds" or pair[0] > 0),
                     name, pair, "(low, high) with 0 <= low < high"
                     + (", low > 0" if name == "order_bounds" else ""))
@@ -444,7 +447,7 @@ _OUTPUTS = {
     "spread": ("half range of {q} over the grids", False),
     "gci": ("grid convergence index of the finest {q} (Roache; Fs 1.25 at a trusted "
             "order, else 3)", False),
-    "n_grids": ("grids with a finite {q}", False),
+    "n_grids": ("grids with a value of {q} (not NaN)", False),
     "safety_factor": ("safety factor Fs of the {q} error (1.25 at a trusted order, else 3)",
                       False),
     "non_monotone": ("{q} oscillates under refinement (1 = yes)", True),
@@ -465,7 +468,7 @@ def _apply(values: np.ndarray, h: np.ndarray, opts: ConvergenceOptions) -> tuple
 def _end_index(values: np.ndarray, end: int) -> int:
     """Index (along grid, ascending n) of the coarsest (``end`` 0) or finest
     (``end`` -1) finite value, -1 if none."""
-    idx = np.flatnonzero(np.isfinite(values))
+    idx = np.flatnonzero(~np.isnan(values))  # an inf is a value (flagged), not a grid not run
     return int(idx[end]) if idx.size else -1
 
 
