@@ -221,22 +221,23 @@ def test_top_level_exports_what_a_notebook_needs():
     assert {"read_curve", "write_curve"} <= set(brushcore.__all__)
 
 
-def test_from_layout_file_takes_count_grid_and_phi_from_the_file(tmp_path):
+def test_file_params_takes_count_grid_and_phi_from_the_file(tmp_path):
     """As --layout file does; BrushParams itself wanted phi=0.1201171875 typed out."""
+    from brushcore import file_params
     from brushcore.model.layout_file import save_label_map
 
     regular = BrushParams("regular", 16, 0.01, 64)
     labels = build_labels(regular)
     path = save_label_map(labels, tmp_path / "lab.npy")
-    p = BrushParams.from_layout_file(path, 0.01, seed=2, h=1e-6)
+    p = file_params(path, 0.01, seed=2, h=1e-6)
     assert (p.layout, p.n_pillars, p.grid, p.layout_file) == ("file", 16, 64, str(path))
     assert p.phi == np.count_nonzero(labels >= 0) / 64**2 and p.seed == 2 and p.h == 1e-6
     assert np.array_equal(build_labels(p), labels)
-    assert BrushParams.from_layout_file(path, kbar=0.01, grid=64) == replace(p, h=1.0, seed=0)
+    assert file_params(path, kbar=0.01, grid=64) == replace(p, h=1.0, seed=0)
     with pytest.raises(ParameterError, match=r"^n_pillars=9 is invalid: allowed 16, the value"):
-        BrushParams.from_layout_file(path, 0.01, n_pillars=9)
+        file_params(path, 0.01, n_pillars=9)
     with pytest.raises(ParameterError, match=r"^layout_file="):
-        BrushParams.from_layout_file(tmp_path / "missing.npy", 0.01)
+        file_params(tmp_path / "missing.npy", 0.01)
 
 
 def _tilt(grid: int) -> np.ndarray:

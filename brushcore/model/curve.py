@@ -240,7 +240,7 @@ def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
     may pass it; building it again costs under 0.1 s even at 2048^2.  Any
     other map would run a brush that ``params`` and the curve's
     ``parameter_hash`` do not describe; a layout of one's own is a file
-    layout (``layout="file"``, `BrushParams.from_layout_file`).
+    layout (``layout="file"``, `brushcore.file_params`).
 
     Raises
     ------
@@ -267,7 +267,7 @@ def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
             f"{built.shape[0]} x {built.shape[1]} map of {params.n_pillars} pillars)",
             "another map would run a brush the parameters and parameter_hash do not "
             "describe; a layout of one's own goes through layout='file' "
-            "(BrushParams.from_layout_file)")
+            "(brushcore.file_params)")
     return built
 
 

@@ -81,7 +81,7 @@ class BrushParams:
         "file" (the label map or image in ``layout_file``).
     n_pillars : number of pillars N >= 1 (a perfect square for "regular",
         rows x columns near the hexagonal aspect for "hexagonal", the
-        file's count for "file": `from_layout_file` fills it in, with grid
+        file's count for "file": `brushcore.file_params` fills it in, with grid
         and phi).
     kbar : normalised spring stiffness k / (E* L) in [1e-9, inf] (`MIN_KBAR`); inf = rigid.
     grid : elements per side n of the square L x L holding the pillars.
@@ -108,7 +108,7 @@ class BrushParams:
         a side of a square [degrees] (0 for discs).
     layout_file : path of the ``.npy`` label map or ``.png`` image of a
         "file" layout ("" otherwise).  Its n_pillars, grid and phi must be
-        the file's; `from_layout_file` fills them in.
+        the file's; `brushcore.file_params` fills them in.
     roughness : standard deviation S in [0, 1e3] of Gaussian pillar heights, in
         units of d_K = sqrt(2 pi dgamma a0 / E*) (a0 = sqrt(A / pi), A the
         discretised pillar area), drawn from ``seed`` (also for regular
@@ -304,31 +304,6 @@ class BrushParams:
                  self.kbar_spread, "0 when kbar_values are given (they are exclusive)")
         object.__setattr__(self, "inputs_digest", digest.hexdigest()[:16]
                            if any(getattr(self, k) is not None for k in ARRAY_FIELDS) else "")
-
-    @classmethod
-    def from_layout_file(cls, path: str | os.PathLike, kbar: float,
-                         **fields: object) -> BrushParams:
-        """The parameters of a file layout, with ``n_pillars``, ``grid`` and
-        ``phi`` taken from the file, as ``--layout file`` does.
-
-        Parameters
-        ----------
-        path : the ``.npy`` label map or ``.png`` image (see
-            `brushcore.model.layout_file`)
-        kbar : normalised spring stiffness k / (E* L)
-        **fields : any other field (e_star, h, roughness, heights, ...);
-            n_pillars, grid or phi, if given, must be the file's
-
-        Raises
-        ------
-        ParameterError
-            For ``layout_file`` when the file is refused, for n_pillars, grid
-            or phi when a given value is not the file's, and as the
-            constructor for the other fields.
-        """
-        from brushcore.model.layout_file import file_params  # it imports this module
-
-        return file_params(path, kbar, **fields)
 
     @classmethod
     def from_attrs(cls, attrs: Mapping[str, object]) -> BrushParams:
