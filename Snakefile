@@ -26,8 +26,8 @@ check_cases(config)
 check_cluster_threads(config, workflow.resource_settings.cores,
                       workflow.resource_settings.nodes,
                       main=not (workflow.remote_exec or workflow.subprocess_exec))
-if clipped_runtimes(config):
-    logger.warning(clipped_runtimes(config))
+if clipped := clipped_runtimes(config):  # one walk over the sweep's cases
+    logger.warning(clipped)
 
 
 report: "workflow/report/workflow.rst"

@@ -50,16 +50,17 @@ def seed_mean(sweep: xr.Dataset, name: str, layout: str, n_pillars: int) -> xr.D
 
 def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> str:
     """How many seeds a random brush's seed mean rests on, and their scatter,
-    as a note: "" for a sweep of one seed or another layout; else "F_ad mean of k seeds, SD s, 95 % t-interval
-    +- t s / sqrt(k)" (sample SD, Student's t with k - 1 degrees of freedom:
-    4.30 for three seeds, not 1.96), saying when seeds are missing."""
+    as a note: "" for a sweep of one seed or another layout; else "F_ad mean
+    of k seeds, SD s, 95 % t-interval +- t s / sqrt(k)" (sample SD,
+    Student's t with k - 1 degrees of freedom: 4.30 for three seeds, not
+    1.96), saying when seeds are missing."""
     if sweep.sizes.get("seed", 1) < 2 or layout != "random" or layout not in sweep.layout:
         return ""  # flat lattices run seed 0 only: nothing drawn, nothing missing
     runs = sweep[name].sel(layout=layout, n_pillars=n_pillars)
-    hit = np.flatnonzero(np.isclose(runs.kbar.values, kbar, rtol=1e-9, atol=0.0))
-    if not hit.size:
+    at = _kbar_index(runs.kbar.values, kbar)
+    if at is None:
         return ""
-    values = runs.isel(kbar=hit[0]).values.ravel()
+    values = runs.isel(kbar=at).values.ravel()
     values = values[np.isfinite(values)]
     k, total = int(values.size), int(sweep.sizes["seed"])
     missing = f" ({total - k} of {total} seeds missing)" if k < total else ""
@@ -74,8 +75,15 @@ def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: f
 def value_at(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> float:
     """Seed-averaged value of one case, NaN when the case was not run."""
     series = seed_mean(sweep, name, layout, n_pillars)
-    hit = np.flatnonzero(np.isclose(series.kbar.values, kbar, rtol=1e-9, atol=0.0))
-    return float(series.values[hit[0]]) if hit.size else math.nan
+    at = _kbar_index(series.kbar.values, kbar)
+    return math.nan if at is None else float(series.values[at])
+
+
+def _kbar_index(kbars: np.ndarray, kbar: float) -> int | None:
+    """Position of ``kbar`` among ``kbars`` (to 1e-9, as a config's values
+    survive the file names), None if it was not run."""
+    hit = np.flatnonzero(np.isclose(kbars, kbar, rtol=1e-9, atol=0.0))
+    return int(hit[0]) if hit.size else None
 
 
 def rigid_end(sweep: xr.Dataset, layout: str, n_pillars: int) -> tuple[float, float]:

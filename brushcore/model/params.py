@@ -428,7 +428,7 @@ class BrushParams:
         """
         out = {}
         for k, v in asdict(self).items():
-            if k in ARRAY_FIELDS or k == "backend":  # inputs, not where they ran
+            if k in NOT_ATTRIBUTES:
                 continue
             if k in ROUGH_FIELDS and v == ROUGH_DEFAULTS[k]:
                 continue
@@ -438,6 +438,9 @@ class BrushParams:
 
 #: Per-pillar and per-element inputs (arrays) of `BrushParams`.
 ARRAY_FIELDS = ("heights", "kbar_values", "gap_map")
+#: Fields `as_attrs` leaves out: the arrays (curve variables, represented by
+#: ``inputs_digest``) and where a run ran (``backend``), not what it solved.
+NOT_ATTRIBUTES = (*ARRAY_FIELDS, "backend")
 
 
 def _fields_of(attrs: Mapping[str, object]) -> dict[str, object]:
@@ -446,13 +449,15 @@ def _fields_of(attrs: Mapping[str, object]) -> dict[str, object]:
     the constructor to refuse)."""
     out = {}
     for f in fields(BrushParams):
-        if not f.init or f.name in ARRAY_FIELDS or f.name == "backend" or f.name not in attrs:
+        if not f.init or f.name in NOT_ATTRIBUTES or f.name not in attrs:
             continue
         value = attrs[f.name]
         if isinstance(f.default, bool) and is_integer(value) and value in (0, 1):
             value = bool(value)
         out[f.name] = value
     return out
+
+
 #: Rough-brush fields and the defaults that give the flat brush.
 ROUGH_DEFAULTS = {"roughness": 0.0, "preload": 0.0, "kbar_spread": 0.0, "inputs_digest": ""}
 ROUGH_FIELDS = tuple(ROUGH_DEFAULTS)
