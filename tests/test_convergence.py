@@ -224,6 +224,10 @@ def test_bad_input_raises():
     with pytest.raises(ValueError, match="min_grids"):
         ConvergenceOptions(min_grids=2)
     assert ConvergenceOptions(min_grids=np.int64(4)).min_grids == 4
+    # A list given for a pair is stored as a tuple: frozen means unchangeable.
+    listed = ConvergenceOptions(order_range=[0.3, 4.0])
+    assert listed.order_range == (0.3, 4.0) and isinstance(listed.order_range, tuple)
+    assert hash(listed) == hash(ConvergenceOptions())
     for bad in ({"safety_factor": math.nan}, {"trusted_order": (2.0, 1.0)},
                 {"max_relative_residual": -1.0}, {"order_bounds": (0.0, 3.0)},
                 {"safety_factor": 4.0}, {"order_range": 1.0}):

@@ -174,6 +174,8 @@ class ConvergenceOptions:
                     and 0 <= pair[0] < pair[1] and (name != "order_bounds" or pair[0] > 0),
                     name, pair, "(low, high) with 0 <= low < high"
                     + (", low > 0" if name == "order_bounds" else ""))
+            # A list would stay mutable (and unhashable) inside a frozen object.
+            object.__setattr__(self, name, (float(pair[0]), float(pair[1])))
         for name in ("safety_factor", "scattered_safety_factor", "max_relative_residual"):
             value = getattr(self, name)
             require(is_real(value) and math.isfinite(value) and value > 0, name, value,

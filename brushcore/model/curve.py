@@ -75,7 +75,7 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
     """
     attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1,
                                            "touching_pillar_pairs": count_touching_pairs(labels)}
-    if params.layout == "random":  # the rule that drew it: L min_gap / 512 since 9695874
+    if params.layout == "random":  # the rule that drew it: gap L min_gap / 512 on every grid
         attrs["random_gap"] = random_gap(params)
     if params.layout == "hexagonal":
         attrs["lattice_rows"], attrs["lattice_columns"] = hexagonal_lattice(params.n_pillars)

@@ -323,8 +323,8 @@ def hinted_params(make: Callable[[int], BrushParams], grid: int,
 def build_labels(params: BrushParams) -> np.ndarray:
     """The label map of a parameter set, checked so that every pillar has elements.
 
-    Regular and random layouts of discs are built exactly as before
-    shapes existed (same label maps, bit for bit).  Other shapes, the
+    Regular and random layouts of discs are painted by `label_map` from
+    centres whose construction keeps the discs apart.  Other shapes, the
     hexagonal lattice and file layouts are also checked for touching
     pillars (a shared element edge).
 

@@ -1,7 +1,8 @@
 """Frozen parameter sets and their validation, done once at the edge.
 
-`BrushParams` describes the physical problem, `SolverOptions` the numerics.
-Both validate in ``__post_init__`` so that a bad value fails with a message
+`BrushParams` describes the physical problem (the numerics' settings,
+`SolverOptions`, live in `brushcore.numerics.options`).  It validates in
+``__post_init__`` so that a bad value fails with a message
 naming the parameter and its allowed range before any computation starts.
 """
 

@@ -5,8 +5,8 @@ is written against ``backend.xp``, an array-API namespace, plus the few
 calls the standard lacks (`bincount`, `put`, `flatnonzero`),
 which each backend provides natively:
 
-- ``cpu``: NumPy (the default).  Every helper is the NumPy call the engine
-  made before backends existed, so CPU results are bit-identical.
+- ``cpu``: NumPy (the default).  Every helper is the plain NumPy call, so the
+  CPU path pays nothing for the abstraction.
 - ``gpu``: CuPy, imported only when chosen (an optional backend costs
   nothing to those who do not use it), seen through `array_api_compat.cupy`
   (CuPy 13 lacks some array-API names, e.g. ``bool``, ``concat``,

@@ -1,8 +1,7 @@
 """Which library's FFTs are faster for a whole-grid pair on this machine.
 
-``fft_library: auto`` used to mean MKL wherever mkl_fft is installed, from
-measurements on an Intel Xeon.  On an AMD EPYC the answer turned
-(2026-12-03, pruned pair in single precision, medians of alternating
+Neither library wins everywhere: MKL is faster on an Intel Xeon, while on
+an AMD EPYC (2026-12-03, pruned pair in single precision, medians of alternating
 rounds): FFTW 0.85 / 4.75 / 22.8 / 127 ms against MKL 1.12 / 5.44 / 24.1 /
 119 ms at n = 256 / 512 / 1024 / 2048 on one thread, and on two 0.58 /
 1.89 / 15.9 / 95 against 0.86 / 3.08 / 15.6 / 75 ms; a soft random curve

@@ -159,7 +159,7 @@ class _Backoff:
 #: Margin, in CG error estimates, by which every element must clear the
 #: threshold before a cascade round stops short of the tolerance: its own
 #: estimate times DECISION_SAFETY plus the largest one times DECISION_FLOOR.
-#: 3 (10 before 2026-12-05): every round that stopped early on random 1620
+#: With 3, every round that stopped early on random 1620
 #: at kbar 1, random 220 at kbar 1e-3 and random 64 at kbar 1e-4 (512^2,
 #: 3,814 rounds, each re-solved to 1e-11 in double) decided as the true
 #: solution does, with 8 % fewer applications on the first and 4 % on the
@@ -226,14 +226,9 @@ SETTLE_FLOOR = 1e-9
 #: CG to 1e-7 against double to 1e-11 on six random curves, 512^2).  While
 #: the transforms are float32 every decision margin holds this much more,
 #: and a solve that only this band leaves unsettled is handed to double at
-#: once.  Measured (2026-12-05, 512^2, one thread, FFTW plans that put it
-#: on its other branch without the band): random 1620 at kbar 1e-5 W
-#: 801.36279 -> 801.09197 (exact mode 801.09192), 10,558 -> 12,012
-#: applications; with 5e-6 it stayed on the other branch (801.36268).  On
-#: the plans of a later clean-clone sweep (2026-12-05, 7496c72) 1.5e-5 left
-#: it on the other branch again (801.36274, the same with 98d924a's code);
-#: 3e-5 took it back (801.09197, 11,888 -> 12,872 applications), as double
-#: precision does (801.09193): twice the largest error measured.
+#: once.  Twice the largest error measured: a band of 1.5e-5 left random
+#: 1620 at kbar 1e-5 (a near-tie) on the branch exact mode does not take
+#: on some FFTW plans (docs/SPEED.md, the sweep's row).
 PRECISION_BAND = 3e-5
 
 
