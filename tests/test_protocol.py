@@ -401,8 +401,6 @@ def test_a_label_map_other_than_the_parameters_own_is_refused(params, make, monk
     with pytest.raises(ParameterError, match=r"^labels=.* is invalid \(.*layout='file'.*\): "
                                              r"allowed None or the map build_labels\(params\)"):
         simulate(params, labels=labels)
-    with pytest.raises(ParameterError, match=r"^labels="):
-        curve.simulate_protocol(params, labels=labels)
 
 
 def test_the_parameters_own_label_map_is_accepted():
@@ -440,8 +438,6 @@ def test_containers_of_the_wrong_kind_are_refused_before_any_work(args, kwargs, 
     monkeypatch.setattr(curve, "build_labels", no_work)
     with pytest.raises(ParameterError, match=message):
         simulate(*args, **kwargs)
-    with pytest.raises(ParameterError, match=message):
-        curve.simulate_protocol(*args, **kwargs)
 
 
 def test_a_tuple_of_waypoints_is_a_protocol():

@@ -294,8 +294,15 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     first touch to ``params.preload`` and retracted until it has let go,
     or follows ``protocol``: waypoints whose values are normalised, forces
     in F_K (a preload P is ``Waypoint("force", -P)``) and displacements in
-    d_K, the units of the curve's normalised variables.  See
-    `simulate_protocol` for the extra outputs.
+    d_K, the units of the curve's normalised variables.  Such a curve holds
+    the flat pull-off's variables (same names, units and meaning, over both
+    branches of the loop) and, per step, ``branch`` (waypoint index, -1 at
+    first touch), ``direction`` (-1 approach, 0 first touch, +1 retraction)
+    and ``retraction`` (1 on the last retraction branch, where
+    ``adhesive_force`` and ``work_of_separation`` = integral of max(F, 0) dd
+    are taken); per pillar also its height and kbar; and the scalars
+    ``dissipated_energy`` (the integral of F dd over the whole loop) and
+    ``pillars_in_contact_at_preload``.
 
     Per pillar (dimension ``pillar``, label order: attribute ``pillar_order``)
     the file holds the centroid (``pillar_y``, ``pillar_x``), the force at
@@ -381,32 +388,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "pillar": _pillar_coord(params.n_pillars)}, attrs=attrs)
 
 
-def simulate_protocol(params: BrushParams, options: SolverOptions = SolverOptions(),
-                      progress: Progress | None = None, labels: np.ndarray | None = None,
-                      protocol: Sequence[Waypoint] | None = None) -> xr.Dataset:
-    """Approach, preload and retraction (or any waypoint protocol) as a Dataset.
-
-    Beyond the flat pull-off's variables (same names, units and meaning, now over both
-    branches of the loop): per step ``branch`` (waypoint index, -1 at first
-    touch), ``direction`` (-1 approach, 0 first touch, +1 retraction) and
-    ``retraction`` (1 on the last retraction branch, where ``adhesive_force``
-    and ``work_of_separation`` = integral of max(F, 0) dd are taken); per
-    pillar (dimension ``pillar``, label order), beside the centroid, force
-    at F_ad and let-go displacement every curve file has, height and kbar;
-    scalars ``dissipated_energy`` (the
-    integral of F dd over the whole loop) and ``pillars_in_contact_at_preload``.
-    Waypoint values in ``protocol`` are normalised (F_K, d_K); ``labels``
-    is None or the parameters' own map, as in `simulate`.
-    """
-    check_arguments(params, options, protocol)
-    resolve_backend(params.backend)  # before any work
-    return _simulate_protocol(params, options, progress, own_labels(params, labels),
-                              protocol)
-
-
 def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Progress | None,
                        labels: np.ndarray, protocol: Sequence[Waypoint] | None) -> xr.Dataset:
-    """`simulate_protocol` on the label map `own_labels` returned."""
+    """`simulate` of a protocol run on the label map `own_labels` returned."""
     backend = resolve_backend(params.backend)
     t0 = time.perf_counter()
     inputs = pillar_inputs(params, labels)
