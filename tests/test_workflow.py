@@ -274,6 +274,15 @@ def test_lint(repo_copy: Path) -> None:
     assert "Error" not in output(proc), output(proc)
 
 
+def test_snakefmt_clean() -> None:
+    """DESIGN.md asks for rule files that ``snakefmt --check`` leaves alone."""
+    pytest.importorskip("snakefmt")
+    files = [str(REPO / "Snakefile"), *map(str, sorted((REPO / "workflow").rglob("*.smk")))]
+    proc = subprocess.run([sys.executable, "-m", "snakefmt", "--check", *files],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
 @pytest.mark.parametrize(
     ("bad", "message"),
     [

@@ -29,8 +29,10 @@ def check_config(config, schema_path):
     if error is None:
         where = _first_nan(config)
         if where is not None:
-            raise ConfigError(f"config key '{where}': nan is not a number; allowed a number "
-                              "in the range the schema gives")
+            raise ConfigError(
+                f"config key '{where}': nan is not a number; allowed a number "
+                "in the range the schema gives"
+            )
         _integral_counts(config)
         return
     where = ".".join(str(p) for p in error.absolute_path)
@@ -46,7 +48,9 @@ def check_config(config, schema_path):
         forms = {}
         for sub in error.context:
             forms.setdefault(sub.schema_path[0], sub.message)
-        message = f"{error.instance!r} fits none of its forms: " + "; ".join(forms.values())
+        message = f"{error.instance!r} fits none of its forms: " + "; ".join(
+            forms.values()
+        )
     raise ConfigError(f"config key '{where}': {message}")
 
 
@@ -87,6 +91,7 @@ _COUNT_KEYS = ("grid", "regular", "random", "hexagonal", "seeds", "threads")
 
 def _integral_counts(config):
     """Counts written as 64.0 become 64 (in place), as the schema accepted them."""
+
     def fix(value):
         if isinstance(value, list):
             return [fix(v) for v in value]
@@ -129,7 +134,8 @@ def canonical_solver(config, schema_path):
     order = list(_schema(schema_path)["properties"]["solver"]["properties"])
     solver = config["solver"]
     config["solver"] = {k: solver[k] for k in order if k in solver} | {
-        k: v for k, v in solver.items() if k not in order}
+        k: v for k, v in solver.items() if k not in order
+    }
 
 
 def check_cases(config):
@@ -159,28 +165,49 @@ def check_cases(config):
     for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
         key = (layout, n, seed, grid, phi, rough, shape)
         softest[key] = min(float(kbar), softest.get(key, math.inf))
-    makes = {key: (lambda g, layout=key[0], n=key[1], kbar=kbar, seed=key[2], phi=key[4],
-                   rough=key[5], shape=key[6]: BrushParams(
-                       layout, n, kbar, g, phi=phi, seed=seed,
-                       allow_coarse=config["allow_coarse"], **parse_rough_tag(rough),
-                       **parse_shape_tag(shape)))
-             for key, kbar in softest.items()}
+    makes = {
+        key: (
+            lambda g, layout=key[0], n=key[1], kbar=kbar, seed=key[2], phi=key[
+                4
+            ], rough=key[5], shape=key[6]: BrushParams(
+                layout,
+                n,
+                kbar,
+                g,
+                phi=phi,
+                seed=seed,
+                allow_coarse=config["allow_coarse"],
+                **parse_rough_tag(rough),
+                **parse_shape_tag(shape),
+            )
+        )
+        for key, kbar in softest.items()
+    }
     for (layout, n, seed, grid, phi, rough, shape), make in makes.items():
         try:
             build_labels(hinted_params(make, grid))
         except ParameterError as exc:
             # A grid to suggest must run every brush the same grid key sets.
             key = n if n in by_n else None
-            others = [m for (_, n2, _, g2, *_), m in makes.items()
-                      if m is not make and g2 == grid and (n2 if n2 in by_n else None) == key]
+            others = [
+                m
+                for (_, n2, _, g2, *_), m in makes.items()
+                if m is not make and g2 == grid and (n2 if n2 in by_n else None) == key
+            ]
             exc = grid_hint(exc, make, grid, others)
             fig5 = config["fig5"]
-            only_fig5 = (layout == fig5["layout"] and n == int(fig5["n_pillars"])
-                         and n not in config.get(layout, []))
-            keys = {"n_pillars": "fig5.n_pillars" if only_fig5 else layout, "seed": "seeds",
-                    "grid": "grid_by_n.grid" if n in by_n else "grid",
-                    "allow_coarse": "allow_coarse: true",
-                    "min_gap": "min_gap (CLI only: --min-gap)"}
+            only_fig5 = (
+                layout == fig5["layout"]
+                and n == int(fig5["n_pillars"])
+                and n not in config.get(layout, [])
+            )
+            keys = {
+                "n_pillars": "fig5.n_pillars" if only_fig5 else layout,
+                "seed": "seeds",
+                "grid": "grid_by_n.grid" if n in by_n else "grid",
+                "allow_coarse": "allow_coarse: true",
+                "min_gap": "min_gap (CLI only: --min-gap)",
+            }
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} "
                 f"(case {layout} N = {n}, grid = {grid}, phi = {phi}"
@@ -206,7 +233,8 @@ def check_cluster_threads(config, cores, jobs, main):
     raise ConfigError(
         f"config key 'threads': {threads}, but Snakemake's cores is {cores}, which caps "
         f"every job at {cores} thread(s) (and on a cluster {cores} CPU(s)): set "
-        f"`cores: {threads}` in the profile or pass --cores {threads}")
+        f"`cores: {threads}` in the profile or pass --cores {threads}"
+    )
 
 
 #: Deterministic layouts: their label maps are built at plan time, and a flat
@@ -240,8 +268,14 @@ def _rough_tags(config, kbar):
     """Suffixes of every (roughness, preload, kbar_spread) asked for; rigid
     pillars have no stiffness spread."""
     spreads = [0.0] if float(kbar) == float("inf") else config["kbar_spread"]
-    return sorted({rough_tag(s, p, c) for s in config["roughness"]
-                   for p in config["preload"] for c in spreads})
+    return sorted(
+        {
+            rough_tag(s, p, c)
+            for s in config["roughness"]
+            for p in config["preload"]
+            for c in spreads
+        }
+    )
 
 
 def shape_tag(config, shape):
@@ -285,7 +319,9 @@ def sweep_cases(config):
                     lattice(layout, n, kbar, shape)
     fig5 = config["fig5"]
     for kbar in fig5["kbar"]:
-        lattice(fig5["layout"], fig5["n_pillars"], kbar, shape_tag(config, fig5["shape"]))
+        lattice(
+            fig5["layout"], fig5["n_pillars"], kbar, shape_tag(config, fig5["shape"])
+        )
     for n in config["random"]:
         for kbar in config["kbar"]:
             for seed in config["seeds"]:
@@ -293,8 +329,11 @@ def sweep_cases(config):
                     for shape in shapes:
                         cases.add(("random", n, kbar_tag(kbar), seed, rough, shape))
     ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[5], c[4]))
-    return [(*case[:4], grid, phi, case[4], case[5]) for case in ordered
-            for grid in case_grids(config, case[1])]
+    return [
+        (*case[:4], grid, phi, case[4], case[5])
+        for case in ordered
+        for grid in case_grids(config, case[1])
+    ]
 
 
 def grid_list(value):
@@ -317,21 +356,33 @@ def wants_convergence(config):
 
 def sweep_brushes(config):
     """Every pillar number N of the sweep (every layout and the Fig. 5 brush)."""
-    return {*config["regular"], *config["hexagonal"], *config["random"],
-            config["fig5"]["n_pillars"]}
+    return {
+        *config["regular"],
+        *config["hexagonal"],
+        *config["random"],
+        config["fig5"]["n_pillars"],
+    }
 
 
 #: One curve file per case; every parameter that changes the curve is in its name,
 #: so that a sweep on another grid or filling factor never overwrites it.  The
 #: shape and rough suffixes are empty for the flat brush of discs.
-CURVE_NAME = "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{shape}{rough}"
+CURVE_NAME = (
+    "{layout}/N{n_pillars}_kbar{kbar}_seed{seed}_grid{grid}_phi{phi}{shape}{rough}"
+)
 
 
 def curve_file(layout, n_pillars, kbar, seed, grid, phi, rough, shape=""):
     """The curve file of one case (a tuple of `sweep_cases`)."""
     name = CURVE_NAME.format(
-        layout=layout, n_pillars=n_pillars, kbar=kbar, seed=seed, grid=grid,
-        phi=repr(float(phi)), shape=shape, rough=rough,
+        layout=layout,
+        n_pillars=n_pillars,
+        kbar=kbar,
+        seed=seed,
+        grid=grid,
+        phi=repr(float(phi)),
+        shape=shape,
+        rough=rough,
     )
     return f"results/curves/{name}.nc"
 
@@ -346,9 +397,16 @@ def named_case(case):
     `brushcore.data.aggregate.CaseKey`, then phi (plain values, for the script)."""
     layout, n_pillars, kbar, seed, grid, phi, rough, shape = case
     rough = parse_rough_tag(rough)
-    return [layout, int(n_pillars), float(kbar), int(seed), int(grid),
-            *(rough.get(name, 0.0) for name in ("roughness", "preload", "kbar_spread")),
-            shape[1:] if shape else "disc", float(phi)]
+    return [
+        layout,
+        int(n_pillars),
+        float(kbar),
+        int(seed),
+        int(grid),
+        *(rough.get(name, 0.0) for name in ("roughness", "preload", "kbar_spread")),
+        shape[1:] if shape else "disc",
+        float(phi),
+    ]
 
 
 def simulate_mem_mb(wildcards):
@@ -430,14 +488,21 @@ def curve_kind(layout, shape, rough, solver=None):
     if parse_rough_tag(rough).get("roughness", 0.0) > 0:
         return "rough"
     folded = (solver or {}).get("symmetry", True)
-    return "mirror" if layout == "regular" and not shape and not rough and folded else "whole"
+    return (
+        "mirror"
+        if layout == "regular" and not shape and not rough and folded
+        else "whole"
+    )
 
 
 def solver_slowdown(solver, kind):
     """Factor on a curve's time for the config's solver settings (see
     `EXACT_SLOWDOWN`, `DOUBLE_SLOWDOWN`); 1 for the defaults."""
     solver = solver or {}
-    exact = solver.get("cascade", "local") == "global" or float(solver.get("rtol", 1e-4)) < 1e-6
+    exact = (
+        solver.get("cascade", "local") == "global"
+        or float(solver.get("rtol", 1e-4)) < 1e-6
+    )
     double = kind == "whole" and solver.get("precision", "auto") == "double"
     return (EXACT_SLOWDOWN if exact else 1.0) * (DOUBLE_SLOWDOWN if double else 1.0)
 
@@ -469,7 +534,9 @@ def curve_minutes(layout, shape, rough, grid, solver=None):
     at most 2x.
     """
     kind = curve_kind(layout, shape, rough, solver)
-    seconds = (RUNTIME_SAFETY * slowest_curve_s(kind, grid) * solver_slowdown(solver, kind))
+    seconds = (
+        RUNTIME_SAFETY * slowest_curve_s(kind, grid) * solver_slowdown(solver, kind)
+    )
     return math.ceil(RUNTIME_OVERHEAD_MIN + seconds / 60)
 
 
@@ -480,8 +547,13 @@ def simulate_runtime(config):
     cap = config.get("slurm_max_runtime_min")
 
     def runtime(wildcards, attempt):
-        minutes = attempt * curve_minutes(wildcards.layout, wildcards.shape, wildcards.rough,
-                                          int(wildcards.grid), config.get("solver"))
+        minutes = attempt * curve_minutes(
+            wildcards.layout,
+            wildcards.shape,
+            wildcards.rough,
+            int(wildcards.grid),
+            config.get("solver"),
+        )
         return minutes if cap is None else min(minutes, int(cap))
 
     return runtime
@@ -493,16 +565,22 @@ def clipped_runtimes(config):
     cap = config.get("slurm_max_runtime_min")
     if cap is None:
         return None
-    asked = [(curve_minutes(layout, shape, rough, grid, config.get("solver")), curve_file(
-                 layout, n, kbar, seed, grid, phi, rough, shape))
-             for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config)]
+    asked = [
+        (
+            curve_minutes(layout, shape, rough, grid, config.get("solver")),
+            curve_file(layout, n, kbar, seed, grid, phi, rough, shape),
+        )
+        for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config)
+    ]
     over = sorted((a for a in asked if a[0] > int(cap)), reverse=True)
     if not over:
         return None
     minutes, name = over[0]
-    return (f"slurm_max_runtime_min = {cap} clips the time limit of {len(over)} of "
-            f"{len(asked)} simulations (the largest: {minutes} min for {name}); a curve "
-            f"that needs longer is killed at {cap} min (its retry too) and writes nothing")
+    return (
+        f"slurm_max_runtime_min = {cap} clips the time limit of {len(over)} of "
+        f"{len(asked)} simulations (the largest: {minutes} min for {name}); a curve "
+        f"that needs longer is killed at {cap} min (its retry too) and writes nothing"
+    )
 
 
 ROUGH_FIGURES = ("rough_roughness", "rough_preload")
@@ -528,23 +606,37 @@ def rough_example_curve(config):
     enough that pillars share load, stiff enough that they interact).
     """
     brush = rough_brush(config)
-    rough = [c for c in sweep_cases(config) if c[6] and not c[7] and (c[0], c[1]) == brush
-             and c[3] == 0 and float(c[2]) < float("inf")]
+    rough = [
+        c
+        for c in sweep_cases(config)
+        if c[6]
+        and not c[7]
+        and (c[0], c[1]) == brush
+        and c[3] == 0
+        and float(c[2]) < float("inf")
+    ]
     if not rough:
         return None
 
     def rank(case):
         tag = parse_rough_tag(case[6])
-        return (-tag["roughness"], -tag["preload"], tag["kbar_spread"],
-                abs(math.log10(float(case[2])) + 2.0))
+        return (
+            -tag["roughness"],
+            -tag["preload"],
+            tag["kbar_spread"],
+            abs(math.log10(float(case[2])) + 2.0),
+        )
 
     return curve_file(*min(rough, key=rank))
 
 
 def rough_figure_files(config):
     """The rough-brush figures, for configs that ask for rough cases only."""
-    flat = all(float(v) == 0.0 for key in ("roughness", "preload", "kbar_spread")
-               for v in config[key])
+    flat = all(
+        float(v) == 0.0
+        for key in ("roughness", "preload", "kbar_spread")
+        for v in config[key]
+    )
     if flat:
         return []
     names = ROUGH_FIGURES + (CURVE_FIGURES if rough_example_curve(config) else ())

@@ -121,7 +121,9 @@ rule rough_figure:
         runtime=10,
     params:
         figure=lambda wildcards: wildcards.rough_figure,
-        options=lambda wildcards: dict(zip(("layout", "n_pillars"), rough_brush(config))),
+        options=lambda wildcards: dict(
+            zip(("layout", "n_pillars"), rough_brush(config))
+        ),
         flat=False,
     script:
         "../scripts/figure.py"
