@@ -411,9 +411,19 @@ def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, 
 def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
     from brushcore.data import figures
     from brushcore.data.aggregate import build_sweep
+    from brushcore.data.views import finest_grid
     from brushcore.data.summary import headline_rows, value_at
 
     sweep = build_sweep(refinement_curves)
+    # Text per case and grid, as `run_*` where settings differ (preconditioner
+    # or precision across grids and layouts): it broke the reduction's sum.
+    done = np.isfinite(sweep["adhesive_force_normalized"])
+    sweep["run_preconditioner"] = xr.where(
+        done, xr.where(sweep["grid"] == sweep["grid"].max(), "tiles", "blocks"), "")
+    one = finest_grid(sweep)
+    runs = one["run_preconditioner"].squeeze("seed").squeeze("layout").squeeze("n_pillars")
+    assert runs.sel(kbar=np.inf).item() == "tiles"  # ran on every grid
+    assert runs.sel(kbar=1e-3).item() == "tiles"
     assert value_at(sweep, "adhesive_force_normalized", "regular", 4, math.inf) == float(
         sweep["adhesive_force_normalized"].sel(grid=64, kbar=np.inf).squeeze())
     rows = headline_rows(sweep, fig5_n_pillars=4, fig5_kbar=math.inf)

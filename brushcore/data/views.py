@@ -130,9 +130,15 @@ def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr
     finest = rank == rank.where(done).max(GRID_DIM)  # one True per case that ran
     out = sweep.copy()
     for name, var in sweep.data_vars.items():
-        if GRID_DIM in var.dims:
+        if GRID_DIM not in var.dims:
+            continue
+        if np.issubdtype(var.dtype, np.number):
             # Exactly one unmasked value survives, so the sum is that value.
             out[name] = var.where(finest).sum(GRID_DIM, min_count=1).assign_attrs(var.attrs)
+        else:  # text (``run_*``): the finest grid's entry, "" where none ran
+            at = finest.argmax(GRID_DIM)
+            out[name] = (var.isel({GRID_DIM: at}).where(finest.any(GRID_DIM), "")
+                         .astype(var.dtype).assign_attrs(var.attrs))
     out["grid_used"] = (
         sweep[GRID_DIM].astype(np.float64).where(finest).sum(GRID_DIM, min_count=1)
         .assign_attrs(units="1", long_name="elements per side n of the finest grid run")
