@@ -433,7 +433,15 @@ def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
     for draw in (figures.fig6, figures.fig7, figures.fig8):
         draw(sweep)
     figures.fig5(sweep, n_pillars=4, kbar=(1e-3,))
-    figures.save(figures.convergence(extrapolate_sweep(sweep)), tmp_path / "c.png")
+    # Rigid is a kbar like any other (its tolerance was infinite: no curve).
+    both = figures.fig5(sweep, n_pillars=4, kbar=(math.inf, 1e-3))
+    titles = [ax.get_title(loc="left") for ax in both.axes]
+    assert any("rigid" in t for t in titles) and any("0.001" in t for t in titles), titles
+    drawn = figures.convergence(extrapolate_sweep(sweep))
+    # n = 32 gives 3.1 elements a radius: flagged in the figure as in the table
+    assert any("coarsest under-resolved (3.1" in t.get_text()
+               for ax in drawn.axes for t in ax.texts)
+    figures.save(drawn, tmp_path / "c.png")
     assert (tmp_path / "c.png").stat().st_size > 0
 
 

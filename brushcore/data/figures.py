@@ -83,9 +83,13 @@ def _phi(sweep: xr.Dataset) -> float:
 def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int):
     """(d, F) normalised of one run without padding, or None when absent."""
     try:
-        case = sweep.sel(layout=layout, n_pillars=n_pillars, seed=seed).sel(
-            kbar=kbar, method="nearest", tolerance=abs(kbar) * 1e-9
-        )
+        case = sweep.sel(layout=layout, n_pillars=n_pillars, seed=seed)
+        kbars = case["kbar"].values
+        # rigid (inf) matches itself; a finite kbar matches to rounding
+        hit = np.flatnonzero((kbars == kbar) | np.isclose(kbars, kbar, rtol=1e-9, atol=0.0))
+        if not hit.size:
+            return None
+        case = case.isel(kbar=int(hit[0]))
     except KeyError:
         return None
     d = case["displacement_normalized"].values
@@ -131,11 +135,21 @@ def fig5(
         d, f = _curve(sweep, layout, n_pillars, k, seed)
         ax = fig.add_subplot(grid[row, 0])
         ax.plot(d, f, color="C0", lw=1.2)
-        ax.set_title(f"({chr(ord('a') + row)}) " + r"$\bar k$" + f" = {k:g}", loc="left")
+        # A preloaded case is drawn as its loop: approach (F < 0), then retraction.
+        loop = ", from the preload" if float(np.min(f)) < 0.0 else ""
+        ax.set_title(f"({chr(ord('a') + row)}) " + r"$\bar k$" + f" = {_kbar_text(k)}{loop}",
+                     loc="left")
         ax.set_xlabel(r"$\bar d$")
         ax.set_ylabel(r"$\bar F$")
         snap = snapshots(sweep, layout, n_pillars, k, seed)
         if snap is None:
+            if n_snap:  # the sweep keeps one grid's maps (its finest): say so
+                grids = sorted({int(g) for g in sweep["case_grid"].values}) \
+                    if "case_grid" in sweep else []
+                kept = f" (kept on n = {', '.join(map(str, grids))} only)" if grids else ""
+                empty = fig.add_subplot(grid[row, 1:])
+                empty.set_axis_off()
+                _no_data(empty, f"no contact snapshots of this case in the sweep{kept}")
             continue
         # Numbered in the order of their steps: a protocol's file keeps the
         # "maximum force" map after "separated", though it comes first.
@@ -701,8 +715,12 @@ def convergence(
                         ha="left", va="top", transform=ax.transAxes, fontsize="small")
             flags = [f.replace("_", " ") for f in FIT_FLAGS
                      if f"{q}_{f}" in conv and int(conv[f"{q}_{f}"].sel(case))]
+            coarsest = float(conv["pillar_radius_elements_coarsest"].sel(case)) \
+                if "pillar_radius_elements_coarsest" in conv else math.inf
             if math.isfinite(radius) and radius < UNDER_RESOLVED_RADIUS:
                 flags.append(f"under-resolved ({radius:.1f} el./radius)")
+            elif coarsest < UNDER_RESOLVED_RADIUS:  # as the table says
+                flags.append(f"coarsest under-resolved ({coarsest:.1f} el./radius)")
             if touch.any():
                 grids = ", ".join(str(int(g)) for g in conv["grid"].values[touch])
                 flags.append(f"touching pillars (n = {grids})")
