@@ -481,11 +481,13 @@ def test_summary_quotes_the_paper_only_where_it_applies():
     on, off = (rows["N^1/4 / F_ad on the soft plateau", n] for n in ("64", "100"))
     assert (on.paper, on.note) == ("1.2-1.3", "Fig. 7"), on
     assert off.paper == "" and off.note.startswith("NOT ON THE PLATEAU"), off
-    fit = rows["N^1/4 / F_ad, fit over all N", ""]
-    assert fit.value == f"{64 ** 0.25 / 2.40:.3g}", fit  # N = 64 alone
+    fit = rows["N^1/4 / F_ad, fit over N", ""]
+    assert fit.layout == "regular" and fit.value == f"{64 ** 0.25 / 2.40:.3g}", fit  # N = 64
     assert "1 of 2 brushes on the plateau" in fit.note, fit
     onset = rows["kbar where the soft plateau is reached", "100"]
-    assert onset.value == "n/a", onset
+    assert onset.value == "n/a" and onset.paper == "", onset  # no paper number beside n/a
+    big = rows["enhancement F_ad / F_K, 2304 pillars", "2304"]
+    assert (big.value, big.paper, big.note) == ("n/a", "", "not run"), big
     from brushcore.data import figures
 
     labels = figures.fig7(sweep).axes[0].get_legend_handles_labels()[1]

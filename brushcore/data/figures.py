@@ -278,14 +278,15 @@ def fig7(sweep: xr.Dataset) -> Figure:
     The plateau value is F_ad at the softest kbar run for each brush; a
     brush whose two softest kbar differ by more than `PLATEAU_RTOL` has not
     reached it (`brushcore.data.summary.on_plateau`) and is drawn in grey
-    with its layout's marker, left out of the fit.  The fitted prefactor c of F = c N^(1/4)
-    (and 1/c, the paper's 1.2-1.3) is printed on the plot.
+    with its layout's marker, left out of the fit.  Each layout gets its own
+    fit F = c N^(1/4), drawn in its colour, with 1/c (the paper's 1.2-1.3)
+    and the free exponent printed on the plot.
     """
     sweep = finest_grid(sweep)
     fig = _new_figure(4.6, 3.8)
     ax = fig.add_subplot()
     ax.set_title("Soft plateau of the adhesive force")
-    all_n, all_f = [], []
+    fitted: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # layout -> plateau (N, F)
     markers = {"regular": "s", "random": "o", "hexagonal": "h"}
     off = []  # (N, F) of brushes whose softest kbar is not on the plateau
     for layout in _layouts(sweep):
@@ -297,10 +298,10 @@ def fig7(sweep: xr.Dataset) -> Figure:
         if not points:
             continue
         n, k, f = map(np.asarray, zip(*points))
-        all_n += list(n)
-        all_f += list(f)
-        ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none", label=f"{layout} (min "
-                + r"$\bar k$" + f" = {k.min():g})")
+        fitted[layout] = (n, f)
+        ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none",
+                color=f"C{len(fitted) - 1}", label=f"{layout} (min " + r"$\bar k$"
+                + f" = {k.min():g})")
     for layout in dict.fromkeys(lay for lay, _, _ in off):  # grey, the layout's marker
         n_off, f_off = zip(*[(n, f) for lay, n, f in off if lay == layout])
         ax.plot(n_off, f_off, markers.get(layout, "^"), ms=6, color="0.55",
@@ -314,34 +315,38 @@ def fig7(sweep: xr.Dataset) -> Figure:
         axis.set_minor_formatter(NullFormatter())
     ax.set_xlabel("number of pillars N")
     ax.set_ylabel(FAD_LABEL + " (soft plateau)")
-    drawn = all_n + [n for _, n, _ in off]
+    drawn = [int(v) for n, _ in fitted.values() for v in n] + [n for _, n, _ in off]
     if not drawn:
         _no_data(ax, "no runs")
         return fig
     span = np.geomspace(min(drawn) / 1.5, max(drawn) * 1.5, 50)
     ax.plot(span, theory.soft_limit(span), "k-", lw=1.2, label=r"$N^{1/4}$ (eq. 6)")
-    if not all_n:  # nothing to fit: say so, and still explain the grey points
+    if not fitted:  # nothing to fit: say so, and still explain the grey points
         ax.text(0.03, 0.97, "no brush on its soft plateau: no fit", transform=ax.transAxes,
                 va="top", fontsize=8)
         ax.legend(fontsize=7, loc="lower right")
         return fig
-    fit = fit_soft_prefactor(all_n, all_f)
-    ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "k--", lw=1,
-            label=rf"fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
-    text = f"fitted prefactor c = {fit['prefactor']:.3f}\n" + r"$N^{1/4}/\bar F_{ad}$" \
-        + f" = 1/c = {fit['ratio']:.2f} (paper 1.2-1.3)"
-    if math.isfinite(fit["exponent"]):
-        text += f"\nfree fit exponent {fit['exponent']:.3f}"
-    if len(set(all_n)) == 1:
-        text += f"\nfrom one N only ({all_n[0]}): not a test of the exponent"
-    ax.text(0.03, 0.97, text, transform=ax.transAxes, va="top", fontsize=8,
+    # One fit per layout (the paper's 1.2-1.3 is a range; pooled layouts
+    # would put one layout's prefactor offset into the other's slope).
+    lines = [r"$N^{1/4}/\bar F_{ad}$ = 1/c (paper 1.2-1.3):"]
+    for index, (layout, (n, f)) in enumerate(fitted.items()):
+        fit = fit_soft_prefactor(n, f)
+        ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "--", lw=1,
+                color=f"C{index}", label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
+        line = f"{layout} {fit['ratio']:.2f}"
+        if math.isfinite(fit["exponent"]):
+            line += f", free exponent {fit['exponent']:.3f}"
+        if len(set(n.tolist())) == 1:
+            line += f" (one N only, {int(n[0])}: no test of the exponent)"
+        lines.append(line)
+    ax.text(0.03, 0.97, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7,
             bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "none"})
     ax.legend(fontsize=7, loc="lower right")
     return fig
 
 
 def fig8(sweep: xr.Dataset) -> Figure:
-    """Fig. 8: work of separation against kbar per N, with eq. 27's soft limit.
+    """Fig. 8: work of separation against kbar per N, with the soft limit of eqs. 25-26.
 
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
     (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch.
@@ -371,7 +376,8 @@ def fig8(sweep: xr.Dataset) -> Figure:
             _no_data(ax, f"no {layout} runs")
             continue
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
-        ax.plot([], [], "k--", lw=1, label=r"soft limit $\bar W_S$ (eq. 27)")
+        ax.plot([], [], "k--", lw=1,
+                label=r"soft limit $2\sqrt{\varphi/\pi}/(\sqrt{N}\bar k)$ (eqs. 25-26)")
         ax.legend(fontsize=7)
     return fig
 
