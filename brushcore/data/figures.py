@@ -176,7 +176,8 @@ def fig5(
 def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, object]]:
     layouts = _layouts(sweep)
     fig = _new_figure(4.2 * max(len(layouts), 1), 3.6)
-    axes = fig.subplots(1, max(len(layouts), 1), squeeze=False)[0]
+    # One y range for every layout: the panels are read against each other.
+    axes = fig.subplots(1, max(len(layouts), 1), squeeze=False, sharey=True)[0]
     fig.suptitle(title)
     return fig, dict(zip(layouts, axes))
 
