@@ -408,6 +408,20 @@ def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, 
         pytest.approx(radius[-1])
 
 
+def test_fig5_brush_keeps_its_snapshots_below_the_sweeps_finest_grid(refinement_curves,
+                                                                     tmp_path):
+    """One grid's maps fit the sweep: the Fig. 5 brush's finest, not another brush's."""
+    from brushcore import BrushParams, simulate
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import write_curve
+
+    coarse = [p for p in refinement_curves if not p.name.endswith("_g64.nc")]
+    other = write_curve(simulate(BrushParams("regular", 9, math.inf, 64)), tmp_path / "n9.nc")
+    sweep = build_sweep([*coarse, other], keep_snapshots=[("regular", 4)])
+    assert set(sweep["case_grid"].values.tolist()) == {48}
+    assert set(sweep["case_n_pillars"].values.tolist()) == {4}
+
+
 def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
     from brushcore.data import figures
     from brushcore.data.aggregate import build_sweep

@@ -441,6 +441,7 @@ def _snapshots(
     all_below_mb: float,
     dims: Sequence[str] = SWEEP_DIMS,
 ) -> dict[str, xr.DataArray]:
+    keep = tuple(keep)  # read twice
     with_snaps = {k: c for k, (_, c) in curves.items() if "contact_snapshot" in c}
     if not with_snaps:
         return {}
@@ -449,8 +450,11 @@ def _snapshots(
     keys = sorted(k for k in with_snaps if wanted(k))
     if not keys:
         return {}
-    # Maps of different grids cannot share (y, x): keep the finest grid's.
-    finest = max(k.grid for k in keys)
+    # Maps of different grids cannot share (y, x): keep one grid's, the
+    # finest that the always-kept (Fig. 5) brushes ran on, else the finest.
+    always = {(str(layout), int(n)) for layout, n in keep}
+    figure = [k for k in keys if (k.layout, k.n_pillars) in always]
+    finest = max(k.grid for k in (figure or keys))
     keys = [k for k in keys if k.grid == finest]
     n_snap = max(with_snaps[k].sizes["snapshot"] for k in keys)
     ny, nx = with_snaps[keys[0]].sizes["y"], with_snaps[keys[0]].sizes["x"]
