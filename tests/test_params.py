@@ -119,6 +119,20 @@ def test_suggested_grid_runs_every_brush_of_a_config():
                 build_labels(make(grid))
 
 
+def test_a_brush_no_grid_can_pack_names_its_packing_not_a_grid():
+    """A random brush too dense to pack fails alike on every grid (its gap
+    scales with L): the grid search gives that error at once.  It tried 64
+    grids instead, minutes each for 100,000 pillars (the CLI hung)."""
+    from brushcore.model.layout import next_grid
+
+    make = lambda g: BrushParams("random", 400, 1e-3, g, phi=0.5, min_gap=4)  # noqa: E731
+    with pytest.raises(ParameterError, match=r"^n_pillars=400 is invalid \(random layout: "
+                                             r"only \d+ discs"):
+        hinted_params(make, 32)
+    with pytest.raises(ParameterError, match="n_pillars"):
+        next_grid(make, 33)
+
+
 def test_ellipses_are_resolved_across_their_minor_axis():
     """The radius rule asks 2 elements of the semi-minor axis r / sqrt(aspect):
     16 ellipses of aspect 10 at phi 0.03 have r = 3.15 on 129^2 but b = 1.0."""

@@ -253,6 +253,14 @@ def next_grid(make: Callable[[int], BrushParams], start: int) -> int | None:
     int or None
         The grid, or None when none up to `MAX_GRID` passes the radius rule
         or ``GRID_HINT_TRIES`` grids past it all fail the layout's checks.
+
+    Raises
+    ------
+    ParameterError
+        The layout's own error where no grid can help: one about another
+        parameter than the grid or phi (a random brush too dense to pack,
+        whose gap scales with L, fails alike on every grid; trying 64 of
+        them took minutes for 100,000 pillars).
     """
     tries = 0
     for grid in range(max(start, 1), MAX_GRID + 1):
@@ -263,7 +271,9 @@ def next_grid(make: Callable[[int], BrushParams], start: int) -> int | None:
         try:
             _checked_labels(params)
             return grid
-        except ParameterError:
+        except ParameterError as exc:
+            if exc.name not in ("grid", "phi"):
+                raise
             tries += 1
             if tries >= GRID_HINT_TRIES:
                 return None
@@ -294,11 +304,16 @@ def grid_hint(exc: ParameterError, make: Callable[[int], BrushParams], grid: int
     at +5.3 % phi); this names one that runs, for ``make`` and for the
     ``others`` that share its grid (a config's brushes: a grid that runs
     one of them only would be refused again for the next).  Errors about
-    other parameters, and grid errors with no such grid, come back unchanged.
+    other parameters, and grid errors with no such grid, come back unchanged;
+    where the search meets an error no grid can fix (a random brush too
+    dense to pack), that error comes back.
     """
     if exc.name != "grid":
         return exc
-    found = next_common_grid([make, *others], grid + 1)
+    try:
+        found = next_common_grid([make, *others], grid + 1)
+    except ParameterError as unfixable:  # no grid runs it: say why instead
+        return unfixable
     if found is None:
         return exc
     coarse = "" if "allow_coarse" not in exc.allowed else ", or allow_coarse to run it anyway"
