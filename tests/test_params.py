@@ -170,6 +170,8 @@ def test_floor_even_when_coarse_is_allowed():
     ("heights", np.array([0.0, 0.0, 0.0, 1e4]), r"each in \[-1000, 1000\]"),
     ("heights", np.array([0.0, 0.0, 0.0, 1j]), "real numbers"),
     ("kbar_values", np.array([0.1, 0.1, 0.1, 1e-30]), r"each in \[1e-09, inf\]"),
+    # a uniform gap of 1e16 d_K (a rigid shift) had moved W 0.5 %, 1e300 set it to 0
+    ("gap_map", np.full((32, 32), 1e16), r"each in \[-1000, 1000\]"),
 ])
 def test_values_beyond_what_can_run_are_refused(field, value, allowed):
     args = {"layout": "regular", "n_pillars": 4, "kbar": 0.1, "grid": 32, field: value}

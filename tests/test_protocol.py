@@ -426,7 +426,13 @@ def test_the_parameters_own_label_map_is_accepted():
      r"^protocol=.* \(element 1 is a dict: write Waypoint"),
     ((FLAT,), {"protocol": "separation"},
      r"^protocol='separation' is invalid: allowed None or a list"),
-], ids=["options_none", "options_dict", "swapped", "bare_waypoint", "tuples", "dict", "str"])
+    ((FLAT,), {"protocol": [Waypoint("force", -1e300), Waypoint("separation")]},
+     r"^protocol=.* is invalid \(element 0 is a force of -1e\+300 F_K\): allowed force "
+     r"waypoints in \[-1000, 1000\] F_K"),  # was an rtol=1e-303 the user never set
+    ((FLAT,), {"progress": 5},
+     r"^progress=5 is invalid: allowed None or a function"),  # was a TypeError mid-solve
+], ids=["options_none", "options_dict", "swapped", "bare_waypoint", "tuples", "dict", "str",
+        "huge_force", "progress"])
 def test_containers_of_the_wrong_kind_are_refused_before_any_work(args, kwargs, message,
                                                                    monkeypatch):
     """They were TypeError and AttributeError from inside simulate."""

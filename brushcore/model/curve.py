@@ -19,7 +19,7 @@ from brushcore.model import theory
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap
-from brushcore.model.params import BrushParams
+from brushcore.model.params import MAX_ROUGH, BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
@@ -191,17 +191,24 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
 PROTOCOL_EXAMPLE = "[Waypoint('force', -1.0), Waypoint('separation')]"
 
 
-def check_arguments(params: object, options: object, protocol: object) -> None:
-    """Refuse containers `simulate` cannot read, before any work: ``params``
+def check_arguments(params: object, options: object, protocol: object,
+                    progress: object = None) -> None:
+    """Refuse arguments `simulate` cannot use, before any work: ``params``
     not a BrushParams (swapped arguments), ``options`` not a SolverOptions
     (None, a dict), ``protocol`` not None or a non-empty list or tuple of
-    Waypoint (a bare Waypoint, tuples, dicts).
+    Waypoint (a bare Waypoint, tuples, dicts) or with a force beyond
+    `MAX_ROUGH` F_K (the preload's range: the protocol's tolerance shrinks
+    with its load), ``progress`` neither None nor callable.
 
     Raises
     ------
     ParameterError
-        Naming ``params``, ``options`` or ``protocol`` and what is allowed.
+        Naming ``params``, ``options``, ``protocol`` or ``progress`` and
+        what is allowed.
     """
+    if progress is not None and not callable(progress):
+        raise ParameterError("progress", _shown(progress),
+                             "None or a function progress(events, attached, total)")
     if not isinstance(params, BrushParams):
         raise ParameterError("params", _shown(params), "a BrushParams, the first argument "
                              "(simulate(params, options))")
@@ -225,6 +232,11 @@ def check_arguments(params: object, options: object, protocol: object) -> None:
                                  f"a list of Waypoint, e.g. {PROTOCOL_EXAMPLE}",
                                  f"element {k} is a {type(leg).__name__}: write "
                                  "Waypoint(kind, value)")
+        if leg.kind == "force" and not abs(leg.value) <= MAX_ROUGH:
+            raise ParameterError("protocol", _shown(protocol),
+                                 f"force waypoints in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}] F_K "
+                                 "(the preload's range)",
+                                 f"element {k} is a force of {leg.value:g} F_K")
 
 
 def _shown(value: object) -> object:
@@ -327,11 +339,12 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     ------
     ParameterError
         Before any solve, for arguments of the wrong kind (``params``,
-        ``options``, ``protocol``: `check_arguments`), a layout or
+        ``options``, ``protocol``, ``progress``: `check_arguments`), a
+        force waypoint beyond 1e3 F_K, a layout or
         discretisation that cannot run, ``labels`` other than the
         parameters' own map, an empty protocol or a missing GPU.
     """
-    check_arguments(params, options, protocol)
+    check_arguments(params, options, protocol, progress)
     if backend is not None:
         params = replace(params, backend=backend)
     resolve_backend(params.backend)  # a missing CuPy or card fails before any work

@@ -62,7 +62,7 @@ RANDOM_GAP_GRID = 512
 #: separate); e_star, dgamma or h beyond 1e+-100 overflowed.
 MIN_KBAR = 1e-9
 MAX_GRID = 8192
-MAX_ROUGH = 1e3  # roughness and |heights| [d_K], preload [F_K]
+MAX_ROUGH = 1e3  # roughness, |heights| and |gap map| [d_K], preload [F_K]
 MAX_KBAR_SPREAD = 100.0  # coefficient of variation
 UNIT_RANGE = (1e-30, 1e30)  # e_star, dgamma, h in the inputs' units
 MAX_SEED = 2**63 - 1  # a file attribute is an int64
@@ -123,8 +123,9 @@ class BrushParams:
     kbar_values : kbar of each pillar in [1e-9, inf], label order; exclusive
         with ``kbar_spread`` (``kbar`` then only names the brush).
     gap_map : extra gap of every element, shape (grid, grid), in units of
-        d_K, added below the pillar heights: element offset z_i = z_p -
-        gap_i (a spherical tip is r^2 / 2R, a tilt a linear ramp).
+        d_K, each in [-1e3, 1e3], added below the pillar heights: element
+        offset z_i = z_p - gap_i (a spherical tip is r^2 / 2R, a tilt a
+        linear ramp).
     backend : where the numbers are crunched, "cpu" (NumPy, default) or
         "gpu" (CuPy; see `brushcore.numerics.backend`).  Not part of the
         problem: excluded from equality, hashing, `as_attrs` and the
@@ -284,16 +285,15 @@ class BrushParams:
             ok = np.isfinite(arr) if low is None else (np.isfinite(arr) | (arr == np.inf))
             if low is not None:
                 ok &= ~(arr < low)
-            elif name == "heights":
+            else:  # heights, gap map: beyond 1e3 d_K a rigid shift loses W to rounding
                 ok &= np.abs(arr) <= MAX_ROUGH
             bad = np.argwhere(~ok)
             if bad.size:
                 where = ", ".join(str(int(i)) for i in bad[0])
                 kind = "element (y, x)" if name == "gap_map" else "pillar"
-                allowed = {"heights": f", each in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}]",
-                           "kbar_values": f", each in [{MIN_KBAR:g}, inf]"}
+                allowed = {"kbar_values": f", each in [{MIN_KBAR:g}, inf]"}
                 require(False, name, f"<array with {len(bad)} invalid values>",
-                         what + allowed.get(name, ", all finite"),
+                         what + allowed.get(name, f", each in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}]"),
                          f"{kind} {where} is {float(arr[tuple(bad[0])])!r}")
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
