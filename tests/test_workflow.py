@@ -297,6 +297,9 @@ def test_snakefmt_clean() -> None:
         ({"grid_by_n": [{"n_pillars": 16, "grid": 16}]},
          r"config: grid_by_n.grid = 16 is invalid .*allowed grid_by_n.grid 41, the next "),
         ({"colour": "red"}, "config key 'colour' is unknown"),
+        # a mistyped N in grid_by_n left its brush on `grid` without a word
+        ({"grid_by_n": [{"n_pillars": 99, "grid": 256}]},
+         r"config: grid_by_n.n_pillars = 99 is invalid \(no brush of the sweep has 99 "),
         ({"grid": 64.5}, "config key 'grid': 64.5 fits none of its forms: 64.5 is not of type "
                          "'integer'; 64.5 is not of type 'array'"),
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),

@@ -165,6 +165,14 @@ def check_cases(config):
     for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
         key = (layout, n, seed, grid, phi, rough, shape)
         softest[key] = min(float(kbar), softest.get(key, math.inf))
+    # A mistyped N would leave its brush on `grid` without a word.
+    stray = sorted(by_n - {key[1] for key in softest})
+    if stray:
+        ran = sorted({key[1] for key in softest})
+        raise ConfigError(
+            f"config: grid_by_n.n_pillars = {stray[0]} is invalid (no brush of the "
+            f"sweep has {stray[0]} pillars): allowed an N the sweep runs: {ran}"
+        )
     makes = {
         key: (
             lambda g, layout=key[0], n=key[1], kbar=kbar, seed=key[2], phi=key[
