@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import difflib
+import math
 import re
 import sys
 import time
@@ -61,11 +62,16 @@ def _output(text: str) -> str:
 
 def _kbar(text: str) -> float:
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not a number; allowed a number in [{MIN_KBAR:g}, inf], 'inf' means rigid"
         ) from None
+    if math.isinf(value) and "inf" not in text.lower():  # 1e400: a typo, not "rigid"
+        raise argparse.ArgumentTypeError(
+            f"{text!r} overflows a float; allowed a number in [{MIN_KBAR:g}, 1e308] or 'inf' "
+            "for rigid pillars")
+    return value
 
 
 #: A whole negative number, as a value rather than a flag: argparse's own

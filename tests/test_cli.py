@@ -64,6 +64,7 @@ BAD = [
     (["--kbar", "-1"], r"--kbar -1.0 is invalid"),
     (["--kbar", "nan"], "--kbar nan is invalid"),
     (["--kbar", "abc"], "--kbar: 'abc' is not a number"),
+    (["--kbar", "1e400"], "--kbar: '1e400' overflows a float"),  # ran silently as rigid
     (["--kbar", "0"], "--kbar 0.0 is invalid"),
     (["--pillars", "3"], "--pillars 3 .*perfect square"),
     (["--pillars", "0"], "--pillars 0 .*N >= 1"),
