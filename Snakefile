@@ -22,7 +22,7 @@ check_config(config, workflow.source_path("workflow/schemas/config.schema.yaml")
 
 validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
 canonical_solver(config, workflow.source_path("workflow/schemas/config.schema.yaml"))
-check_cases(config)
+check_cases(config, main=not (workflow.remote_exec or workflow.subprocess_exec))
 check_cluster_threads(
     config,
     workflow.resource_settings.cores,
