@@ -847,20 +847,26 @@ def test_loop_and_load_sharing_figures_show_the_curve():
 def test_large_loads_tighten_the_tolerance():
     """Roughness and preload of 1000 units: CG's rtol, relative to stresses
     1000 times a pull-off's, gave F_ad 12 % high and a negative dissipated
-    energy (-74 W_K) at the default; the protocol's rtol now shrinks with
-    the load (`solve.load_options`), and both agree with rtol 1e-8 (F_ad
-    within 1e-4, 1.2e-5 measured; the loop energy, a difference of integrals ~1e6 W_K, within
-    5 %: 3.2 % measured).  Loads of 10 units and less keep the rtol asked for."""
+    energy (-74 W_K) at the default.  The loop energy is a difference of
+    integrals ~X^2 W_K, so the protocol's rtol shrinks as (10 / X)^2
+    (`solve.load_options`); shrinking it as 10 / X left it 29 % low on seed
+    5 (2.7 % on seed 3, the one this test had run).  Over seeds 0-7 both
+    now agree with rtol 1e-10: F_ad within 1e-4 (4.6e-6 measured), the loop
+    energy within 2 % (5.4e-3 measured).  Loads of 10 units and less keep
+    the rtol asked for; the scaled rtol stops at MIN_RTOL."""
     from brushcore.model.solve import LOAD_SPAN, load_options
 
-    params = BrushParams("regular", 16, math.inf, 64, roughness=1000.0, preload=1000.0, seed=3)
-    ds = simulate(params)
-    ref = simulate(params, SolverOptions(rtol=1e-8))
-    assert float(ds.adhesive_force_normalized) == pytest.approx(
-        float(ref.adhesive_force_normalized), rel=1e-4)
-    assert float(ds.dissipated_energy_normalized) == pytest.approx(
-        float(ref.dissipated_energy_normalized), rel=0.05)
-    assert float(ds.dissipated_energy_normalized) > 0
-    assert ds.attrs["rtol"] == pytest.approx(1e-6)  # what ran is recorded
+    for seed in range(8):
+        params = BrushParams("regular", 16, math.inf, 64, roughness=1000.0, preload=1000.0,
+                             seed=seed)
+        ds = simulate(params)
+        ref = simulate(params, SolverOptions(rtol=1e-10))
+        assert float(ds.adhesive_force_normalized) == pytest.approx(
+            float(ref.adhesive_force_normalized), rel=1e-4), seed
+        assert float(ds.dissipated_energy_normalized) == pytest.approx(
+            float(ref.dissipated_energy_normalized), rel=0.02), seed
+        assert float(ds.dissipated_energy_normalized) > 0
+        assert ds.attrs["rtol"] <= 1e-8 * (1 + 1e-9)  # what ran is recorded
     assert load_options(SolverOptions(), LOAD_SPAN) == SolverOptions()
+    assert load_options(SolverOptions(rtol=1e-10), 1e3).rtol == SolverOptions.MIN_RTOL
     assert load_options(SolverOptions(precision="mixed"), 1e4).rtol == 1e-6
