@@ -41,7 +41,7 @@ class SolverOptions:
     symmetry : solve a brush symmetric about both mid-lines (every regular
         flat brush with equal springs) on one quadrant with quarter-size
         transforms (`brushcore.numerics.mirror`); True by default, F_ad and
-        W within 1e-9 of the whole grid.  Protocol runs (preload, rough or
+        W within 1e-8 of the whole grid (exact mode).  Protocol runs (preload, rough or
         graded brushes) always solve the whole grid.
     precision : "auto" (default), "mixed" or "double".  "mixed" runs the
         host's FFTs in single precision and applies the block inverses from

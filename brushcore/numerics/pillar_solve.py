@@ -7,9 +7,9 @@ held fixed: with D the detached elements of pillar p and p' the rest,
     B_p'p' d sigma = B_p'D sigma_D,      B = K + s_p 1 1^T,
 
 which the dense inverse gives as a Schur complement.  Pillars of thousands
-of elements (the 8 x 8 brush at 2048^2: 7,850) have no dense inverse, but
+of elements (the 8 x 8 brush at 2048^2: 7,860) have no dense inverse, but
 the same system is small: K restricted to one pillar is a convolution over
-the pillar's bounding box, one FFT pair on a grid twice the box (256^2
+the pillar's bounding box, one FFT pair on a grid twice the box (200^2
 against the 2048^2 of a global application), solved by CG with the tile
 preconditioner's block of that pillar (`TileCoarse.apply_pillar`).  The
 small transforms run on planned FFTW (`BoxTransforms`).  On a
