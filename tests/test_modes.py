@@ -41,8 +41,11 @@ def test_local_cascade_agrees_with_global(reference, case):
                     SolverOptions(rtol=1e-8, cascade="local", early_decisions=False))
     df = float(fast.adhesive_force) / float(ref.adhesive_force) - 1
     dw = float(fast.work_of_separation) / float(ref.work_of_separation) - 1
-    # Measured: identical to round-off (the first-order bound is rigorous).
-    assert abs(df) < 2e-4 and abs(dw) < 2e-4, f"dF = {df:.2e}, dW = {dw:.2e}"
+    # Measured: identical to round-off on all eight (the first-order bound is
+    # rigorous).  1e-6 leaves room for a rounding-level near-tie on other FFT
+    # plans and still catches a bound too loose to be one: with the far-field
+    # bound dropped, random 64 at kbar 1e-5 moved W by 5.2e-5.
+    assert abs(df) < 1e-6 and abs(dw) < 1e-6, f"dF = {df:.2e}, dW = {dw:.2e}"
     assert fast.attrs["operator_applications"] <= ref.attrs["operator_applications"]
 
 

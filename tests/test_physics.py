@@ -66,6 +66,24 @@ def test_flat_punch_pull_off_is_kendall(rigid_punches, a):
     assert float(ds.adhesive_force_normalized) == pytest.approx(ratio, rel=1e-12)
 
 
+@pytest.mark.parametrize("a", [30, 40])
+def test_displacement_scale_is_kendalls_critical_displacement(rigid_punches, a):
+    """Eq. 21: d_K = F_K / (2 a0 E*), Kendall's critical displacement of a rigid
+    flat punch.  So the normalised pull-off displacement is F_ad/F_K over the
+    secant stiffness F_ad/d there in units of 2 a0 E*, exactly (1e-9), and
+    about 1: the force's +0.6-1.6 % and the staircase's stiffness, -0.3 to
+    -0.4 % and lower once edge elements have gone (the peak may follow the
+    first event), put it within 2.5 % (1.0139 measured at a = 40).  d_K is
+    also the unit of roughness, heights and gap maps."""
+    ds = rigid_punches[a]
+    peak = int(np.argmax(ds.force.values))
+    d_bar = float(ds.displacement_normalized[peak])
+    secant = float(ds.force[peak] / ds.displacement[peak]) / theory.flat_punch_stiffness(
+        _a0(ds), 1.0)
+    assert d_bar == pytest.approx(float(ds.adhesive_force_normalized) / secant, rel=1e-9)
+    assert d_bar == pytest.approx(1.0, abs=0.025), d_bar
+
+
 def test_kendall_is_approached_as_the_punch_spans_more_elements(rigid_punches):
     """Kendall's force from above, within 1 % from a = 40 elements on (measured
     +0.62, +0.55, +0.45 % at a = 40, 50, 60; +1.63 % at 30, +1.70 % at 10).
@@ -163,10 +181,14 @@ def test_soft_work_approaches_spring_energy(single_pillar):
         if kbar <= 1e-3:  # series spring + contact; neighbours add ~0.2 % compliance
             assert w == pytest.approx(4 * theory.spring_punch_work(f, k, kc), rel=5e-3), kbar
     assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-3, errors
-    # eq. 27 itself uses Kendall's force instead of the discretised one (~1-3 % apart)
+    # Eqs. 25-26 take each pillar's force as Kendall's, N^(1/4) F_K in all;
+    # W goes as the force squared, so W / W_S is (F_ad / N^(1/4) F_K)^2, up
+    # to the contact's own compliance (1.8e-4 measured: 1.05702 against
+    # 1.05683).  This pins W's normalisation (eq. 23) to F's (eq. 20).
     ratio = float(ds.work_of_separation_normalized) / float(
         theory.soft_work(4, ds.attrs["phi_actual"], 1e-5))
-    assert abs(ratio - 1) < 0.06, f"W / W_S(eq. 27) = {ratio:.4f}"
+    expected = (float(ds.adhesive_force_normalized) / float(theory.soft_limit(4))) ** 2
+    assert ratio == pytest.approx(expected, rel=1e-3), f"W / W_S(eq. 27) = {ratio:.5f}"
 
 
 def test_rigid_regular_brush_is_near_phi_limit():
@@ -177,7 +199,10 @@ def test_rigid_regular_brush_is_near_phi_limit():
     """
     ds = simulate(BrushParams("regular", 64, math.inf, 256, phi=0.12))
     ratio = float(ds.adhesive_force_normalized) / theory.rigid_limit(ds.attrs["phi_actual"])
-    assert 0.98 < ratio < 1.15, f"F_ad / phi^-1/4 = {ratio:.3f}"
+    # "Slightly above", and this model's 1.010 to 0.005: sigma_c 3 % off
+    # moved it to 0.981 or 1.042.
+    assert ratio > 1 and ratio == pytest.approx(1.010, abs=0.005), \
+        f"F_ad / phi^-1/4 = {ratio:.4f}"
 
 
 @pytest.mark.parametrize("transform", ["transpose", "flip_x", "flip_y", "rot180"])
@@ -199,10 +224,16 @@ def test_layout_symmetries_leave_results_unchanged(transform):
 
 
 def test_paper_fig5a_case_on_256_grid():
-    """16 x 16 pillars, kbar = 0.455, phi = 0.12: the paper reports F_ad/F_K ~ 1.8 on 512."""
+    """16 x 16 pillars, kbar = 0.455, phi = 0.12: the paper reports F_ad/F_K ~ 1.8 on 512.
+
+    The band is the paper's; the pin is this model's value on 256^2 (1.8386,
+    reproduced by two independent dense solvers in audits), to 1e-3 (CG's
+    tolerance moves it ~1e-5): a critical stress 3 % off (C in sigma_c)
+    moved it to 1.786 or 1.896, inside the band but not the pin."""
     ds = simulate(BrushParams("regular", 256, 0.455, 256, phi=0.12))
     f = float(ds.adhesive_force_normalized)
     assert 1.75 <= f <= 1.92, f"F_ad/F_K = {f:.4f}"
+    assert f == pytest.approx(1.8386, rel=1e-3), f"F_ad/F_K = {f:.4f}"
 
 
 def test_curve_is_consistent():

@@ -870,3 +870,29 @@ def test_large_loads_tighten_the_tolerance():
     assert load_options(SolverOptions(), LOAD_SPAN) == SolverOptions()
     assert load_options(SolverOptions(rtol=1e-10), 1e3).rtol == SolverOptions.MIN_RTOL
     assert load_options(SolverOptions(precision="mixed"), 1e4).rtol == 1e-6
+
+
+def test_given_heights_and_springs_reach_their_own_pillars():
+    """Per-pillar inputs through the public API land on their pillars (label
+    order) with the right units: a soft pillar lets go once its spring
+    carries f_c, at d = f_c / k_i + its height (in d_K).
+
+    Heights 0, 20, 40, 60 d_K at equal kbar 1e-2: successive let-go
+    displacements 20.69, 20.71, 20.28 d_K apart (measured; the pillars'
+    elastic interaction moves each f_c / k = 9 d_K a little), 5 % allowed.
+    Stiffness k, 2k, 4k, 8k at equal heights: the gaps halve, f_c (1/k_i -
+    1/k_j), 2.03 and 1.99 measured, 4 % allowed.  Reversed inputs, or heights
+    off by a factor, fail both."""
+    k = 1e-2
+    heights = BrushParams("regular", 4, k, 128, phi=0.05, preload=20.0,
+                          heights=np.array([0.0, 20.0, 40.0, 60.0]))
+    ds = simulate(heights)
+    d_k = float(ds.displacement[1] / ds.displacement_normalized[1])  # the curve's own d_K
+    gaps = np.diff(ds.pillar_let_go_displacement.values) / d_k
+    assert gaps == pytest.approx([20.0] * 3, rel=0.05), gaps
+    springs = BrushParams("regular", 4, 1e-4, 128, phi=0.05, preload=0.1,
+                          kbar_values=np.array([1e-4, 2e-4, 4e-4, 8e-4]))
+    let_go = simulate(springs).pillar_let_go_displacement.values
+    gaps = -np.diff(let_go)
+    assert gaps[0] / gaps[1] == pytest.approx(2.0, rel=0.04), gaps
+    assert gaps[1] / gaps[2] == pytest.approx(2.0, rel=0.04), gaps
