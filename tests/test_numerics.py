@@ -451,14 +451,15 @@ def _far_response_error(mirrored: bool, distance: float, compliance: float) -> n
 def test_far_response_is_the_first_order_answer_to_second_order_in_size(mirrored, compliance):
     """The far-field warm start expands the source to dipole order and each
     target's field to its Hessian, so what it misses is of relative order
-    (a/R)^2: halving a/R must divide the error by about 4 (measured 4.1-6.8),
+    (a/R)^2: halving a/R must divide the error by about 4 (measured 4.1-7.5),
     and at a/R = 0.19 it stays under 2 (a/R)^2 (measured 0.3-4.0e-2).  A soft
     pillar answers a uniform field with its spring alone, so there the
     gradient and Hessian terms carry the answer; without the Hessian the
     error fell only as a/R."""
     near, far = (_far_response_error(mirrored, d, compliance) for d in (24, 48))
     assert np.all(near < 2 * (4.5 / 24) ** 2), near
-    assert np.all(near / far > 3.0), near / far
+    assert np.all(far < 2 * (4.5 / 48) ** 2), far  # the bound holds at both distances
+    assert np.all(near / far > 3.5), near / far  # second order: 4 (4.1-7.5 measured)
 
 
 def test_settled_needs_every_decision_clear_of_the_error():
