@@ -158,10 +158,12 @@ def single_pillar():
 
 @pytest.mark.parametrize("kbar", [1e-5, 1e-4])
 def test_soft_separated_pillars_share_load_equally(single_pillar, kbar):
-    """Eq. 3: N soft pillars hold N times one pillar's Kendall force."""
+    """Eq. 3: N soft pillars hold N times one pillar's Kendall force, less the
+    neighbours' tilt of each pillar's stress (~0.5 %, `_four_pillars`):
+    -0.82 % measured, so below 1 and within 1.5 % of it."""
     ds = simulate(_four_pillars(kbar))
     ratio = float(ds.adhesive_force) / (4 * float(single_pillar.adhesive_force))
-    assert abs(ratio - 1) < 0.02, f"kbar={kbar}: F_ad / (4 f_1) = {ratio:.4f}"
+    assert -0.015 < ratio - 1 < 0, f"kbar={kbar}: F_ad / (4 f_1) = {ratio:.4f}"
 
 
 def test_soft_work_approaches_spring_energy(single_pillar):
