@@ -59,6 +59,13 @@ _REFERENCE = r"(?=\s*(?:[=<>'\"]|\d|-\d|\b(?:is|are|must)\b))"
 
 
 def require(ok: bool, name: str, value: object, allowed: str, reason: str = "") -> None:
+    """Raise `ParameterError(name, value, allowed, reason)` unless ``ok``.
+
+    Every layer checks its inputs with it, so that each refusal reads
+    "``name``=``value`` is invalid (``reason``): allowed ``allowed``" and
+    the CLI and the workflow can translate ``name`` into the flag or config
+    key the user typed (`ParameterError.in_terms_of`).
+    """
     if not ok:
         raise ParameterError(name, value, allowed, reason)
 

@@ -98,6 +98,16 @@ def soft_work(n_pillars: int | np.ndarray, phi: float, kbar: float | np.ndarray)
     and k = kbar E* L gives W_S = 2 sqrt(phi / pi) / (sqrt(N) kbar).  The
     paper prints the last step of eq. 27 as sqrt(phi) / (sqrt(N) kbar),
     smaller by 2 / sqrt(pi) = 1.128; eqs. 25-26 give the form used here.
+
+    Parameters
+    ----------
+    n_pillars : N [-]
+    phi : filling factor A / L^2 [-]
+    kbar : normalised spring stiffness k / (E* L) [-]
+
+    Returns
+    -------
+    W_S / (2 pi a0^2 dgamma) [-]
     """
     n = np.asarray(n_pillars, dtype=float)
     return 2.0 * math.sqrt(phi / math.pi) / (np.sqrt(n) * np.asarray(kbar, dtype=float))
@@ -109,6 +119,13 @@ def spring_punch_work(pull_off: float, spring: float, contact: float) -> float:
     Under displacement control the punch and its spring are in series, so
     the force rises linearly with compliance 1/k + 1/k_c up to the pull-off
     force and then drops to zero: W = f^2 (1/k + 1/k_c) / 2.
+
+    Parameters
+    ----------
+    pull_off : the punch's pull-off force f [force]
+    spring : spring stiffness k [force / length]
+    contact : the contact's own stiffness k_c, 2 a E* for a flat punch
+        [force / length]
     """
     return 0.5 * pull_off**2 * (1.0 / spring + 1.0 / contact)
 
@@ -179,7 +196,13 @@ def gaussian_spread_pull_off(s: float) -> float:
 def bimodal_stiffness_pull_off(ratio: float = 2.0, fraction: float = 0.5) -> float:
     """F_ad / (N f_c) of equal-height pillars, a fraction q with stiffness k
     and the rest with ratio * k (ratio >= 1): the stiff ones let go at
-    lambda / ratio, the soft ones at lambda; 0.75 for half k, half 2k."""
+    lambda / ratio, the soft ones at lambda; 0.75 for half k, half 2k.
+
+    Parameters
+    ----------
+    ratio : stiffness of the stiff pillars over the soft ones' (>= 1) [-]
+    fraction : share q of the soft pillars [-]
+    """
     at_stiff = fraction / ratio + (1.0 - fraction)
     at_soft = fraction
     return max(at_stiff, at_soft)
@@ -205,5 +228,11 @@ def foundation_stretch(n_pillars: int, phi: float, kbar: float | np.ndarray
     radius, f_c = N^(-3/4) F_K, on a spring k = kbar E* L; with F_K / d_K =
     2 E* a0 and a0 = L sqrt(phi / pi): lambda / d_K = 2 N^(-3/4) sqrt(phi /
     pi) / kbar.  A roughness S (in d_K) is s = S d_K / lambda stretches.
+
+    Parameters
+    ----------
+    n_pillars : N [-]
+    phi : filling factor A / L^2 [-]
+    kbar : normalised spring stiffness k / (E* L) [-]
     """
     return 2.0 * n_pillars**-0.75 * math.sqrt(phi / math.pi) / np.asarray(kbar, dtype=float)
