@@ -34,7 +34,7 @@ from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, UNDER_R
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
 K_LABEL = r"$\bar k = k / (E^* L)$"
-FAD_LABEL = r"$\bar F_{ad}$"
+FAD_LABEL = r"$\bar F_{ad} = F_{ad} / F_K$"
 W_LABEL = r"$\bar W = W / (2\pi a_0^2 \Delta\gamma)$"
 #: Colours of the layouts and markers of the pillar shapes in the lattice figure.
 LAYOUT_COLORS = {"regular": "C0", "hexagonal": "C1", "random": "C2"}
@@ -139,8 +139,8 @@ def fig5(
         loop = ", from the preload" if float(np.min(f)) < 0.0 else ""
         ax.set_title(f"({chr(ord('a') + row)}) " + r"$\bar k$" + f" = {_kbar_text(k)}{loop}",
                      loc="left")
-        ax.set_xlabel(r"$\bar d$")
-        ax.set_ylabel(r"$\bar F$")
+        ax.set_xlabel(r"$\bar d = d / d_K$")
+        ax.set_ylabel(r"$\bar F = F / F_K$")
         snap = snapshots(sweep, layout, n_pillars, k, seed)
         if snap is None:
             if n_snap:  # the sweep keeps one grid's maps (its finest): say so
@@ -561,7 +561,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
         ax.set_ylabel(FAD_LABEL)
         _no_false_zoom(ax)
     _side_legend(fig, axes)
-    fig.suptitle(f"Preload brings adhesion back: rough {layout} brush, N = {n_pillars}")
+    fig.suptitle(f"Adhesive force against preload: rough {layout} brush, N = {n_pillars}")
     return fig
 
 
