@@ -508,6 +508,35 @@ def test_summary_quotes_the_paper_only_where_it_applies():
     assert "regular: not on a plateau (not fitted)" in labels, labels
 
 
+def test_soft_plateau_fit_is_per_layout_and_paper_numbers_sit_where_they_apply():
+    """Two layouts on their plateaus, F = c N^(1/4) with c 0.9 (regular) and
+    0.75 (random): one fit each, 1/c = 1.111 and 1.333, not a pooled
+    average; random 64 (a paper brush) off its plateau gets no paper onset
+    beside its n/a."""
+    from brushcore.data.summary import headline_rows
+
+    n = np.array([64, 256])
+    plateau = {"regular": 0.9 * n ** 0.25, "random": 0.75 * n ** 0.25}
+    forces = np.empty((2, 2, 3, 1))
+    for i, layout in enumerate(("regular", "random")):
+        forces[i, :, 0, 0] = plateau[layout]
+        forces[i, :, 1, 0] = plateau[layout] * 0.999  # within PLATEAU_RTOL
+        forces[i, :, 2, 0] = 1.7
+    forces[1, 0, 1, 0] = forces[1, 0, 0, 0] * 0.8  # random 64 still rising: off the plateau
+    sweep = xr.Dataset(
+        {"adhesive_force_normalized": (("layout", "n_pillars", "kbar", "seed"), forces)},
+        coords={"layout": ["regular", "random"], "n_pillars": n, "kbar": [1e-6, 1e-5, 10.0],
+                "seed": [0]}, attrs={"phi": 0.12})
+    rows = {(r.quantity.split(" (")[0], r.layout, r.n_pillars): r for r in headline_rows(sweep)}
+    regular = rows["N^1/4 / F_ad, fit over N", "regular", ""]
+    random = rows["N^1/4 / F_ad, fit over N", "random", ""]
+    assert regular.value == f"{1 / 0.9:.3g}" and "2 of 2 brushes" in regular.note, regular
+    assert random.value == f"{1 / 0.75:.3g}" and "1 of 2 brushes" in random.note, random
+    onset = rows["kbar where the soft plateau is reached", "random", "64"]
+    assert (onset.value, onset.paper) == ("n/a", ""), onset
+    assert rows["kbar where the soft plateau is reached", "regular", "64"].paper == "~1e-3"
+
+
 @pytest.mark.parametrize(("radii", "flag"), [((2.1, 4.2, 8.4), "coarsest_under_resolved"),
                                              ((4.2, 8.4, 16.8), ""),
                                              ((1.0, 2.0, 3.9), "under_resolved")])

@@ -297,7 +297,9 @@ def build_sweep(
     Parameters
     ----------
     paths : curve files written by `brushcore.data.io.write_curve`.
-    keep_snapshots : (layout, n_pillars) whose contact snapshots are kept.
+    keep_snapshots : (layout, n_pillars) whose contact snapshots are kept;
+        their finest grid is the one whose maps the sweep keeps (maps of
+        different grids cannot share (y, x)).
     all_snapshots_below_mb : keep all snapshots when they total less [MiB].
     expected : per path, the (case, phi) it must hold (`load_curves`).
 

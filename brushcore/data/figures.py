@@ -28,7 +28,7 @@ from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
-from brushcore.data.views import finest_grid, flat_slice, shape_slice, snapshots
+from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
 from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
                                         touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
@@ -84,18 +84,27 @@ def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: in
     """(d, F) normalised of one run without padding, or None when absent."""
     try:
         case = sweep.sel(layout=layout, n_pillars=n_pillars, seed=seed)
-        kbars = case["kbar"].values
-        # rigid (inf) matches itself; a finite kbar matches to rounding
-        hit = np.flatnonzero((kbars == kbar) | np.isclose(kbars, kbar, rtol=1e-9, atol=0.0))
-        if not hit.size:
+        at = kbar_index(case["kbar"].values, kbar)
+        if at is None:
             return None
-        case = case.isel(kbar=int(hit[0]))
+        case = case.isel(kbar=at)
     except KeyError:
         return None
     d = case["displacement_normalized"].values
     f = case["force_normalized"].values
     ok = np.isfinite(d) & np.isfinite(f)
     return (d[ok], f[ok]) if ok.any() else None
+
+
+def _grid_used(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float,
+               seed: int) -> int | None:
+    """The grid `finest_grid` drew a case at, or None (a sweep without grids)."""
+    if "grid_used" not in sweep:
+        return None
+    case = sweep["grid_used"].sel(layout=layout, n_pillars=n_pillars, seed=seed)
+    at = kbar_index(case["kbar"].values, kbar)
+    value = float(case.isel(kbar=at)) if at is not None else math.nan
+    return int(value) if math.isfinite(value) else None
 
 
 def fig5(
@@ -141,9 +150,10 @@ def fig5(
                      loc="left")
         ax.set_xlabel(r"$\bar d = d / d_K$")
         ax.set_ylabel(r"$\bar F = F / F_K$")
-        snap = snapshots(sweep, layout, n_pillars, k, seed)
+        snap = snapshots(sweep, layout, n_pillars, k, seed, grid=_grid_used(
+            sweep, layout, n_pillars, k, seed))
         if snap is None:
-            if n_snap:  # the sweep keeps one grid's maps (its finest): say so
+            if n_snap:  # the sweep keeps one grid's maps (`build_sweep`): say so
                 grids = sorted({int(g) for g in sweep["case_grid"].values}) \
                     if "case_grid" in sweep else []
                 kept = f" (kept on n = {', '.join(map(str, grids))} only)" if grids else ""
@@ -301,7 +311,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
         n, k, f = map(np.asarray, zip(*points))
         fitted[layout] = (n, f)
         ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none",
-                color=f"C{len(fitted) - 1}", label=f"{layout} (min " + r"$\bar k$"
+                color=LAYOUT_COLORS.get(layout, "C3"), label=f"{layout} (min " + r"$\bar k$"
                 + f" = {k.min():g})")
     for layout in dict.fromkeys(lay for lay, _, _ in off):  # grey, the layout's marker
         n_off, f_off = zip(*[(n, f) for lay, n, f in off if lay == layout])
@@ -330,10 +340,10 @@ def fig7(sweep: xr.Dataset) -> Figure:
     # One fit per layout (the paper's 1.2-1.3 is a range; pooled layouts
     # would put one layout's prefactor offset into the other's slope).
     lines = [r"$N^{1/4}/\bar F_{ad}$ = 1/c (paper 1.2-1.3):"]
-    for index, (layout, (n, f)) in enumerate(fitted.items()):
+    for layout, (n, f) in fitted.items():
         fit = fit_soft_prefactor(n, f)
         ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "--", lw=1,
-                color=f"C{index}", label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
+                color=LAYOUT_COLORS.get(layout, "C3"), label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
         line = f"{layout} {fit['ratio']:.2f}"
         if math.isfinite(fit["exponent"]):
             line += f", free exponent {fit['exponent']:.3f}"

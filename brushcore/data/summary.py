@@ -23,7 +23,7 @@ from scipy import stats
 
 from brushcore.model import theory
 from brushcore.data.aggregate import GRID_DIM
-from brushcore.data.views import finest_grid, flat_slice
+from brushcore.data.views import finest_grid, flat_slice, kbar_index
 from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
@@ -57,7 +57,7 @@ def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: f
     if sweep.sizes.get("seed", 1) < 2 or layout != "random" or layout not in sweep.layout:
         return ""  # flat lattices run seed 0 only: nothing drawn, nothing missing
     runs = sweep[name].sel(layout=layout, n_pillars=n_pillars)
-    at = _kbar_index(runs.kbar.values, kbar)
+    at = kbar_index(runs.kbar.values, kbar)
     if at is None:
         return ""
     values = runs.isel(kbar=at).values.ravel()
@@ -75,15 +75,8 @@ def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: f
 def value_at(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> float:
     """Seed-averaged value of one case, NaN when the case was not run."""
     series = seed_mean(sweep, name, layout, n_pillars)
-    at = _kbar_index(series.kbar.values, kbar)
+    at = kbar_index(series.kbar.values, kbar)
     return math.nan if at is None else float(series.values[at])
-
-
-def _kbar_index(kbars: np.ndarray, kbar: float) -> int | None:
-    """Position of ``kbar`` among ``kbars`` (to 1e-9, as a config's values
-    survive the file names), None if it was not run."""
-    hit = np.flatnonzero(np.isclose(kbars, kbar, rtol=1e-9, atol=0.0))
-    return int(hit[0]) if hit.size else None
 
 
 def rigid_end(sweep: xr.Dataset, layout: str, n_pillars: int) -> tuple[float, float]:

@@ -59,8 +59,15 @@ def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
     return out
 
 
+def kbar_index(kbars: np.ndarray, kbar: float) -> int | None:
+    """Position of ``kbar`` among ``kbars`` (to 1e-9, as a config's values
+    survive the file names; inf matches inf), None if it was not run."""
+    hit = np.flatnonzero(np.isclose(kbars, kbar, rtol=1e-9, atol=0.0))
+    return int(hit[0]) if hit.size else None
+
+
 def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0,
-              *, shape: str = "disc", **rough: float):
+              *, shape: str = "disc", grid: int | None = None, **rough: float):
     """Contact snapshots of one case, or None when the sweep did not keep them.
 
     Parameters
@@ -69,6 +76,8 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
     layout, n_pillars, kbar, seed : the case
     shape : its pillars' `brushcore.model.shapes.shape_label` (where the
         sweep holds several shapes)
+    grid : the grid whose maps are wanted (None: whichever the sweep kept);
+        a curve drawn at another grid must not take their step numbers
     rough : its ``roughness``, ``preload`` and ``kbar_spread`` (each 0, the
         flat brush, unless given; where the sweep holds rough cases)
 
@@ -92,6 +101,8 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
     )
     if f"case_{SHAPE_DIM}" in sweep.variables:
         hit = hit & (sweep[f"case_{SHAPE_DIM}"] == shape)
+    if grid is not None and "case_grid" in sweep.variables:
+        hit = hit & (sweep["case_grid"] == int(grid))
     for name in ROUGH_DIMS:
         if f"case_{name}" in sweep.variables:
             hit = hit & np.isclose(sweep[f"case_{name}"], float(rough.get(name, 0.0)),
@@ -119,7 +130,7 @@ def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr
     -------
     xarray.Dataset
         Every variable with a ``grid`` dimension reduced to its value at the
-        finest grid run (NaN where the case never ran), plus ``grid_used``
+        finest grid run (NaN where the case never ran; text, "" there), plus ``grid_used``
         (elements per side of that grid, NaN where none).
     """
     if GRID_DIM not in sweep.dims:
