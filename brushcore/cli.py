@@ -69,7 +69,7 @@ def _kbar(text: str) -> float:
         ) from None
     if math.isinf(value) and "inf" not in text.lower():  # 1e400: a typo, not "rigid"
         raise argparse.ArgumentTypeError(
-            f"{text!r} overflows a float; allowed a number in [{MIN_KBAR:g}, 1e308] or 'inf' "
+            f"{text!r} overflows a float; allowed a finite number >= {MIN_KBAR:g} or 'inf' "
             "for rigid pillars")
     return value
 

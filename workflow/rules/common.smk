@@ -7,6 +7,7 @@ import re
 
 import jsonschema
 import yaml
+from snakemake.logging import logger
 
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint, hinted_params
@@ -138,6 +139,22 @@ def canonical_solver(config, schema_path):
     }
 
 
+def _case_params(config, key, kbar, grid):
+    """The parameters of a case (layout, n, seed, grid, phi, rough, shape) on ``grid``."""
+    layout, n, seed, _, phi, rough, shape = key
+    return BrushParams(
+        layout,
+        n,
+        kbar,
+        grid,
+        phi=phi,
+        seed=seed,
+        allow_coarse=config["allow_coarse"],
+        **parse_rough_tag(rough),
+        **parse_shape_tag(shape),
+    )
+
+
 def check_cases(config, main=True):
     """Run every check that needs no solve, for every case, before any job starts.
 
@@ -175,21 +192,7 @@ def check_cases(config, main=True):
             f"(the sweep runs N = {ran}): ignored"
         )
     makes = {
-        key: (
-            lambda g, layout=key[0], n=key[1], kbar=kbar, seed=key[2], phi=key[
-                4
-            ], rough=key[5], shape=key[6]: BrushParams(
-                layout,
-                n,
-                kbar,
-                g,
-                phi=phi,
-                seed=seed,
-                allow_coarse=config["allow_coarse"],
-                **parse_rough_tag(rough),
-                **parse_shape_tag(shape),
-            )
-        )
+        key: functools.partial(_case_params, config, key, kbar)
         for key, kbar in softest.items()
     }
     for (layout, n, seed, grid, phi, rough, shape), make in makes.items():
