@@ -22,6 +22,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
@@ -180,6 +181,10 @@ def fig5(
             ax.plot(d[step], f[step], "o", ms=4, color="C3")
             ax.annotate(label, (d[step], f[step]), textcoords="offset points",
                         xytext=(3, 3), fontsize=7)
+    if n_snap:  # the maps' colour key
+        fig.legend(handles=[Patch(color=SNAPSHOT_CMAP(2), label="attached"),
+                            Patch(color=SNAPSHOT_CMAP(1), label="detached")],
+                   loc="upper right", ncols=2, fontsize=7, frameon=False)
     return fig
 
 
