@@ -470,6 +470,16 @@ def test_failed_write_leaves_neither_file_nor_temporary(cli_curves: list[Path], 
         f"a failed write left files: {sorted(p.name for p in tmp_path.iterdir())}")
 
 
+def test_writing_to_a_folder_says_so_before_writing(cli_curves: list[Path],
+                                                     tmp_path: Path) -> None:
+    """A folder as the file name: one clear error naming it, nothing left behind
+    (it was a rename error naming the temporary, after the whole write)."""
+    with pytest.raises(IsADirectoryError, match=r"a folder, not a file name: give one such "
+                                                r"as .*curve\.nc"):
+        write_curve(read_curve(cli_curves[0]), tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
 #: Makes every random brush's solve fail in the jobs (a `sitecustomize` on
 #: PYTHONPATH): whatever can be checked is checked at plan time, so a job
 #: that fails is one whose solve fails.

@@ -136,6 +136,9 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
     ``.{name}.*.tmp`` (see `remove_stale_temporaries`), never half a file.
     """
     path = Path(path)
+    if path.is_dir():  # else a rename error naming the temporary, after the writing
+        raise IsADirectoryError(errno.EISDIR, "a folder, not a file name: give one such "
+                                f"as {path / 'curve.nc'}", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
