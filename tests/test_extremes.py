@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from brushcore import BrushParams, ParameterError, simulate, theory
+from brushcore import BrushParams, ParameterError, SolverOptions, simulate, theory
 
 
 def _fw(ds):
@@ -41,6 +41,14 @@ def test_single_pillar_is_kendall_at_any_stiffness(kbar):
     assert 1 < f < 1.02, f"F_ad/F_K = {f:.4f}"
 
 
+def _agrees_with_exact(ds, params: BrushParams) -> None:
+    """Defaults against `SolverOptions.exact()` within CG's tolerance (1e-4):
+    the fast paths hold at the extremes too."""
+    ref = simulate(params, SolverOptions.exact())
+    for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+        assert float(ds[name]) == pytest.approx(float(ref[name]), rel=1e-4), name
+
+
 def test_densest_resolvable_regular_brush():
     """Radius 0.74 elements (17 x 17 on 64): refused by default, runs when asked for."""
     side = 17  # 18 x 18 (radius 0.695 < sqrt(2)/2) may leave pillars without an element
@@ -48,9 +56,11 @@ def test_densest_resolvable_regular_brush():
         BrushParams("regular", 18 * 18, 1.0, 64, allow_coarse=True)
     with pytest.raises(ParameterError, match="grid=64.*allow_coarse"):
         BrushParams("regular", side * side, 1e-3, 64)
-    ds = simulate(BrushParams("regular", side * side, 1e-3, 64, allow_coarse=True))
+    params = BrushParams("regular", side * side, 1e-3, 64, allow_coarse=True)
+    ds = simulate(params)
     f, _ = _fw(ds)
     assert 1.0 < f < theory.soft_limit(side * side)
+    _agrees_with_exact(ds, params)  # 3.1e-6 measured
 
 
 @pytest.mark.parametrize("phi", [0.01, 0.5])
@@ -66,11 +76,15 @@ def test_filling_factor_extremes(phi):
         assert f == pytest.approx(theory.soft_limit(4), rel=0.03)
     else:  # touching neighbours still never beat independent pillars
         assert 1.0 < f < theory.soft_limit(4)
+        _agrees_with_exact(ds, BrushParams("regular", 4, 1e-4, 128, phi=phi,
+                                           allow_coarse=True))  # 3.3e-5 measured
 
 
 def test_random_layout_near_the_packing_limit():
-    ds = simulate(BrushParams("random", 16, 1e-2, 64, phi=0.35, seed=0))
+    params = BrushParams("random", 16, 1e-2, 64, phi=0.35, seed=0)
+    ds = simulate(params)
     _fw(ds)
+    _agrees_with_exact(ds, params)  # 3.1e-6 measured
     with pytest.raises(ParameterError, match="n_pillars=40 is invalid .random layout"):
         simulate(BrushParams("random", 40, 1e-2, 64, phi=0.5, seed=0))
 
