@@ -71,6 +71,7 @@ BAD = [
     (["--phi", "0.6"], r"--phi 0.6 .*\(0, 0.5\]"),
     (["--phi", "0"], r"--phi 0.0 .*\(0, 0.5\]"),
     (["--grid", "8", "--pillars", "64"], "--grid 8 .*pillar radius"),
+    (["--grid", "0"], r"--grid 0 is invalid: allowed an integer in \[4, 8192\]"),  # not "41"
     (["--grid", "41", "--pillars", "256"], "--grid 41 .*--grid 164, the next .*--allow-coarse"),
     (["--grid", "128", "--pillars", "256"], "--grid 128 .*--grid 164, the next"),
     (["--layout", "hex"], "invalid choice: 'hex'"),

@@ -26,9 +26,9 @@ import numpy as np
 from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
 from brushcore.model.labelmap import check_not_touching
 from brushcore.model.layout_file import read_label_map
-from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_GRID, MAX_PHI_ERROR,
+from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_GRID, MAX_PHI_ERROR, MIN_GRID,
                                     RANDOM_GAP_GRID, BrushParams)
-from brushcore.validation import ParameterError
+from brushcore.validation import ParameterError, is_integer
 from brushcore.model.shapes import PillarShape
 
 
@@ -308,8 +308,8 @@ def grid_hint(exc: ParameterError, make: Callable[[int], BrushParams], grid: int
     where the search meets an error no grid can fix (a random brush too
     dense to pack), that error comes back.
     """
-    if exc.name != "grid":
-        return exc
+    if exc.name != "grid" or not (is_integer(grid) and MIN_GRID <= grid <= MAX_GRID):
+        return exc  # a grid out of range is told its range, not a neighbour
     try:
         found = next_common_grid([make, *others], grid + 1)
     except ParameterError as unfixable:  # no grid runs it: say why instead

@@ -61,7 +61,7 @@ RANDOM_GAP_GRID = 512
 #: roughness 1e30 d_K hung the approach (1e3 runs at once, each pillar then
 #: separate); e_star, dgamma or h beyond 1e+-100 overflowed.
 MIN_KBAR = 1e-9
-MAX_GRID = 8192
+MIN_GRID, MAX_GRID = 4, 8192
 MAX_ROUGH = 1e3  # roughness, |heights| and |gap map| [d_K], preload [F_K]
 MAX_KBAR_SPREAD = 100.0  # coefficient of variation
 UNIT_RANGE = (1e-30, 1e30)  # e_star, dgamma, h in the inputs' units
@@ -191,8 +191,8 @@ class BrushParams:
         self._check_shape()
         require(is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar >= MIN_KBAR,
                  "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars")
-        require(is_integer(self.grid) and 4 <= self.grid <= MAX_GRID, "grid", self.grid,
-                 f"an integer in [4, {MAX_GRID}]")
+        require(is_integer(self.grid) and MIN_GRID <= self.grid <= MAX_GRID, "grid", self.grid,
+                 f"an integer in [{MIN_GRID}, {MAX_GRID}]")
         require(is_real(self.phi) and 0.0 < self.phi <= 0.5, "phi", self.phi,
                  "a number in (0, 0.5]")
         require(is_integer(self.seed) and 0 <= self.seed <= MAX_SEED, "seed", self.seed,
