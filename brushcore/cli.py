@@ -325,7 +325,14 @@ def _simulate(args: argparse.Namespace) -> int:
                                                        "kbar_values", positive=True)
         if args.gap_map is not None:
             arrays["gap_map"] = read_gap_map(args.gap_map, base.grid)
-        params = dataclasses.replace(base, **arrays) if arrays else base
+        try:
+            params = dataclasses.replace(base, **arrays) if arrays else base
+        except ParameterError as exc:  # a value out of range: name the file it came from
+            source = {"heights": args.heights, "kbar_values": args.kbar_file,
+                      "gap_map": args.gap_map}.get(exc.name)
+            if exc.name not in arrays or source is None:
+                raise
+            raise ParameterError(exc.name, str(source), exc.allowed, exc.reason) from None
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,
                                 early_decisions=args.early_decisions,

@@ -703,6 +703,8 @@ def test_spread_draws_are_reproducible_and_have_the_asked_moments():
     ("0.1\n" * 15 + "0\n", "--kbar-file", "line 16 holds 0.0"),
     ("0.1\n" * 15 + "1e-11\n", "--kbar-file", "line 16 holds 1e-11"),  # under MIN_KBAR
     ("0.1\n" * 3 + "abc\n", "--kbar-file", "line 4: 'abc' is not a number"),
+    # a value out of range, caught by BrushParams: named by its file too
+    ("0.1\n" * 15 + "1e4\n", "--heights", "(pillar 15 is 10000.0): allowed one value per"),
 ])
 def test_cli_refuses_bad_files_before_any_work(tmp_path, capsys, content, flag, message):
     from brushcore.cli import main
