@@ -246,6 +246,9 @@ def test_refused_label_maps_name_the_file_and_the_pillars(tmp_path):
     (tmp_path / "folder.npy").mkdir()
     with pytest.raises(ParameterError, match=r"folder\.npy.*\(a folder\)"):
         read_label_map(tmp_path / "folder.npy")
+    (tmp_path / "maps").mkdir()  # no suffix: it was "unknown kind '(no suffix)'"
+    with pytest.raises(ParameterError, match=r"maps.*\(a folder\)"):
+        read_label_map(tmp_path / "maps")
 
 
 def test_broken_images_are_refused_not_crashed_on(tmp_path):

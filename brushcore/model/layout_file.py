@@ -135,6 +135,8 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
         (pillar indices and element named).
     """
     path = Path(path)
+    if path.is_dir():
+        raise _refuse(path, f"a file ending in {' or '.join(SUFFIXES)}", "a folder")
     if path.suffix.lower() not in SUFFIXES:
         raise _refuse(path, f"a file ending in {' or '.join(SUFFIXES)}",
                       f"unknown kind {path.suffix or '(no suffix)'!r}")
