@@ -135,14 +135,13 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
         (pillar indices and element named).
     """
     path = Path(path)
-    if path.is_dir():
-        raise _refuse(path, f"a file ending in {' or '.join(SUFFIXES)}", "a folder")
+    if path.is_dir():  # before the suffix, which a folder's name need not have
+        raise _refuse(path, "an existing, readable file", "a folder")
     if path.suffix.lower() not in SUFFIXES:
         raise _refuse(path, f"a file ending in {' or '.join(SUFFIXES)}",
                       f"unknown kind {path.suffix or '(no suffix)'!r}")
     if not path.is_file():
-        raise _refuse(path, "an existing, readable file",
-                      "a folder" if path.is_dir() else "no such file")
+        raise _refuse(path, "an existing, readable file", "no such file")
     labels = _read_npy(path) if path.suffix.lower() == ".npy" else _read_png(path)
     unit = "elements" if path.suffix.lower() == ".npy" else "pixels"
     if labels.ndim != 2 or labels.shape[0] != labels.shape[1]:
