@@ -117,6 +117,19 @@ FIT_FLAGS = ("non_monotone", "poor_fit", "too_few_grids", "not_asymptotic")
 TOUCHING = "touching_pillar_pairs"
 
 
+def resolution_flag(finest: float, coarsest: float) -> tuple[str, float] | None:
+    """The study's resolution flag and the radius behind it: ("under_resolved",
+    finest) where the finest grid's pillar radius [elements] is under
+    `UNDER_RESOLVED_RADIUS`, else ("coarsest_under_resolved", coarsest) where
+    the fit rests on a coarsest grid under it, else None (NaN counts as
+    resolved).  The table and the figure flag alike."""
+    if finest < UNDER_RESOLVED_RADIUS:
+        return "under_resolved", finest
+    if coarsest < UNDER_RESOLVED_RADIUS:
+        return "coarsest_under_resolved", coarsest
+    return None
+
+
 def touching_grids(counts: np.ndarray) -> np.ndarray:
     """Where a `TOUCHING` count marks pillars that share an element edge
     (> 0; NaN, a curve written before the count, does not), elementwise."""

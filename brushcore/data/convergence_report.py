@@ -12,7 +12,8 @@ import numpy as np
 import xarray as xr
 
 from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, QUANTITIES, TOUCHING,
-                                        UNDER_RESOLVED_RADIUS, touching_grids)
+                                        UNDER_RESOLVED_RADIUS, resolution_flag,
+                                        touching_grids)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
 
@@ -49,10 +50,10 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             for s in ("extrapolated", "error", "order"):
                 row[s] = float(one[f"{q}_{s}"])
             flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
-            if row["radius_elements_finest"] < UNDER_RESOLVED_RADIUS:
-                flags.append("under_resolved")
-            elif float(one["pillar_radius_elements_coarsest"]) < UNDER_RESOLVED_RADIUS:
-                flags.append("coarsest_under_resolved")
+            resolution = resolution_flag(row["radius_elements_finest"],
+                                         float(one["pillar_radius_elements_coarsest"]))
+            if resolution:
+                flags.append(resolution[0])
             if TOUCHING in one and touching_grids(one[TOUCHING].values).any():
                 flags.append("touching_pillars")
             row["flags"] = ",".join(flags)

@@ -30,13 +30,16 @@ from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
-from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, UNDER_RESOLVED_RADIUS,
+from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, resolution_flag,
                                         touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
 K_LABEL = r"$\bar k = k / (E^* L)$"
 FAD_LABEL = r"$\bar F_{ad} = F_{ad} / F_K$"
 W_LABEL = r"$\bar W = W / (2\pi a_0^2 \Delta\gamma)$"
+#: The convergence figure's words for `resolution_flag`'s flags.
+RESOLUTION_TEXT = {"under_resolved": "under-resolved",
+                   "coarsest_under_resolved": "coarsest under-resolved"}
 #: Colours of the layouts and markers of the pillar shapes in the lattice figure.
 LAYOUT_COLORS = {"regular": "C0", "hexagonal": "C1", "random": "C2"}
 SHAPE_MARKERS = {"disc": ("o", "-"), "square": ("s", "--"), "ellipse": ("D", ":")}
@@ -739,10 +742,10 @@ def convergence(
                      if f"{q}_{f}" in conv and int(conv[f"{q}_{f}"].sel(case))]
             coarsest = float(conv["pillar_radius_elements_coarsest"].sel(case)) \
                 if "pillar_radius_elements_coarsest" in conv else math.inf
-            if math.isfinite(radius) and radius < UNDER_RESOLVED_RADIUS:
-                flags.append(f"under-resolved ({radius:.1f} el./radius)")
-            elif coarsest < UNDER_RESOLVED_RADIUS:  # as the table says
-                flags.append(f"coarsest under-resolved ({coarsest:.1f} el./radius)")
+            resolution = resolution_flag(radius, coarsest)  # as the table flags
+            if resolution:
+                name, r = resolution
+                flags.append(f"{RESOLUTION_TEXT[name]} ({r:.1f} el./radius)")
             if touch.any():
                 grids = ", ".join(str(int(g)) for g in conv["grid"].values[touch])
                 flags.append(f"touching pillars (n = {grids})")
