@@ -328,10 +328,10 @@ def _simulate(args: argparse.Namespace) -> int:
         try:
             params = dataclasses.replace(base, **arrays) if arrays else base
         except ParameterError as exc:  # a value out of range: name the file it came from
-            source = {"heights": args.heights, "kbar_values": args.kbar_file,
-                      "gap_map": args.gap_map}.get(exc.name)
-            if exc.name not in arrays or source is None:
+            if exc.name not in arrays:
                 raise
+            source = {"heights": args.heights, "kbar_values": args.kbar_file,
+                      "gap_map": args.gap_map}[exc.name]
             raise ParameterError(exc.name, str(source), exc.allowed, exc.reason) from None
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,

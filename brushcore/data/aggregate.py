@@ -443,18 +443,18 @@ def _snapshots(
     all_below_mb: float,
     dims: Sequence[str] = SWEEP_DIMS,
 ) -> dict[str, xr.DataArray]:
-    keep = tuple(keep)  # read twice
+    always = {(str(layout), int(n)) for layout, n in keep}  # the Fig. 5 brushes
     with_snaps = {k: c for k, (_, c) in curves.items() if "contact_snapshot" in c}
     if not with_snaps:
         return {}
     total = sum(int(c["contact_snapshot"].size) for c in with_snaps.values())
-    wanted = snapshot_filter(keep, all_below_bytes=int(all_below_mb * 2**20), total_bytes=total)
+    wanted = snapshot_filter(always, all_below_bytes=int(all_below_mb * 2**20),
+                             total_bytes=total)
     keys = sorted(k for k in with_snaps if wanted(k))
     if not keys:
         return {}
     # Maps of different grids cannot share (y, x): keep one grid's, the
     # finest that the always-kept (Fig. 5) brushes ran on, else the finest.
-    always = {(str(layout), int(n)) for layout, n in keep}
     figure = [k for k in keys if (k.layout, k.n_pillars) in always]
     finest = max(k.grid for k in (figure or keys))
     keys = [k for k in keys if k.grid == finest]

@@ -84,15 +84,21 @@ def _phi(sweep: xr.Dataset) -> float:
     return float(sweep.attrs.get("phi", math.nan))
 
 
-def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int):
-    """(d, F) normalised of one run without padding, or None when absent."""
+def _case(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float,
+          seed: int) -> xr.Dataset | None:
+    """One case of a sweep without a grid dimension, or None when absent."""
     try:
         case = sweep.sel(layout=layout, n_pillars=n_pillars, seed=seed)
-        at = kbar_index(case["kbar"].values, kbar)
-        if at is None:
-            return None
-        case = case.isel(kbar=at)
     except KeyError:
+        return None
+    at = kbar_index(case["kbar"].values, kbar)
+    return None if at is None else case.isel(kbar=at)
+
+
+def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int):
+    """(d, F) normalised of one run without padding, or None when absent."""
+    case = _case(sweep, layout, n_pillars, kbar, seed)
+    if case is None:
         return None
     d = case["displacement_normalized"].values
     f = case["force_normalized"].values
@@ -103,11 +109,9 @@ def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: in
 def _grid_used(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float,
                seed: int) -> int | None:
     """The grid `finest_grid` drew a case at, or None (a sweep without grids)."""
-    if "grid_used" not in sweep:
-        return None
-    case = sweep["grid_used"].sel(layout=layout, n_pillars=n_pillars, seed=seed)
-    at = kbar_index(case["kbar"].values, kbar)
-    value = float(case.isel(kbar=at)) if at is not None else math.nan
+    case = _case(sweep[["grid_used"]], layout, n_pillars, kbar, seed) \
+        if "grid_used" in sweep else None
+    value = math.nan if case is None else float(case["grid_used"])
     return int(value) if math.isfinite(value) else None
 
 
@@ -351,7 +355,8 @@ def fig7(sweep: xr.Dataset) -> Figure:
     for layout, (n, f) in fitted.items():
         fit = fit_soft_prefactor(n, f)
         ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "--", lw=1,
-                color=LAYOUT_COLORS.get(layout, "C3"), label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
+                color=LAYOUT_COLORS.get(layout, "C3"),
+                label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
         line = f"{layout} {fit['ratio']:.2f}"
         if math.isfinite(fit["exponent"]):
             line += f", free exponent {fit['exponent']:.3f}"

@@ -139,6 +139,7 @@ def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr
     rank = xr.DataArray(np.arange(sweep.sizes[GRID_DIM]), dims=GRID_DIM)
     done = np.isfinite(sweep[ran])
     finest = rank == rank.where(done).max(GRID_DIM)  # one True per case that ran
+    at, ran_at_all = finest.argmax(GRID_DIM), finest.any(GRID_DIM)  # for text
     out = sweep.copy()
     for name, var in sweep.data_vars.items():
         if GRID_DIM not in var.dims:
@@ -147,8 +148,7 @@ def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr
             # Exactly one unmasked value survives, so the sum is that value.
             out[name] = var.where(finest).sum(GRID_DIM, min_count=1).assign_attrs(var.attrs)
         else:  # text (``run_*``): the finest grid's entry, "" where none ran
-            at = finest.argmax(GRID_DIM)
-            out[name] = (var.isel({GRID_DIM: at}).where(finest.any(GRID_DIM), "")
+            out[name] = (var.isel({GRID_DIM: at}).where(ran_at_all, "")
                          .astype(var.dtype).assign_attrs(var.attrs))
     out["grid_used"] = (
         sweep[GRID_DIM].astype(np.float64).where(finest).sum(GRID_DIM, min_count=1)
