@@ -22,12 +22,14 @@ check_config(config, workflow.source_path("workflow/schemas/config.schema.yaml")
 
 validate(config, "workflow/schemas/config.schema.yaml", set_default=True)
 canonical_solver(config, workflow.source_path("workflow/schemas/config.schema.yaml"))
-check_cases(config, main=not (workflow.remote_exec or workflow.subprocess_exec))
+# The Snakemake that plans the run, not one running a job (locally or on Slurm).
+planning = not (workflow.remote_exec or workflow.subprocess_exec)
+check_cases(config, main=planning)
 check_cluster_threads(
     config,
     workflow.resource_settings.cores,
     workflow.resource_settings.nodes,
-    main=not (workflow.remote_exec or workflow.subprocess_exec),
+    main=planning,
 )
 if clipped := clipped_runtimes(config):  # one walk over the sweep's cases
     logger.warning(clipped)
