@@ -49,6 +49,23 @@ def flat_punch_stiffness(radius: float, e_star: float) -> float:
     return 2.0 * radius * e_star
 
 
+def elliptic_punch_stiffness(major: float, minor: float, e_star: float) -> float:
+    """Normal stiffness pi a E* / K(e) of a rigid elliptic flat punch [force / length].
+
+    Galin's solution (Contact Problems in the Theory of Elasticity, 1961;
+    Johnson, Contact Mechanics, 1985, ch. 3), 2 a E* for a circle: the
+    pressure p0 (1 - x^2/a^2 - y^2/b^2)^(-1/2) over the ellipse
+    of semi-axes a >= b displaces it uniformly by 2 p0 b K(e) / E*, with
+    K the complete elliptic integral of the first kind of eccentricity
+    e = sqrt(1 - b^2/a^2), and carries 2 pi a b p0.  ``major`` and
+    ``minor`` are the semi-axes [length], in either order.
+    """
+    from scipy.special import ellipk  # argument m = e^2
+
+    a, b = max(major, minor), min(major, minor)
+    return math.pi * a * e_star / float(ellipk(1.0 - (b / a) ** 2))
+
+
 def kendall_force(radius: float, e_star: float, dgamma: float) -> float:
     """Kendall's pull-off force sqrt(8 pi E* dgamma a^3) of a flat punch [force]."""
     return math.sqrt(8.0 * math.pi * e_star * dgamma * radius**3)
