@@ -17,6 +17,7 @@ configfile: "config/config.yaml"
 include: "workflow/rules/common.smk"
 
 
+check_config_files(workflow.configfiles)
 check_config(config, workflow.source_path("workflow/schemas/config.schema.yaml"))
 
 

@@ -322,11 +322,31 @@ def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: d
     assert_refused_at_plan_time(repo_copy, tmp_path, bad, message)
 
 
-def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict,
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        # YAML keeps the second of two equal keys and drops the first silently
+        ("kbar: [1.0e-3]\ngrid: 64\nkbar: [1.0]\n",
+         r"config file \S+bad.yaml: key 'kbar' is given twice in one mapping \(lines 1 and 3\)"),
+        ("solver:\n  rtol: 1.0e-5\n  rtol: 1.0e-6\n",
+         r"key 'rtol' is given twice in one mapping \(lines 2 and 3\)"),
+        # a literal beyond a float had read as inf, i.e. rigid pillars
+        ("kbar: [1.0e+400, 1.0]\n",
+         r"bad.yaml, line 1: 1.0e\+400 is beyond the largest float .*write .inf"),
+        ("kbar: [1e400, 1.0]\n", r"config key 'kbar.0': 1e400 is beyond the largest float"),
+    ],
+)
+def test_config_text_that_yaml_would_misread_is_refused(repo_copy: Path, tmp_path: Path,
+                                                        text: str, message: str) -> None:
+    assert_refused_at_plan_time(repo_copy, tmp_path, text, message)
+
+
+def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict | str,
                                 message: str) -> None:
-    """`snakemake -n` with `bad` over the test config stops with one short message."""
+    """`snakemake -n` with `bad` (a mapping, or the file's text) over the test
+    config stops with one short message."""
     config = tmp_path / "bad.yaml"
-    config.write_text(yaml.safe_dump(bad))
+    config.write_text(bad if isinstance(bad, str) else yaml.safe_dump(bad))
     proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
                      str(config))
     text = output(proc)

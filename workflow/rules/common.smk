@@ -23,7 +23,9 @@ def check_config(config, schema_path):
     known key for a typo.  Defaults are filled in afterwards by `validate`.
     """
     schema = _schema(schema_path)
-    _exponent_numbers(config)
+    overflow = _exponent_numbers(config)
+    if overflow:
+        raise ConfigError(overflow)
     error = jsonschema.exceptions.best_match(
         jsonschema.Draft202012Validator(schema).iter_errors(config)
     )
@@ -76,14 +78,83 @@ def _children(value):
     return []
 
 
-def _exponent_numbers(value):
+def _exponent_numbers(value, where=""):
     """Turn "1e-8" into 1e-8 wherever the config holds it (in place), so that
-    `kbar: [1e-6, 1e-3]` means what it says rather than failing as text."""
+    `kbar: [1e-6, 1e-3]` means what it says rather than failing as text.
+    Returns the message for the first that overflows a float, or None."""
+    refused = None
     for key, item in _children(value):
+        path = f"{where}.{key}" if where else str(key)
         if isinstance(item, str) and _EXPONENT_NUMBER.fullmatch(item.strip()):
             value[key] = float(item)
+            if math.isinf(value[key]) and refused is None:
+                refused = f"config key '{path}': {item.strip()} {_OVERFLOW}"
         else:
-            _exponent_numbers(item)
+            refused = refused or _exponent_numbers(item, path)
+    return refused
+
+
+_OVERFLOW = "is beyond the largest float (about 1.8e308); for rigid pillars write .inf"
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing what it would otherwise take silently:
+    a key twice in one mapping (the second wins) and a number too large for
+    a float (1.0e400 reads as inf: rigid pillars for a kbar)."""
+
+    path = ""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            line = key_node.start_mark.line + 1
+            try:
+                first = seen.setdefault(key, line)
+            except TypeError:  # an unhashable key: YAML's own error follows
+                continue
+            if first != line:
+                raise _Refused(
+                    f"config file {self.path}: key '{key}' is given twice in one "
+                    f"mapping (lines {first} and {line}), and YAML would keep the "
+                    "second silently; allowed once"
+                )
+        return super().construct_mapping(node, deep)
+
+    def construct_yaml_float(self, node):
+        value = super().construct_yaml_float(node)
+        if math.isinf(value) and "inf" not in node.value.lower():
+            raise _Refused(
+                f"config file {self.path}, line {node.start_mark.line + 1}: "
+                f"{node.value} {_OVERFLOW}"
+            )
+        return value
+
+
+_StrictLoader.add_constructor(
+    "tag:yaml.org,2002:float", _StrictLoader.construct_yaml_float
+)
+
+
+def check_config_files(paths):
+    """Read each config file again with `_StrictLoader`, before the checks of
+    the merged config (which cannot see a key that YAML already dropped)."""
+    for path in paths:
+        loader = type("Loader", (_StrictLoader,), {"path": str(path)})
+        refused = None
+        try:
+            with open(path, encoding="utf-8") as fh:
+                yaml.load(fh, Loader=loader)
+        except _Refused as exc:
+            refused = str(exc)
+        except (OSError, UnicodeDecodeError, yaml.YAMLError):
+            continue  # what Snakemake could not read, it has reported already
+        if refused:  # raised here, not inside PyYAML: a short traceback
+            raise ConfigError(refused)
+
+
+class _Refused(Exception):
+    """What `_StrictLoader` refuses (turned into a ConfigError by its caller)."""
 
 
 #: Keys whose values are counts: JSON Schema calls 64.0 an integer, Python does not.
