@@ -66,6 +66,26 @@ def elliptic_punch_stiffness(major: float, minor: float, e_star: float) -> float
     return math.pi * a * e_star / float(ellipk(1.0 - (b / a) ** 2))
 
 
+def elliptic_punch_initiation_force(major: float, minor: float, e_star: float,
+                                    dgamma: float) -> float:
+    """Force sqrt(8 pi E* dgamma a b^2) at which a rigid elliptic flat punch
+    starts to let go, at the ends of its major axis [force].
+
+    From Galin's pressure (`elliptic_punch_stiffness`): at distance s inside
+    the edge point (a cos t, b sin t) it is p0 / sqrt(2 s L), with
+    L = sqrt(cos^2 t / a^2 + sin^2 t / b^2), so the energy release rate is
+    G = pi p0^2 / (2 E* L), largest where L is least: L = 1/a at the ends of
+    the major axis.  G = dgamma there, with p0 = F / (2 pi a b), gives the
+    force; (b/a)^(1/4) times Kendall's force of the disc of equal area, and
+    Kendall's for a = b.  What follows is not a collapse: the contact
+    shrinks from the ends and the force can rise further, so F_ad lies
+    above this.  ``major`` and ``minor`` are the semi-axes [length], in
+    either order.
+    """
+    a, b = max(major, minor), min(major, minor)
+    return math.sqrt(8.0 * math.pi * e_star * dgamma * a * b * b)
+
+
 def kendall_force(radius: float, e_star: float, dgamma: float) -> float:
     """Kendall's pull-off force sqrt(8 pi E* dgamma a^3) of a flat punch [force]."""
     return math.sqrt(8.0 * math.pi * e_star * dgamma * radius**3)
