@@ -66,6 +66,27 @@ def elliptic_punch_stiffness(major: float, minor: float, e_star: float) -> float
     return math.pi * a * e_star / float(ellipk(1.0 - (b / a) ** 2))
 
 
+#: Electrostatic capacitance of a thin square plate of unit side, in
+#: Gaussian units (a disc of radius a: 2a/pi), known to about six digits
+#: from boundary-element and random-walk computations.
+SQUARE_PLATE_CAPACITANCE = 0.3667874
+
+
+def square_punch_stiffness(side: float, e_star: float) -> float:
+    """Normal stiffness pi E* C s of a rigid square flat punch of side s
+    [force / length].
+
+    A flat punch's stiffness is pi E* times the capacitance C of a thin
+    conducting plate of its shape: uniform displacement over the footprint
+    is uniform potential over the plate, with the same 1/r kernel
+    (Boussinesq's 1/(pi E* r) for the charge's 1/r), so the total force is
+    pi E* C times the displacement; a disc (C = 2a/pi) gives 2 a E*.  For a
+    square, C = `SQUARE_PLATE_CAPACITANCE` s: 1.0212 times the disc of
+    equal area.
+    """
+    return math.pi * e_star * SQUARE_PLATE_CAPACITANCE * side
+
+
 def elliptic_punch_initiation_force(major: float, minor: float, e_star: float,
                                     dgamma: float) -> float:
     """Force sqrt(8 pi E* dgamma a b^2) at which a rigid elliptic flat punch
