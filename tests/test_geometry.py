@@ -106,12 +106,15 @@ def test_hexagonal_lattice_counts_and_pitch():
 
 @pytest.mark.parametrize("n_pillars", [64, 56])
 def test_rigid_hexagonal_brush_is_at_the_phi_limit_of_the_area_it_covers(n_pillars):
-    """Eq. 5's rigid limit phi^-1/4 with the filling factor of the lattice's
-    own footprint, phi / lattice_fill (the pitch that fits leaves part of
-    the square bare: 77 % covered for 8 x 8, 86 % for 8 x 7), as the
-    regular 8 x 8 brush follows phi^-1/4 (1.010, test_physics).  Measured on
-    256^2: 1.0005 and 1.0011 of it; against phi^-1/4 itself 0.936 and 0.965,
-    so the footprint's filling factor, not the nominal one, sets the limit.
+    """Eq. 5's rigid limit phi^-1/4 taken with the filling factor of the
+    lattice's footprint, phi / lattice_fill, the fill counted as N
+    hexagonal cells of the pitch (the pitch that fits leaves part of the
+    square bare: 77 % covered for 8 x 8, 86 % for 8 x 7).  Measured on
+    256^2: 1.0005 and 1.0011 of it, against 0.936 and 0.965 of phi^-1/4
+    itself, so the denser footprint, not the nominal phi, sets the force
+    (the regular 8 x 8 brush sits at 1.010 of phi^-1/4, test_physics; with
+    the lattice's bounding box as footprint the ratio would be about 0.985,
+    a review helper's figure).  A fill 2 % off fails.
     """
     ds = simulate(BrushParams("hexagonal", n_pillars, math.inf, 256, phi=0.12))
     local_phi = ds.attrs["phi_actual"] / hexagonal_fill(n_pillars)
@@ -440,12 +443,15 @@ def test_elliptic_punch_lets_go_from_its_major_axis_ends(elliptic_punches, aspec
     would give (a/b)^(1/4), above Kendall's).  Then the contact shrinks
     from the ends and the force still rises to F_ad.
 
-    Measured at a0 = 30 elements: the first elements to go lie within 3 %
-    of the major axis's length from its ends and 8 % of it off the axis;
-    the force then is 2.8-8.5 % above the formula (the tip's staircase: its
-    radius of curvature b^2/a is 10.6 elements for aspect 2 and 5.8 for 3;
-    aspect 2 unrotated gives 0.8876, 0.8468, 0.8672 at a0 = 30, 40, 60
-    against 0.8409), and F_ad is 2.7-6.5 % above that.
+    Measured at a0 = 30 elements: the first elements to go lie within
+    0.03 a of the major axis's ends (a the semi-major axis) and 0.08 a off
+    it; the force then lies within 10 % of the formula: 2.8-8.5 % above
+    it on this grid (1.0555, 1.0275, 1.0845, 1.0773), -3.5 to +6.3 % at
+    a0 = 40 (a review helper's run): the element pattern at the tip, whose radius of
+    curvature b^2/a is 10.6 elements for aspect 2 and 5.8 for 3 at a0 = 30,
+    scatters it either way (aspect 2 unrotated: 0.8876, 0.8468, 0.8672 at
+    a0 = 30, 40, 60 against 0.8409).  F_ad is 2.7-6.5 % above that force
+    here (18 % for aspect 3 at 30 degrees on a0 = 40).
     """
     ds = elliptic_punches[aspect, orientation]
     step = ds.detachment_step.values
@@ -464,7 +470,7 @@ def test_elliptic_punch_lets_go_from_its_major_axis_ends(elliptic_punches, aspec
     expected = theory.elliptic_punch_initiation_force(a, b, 1.0, 1.0) / theory.kendall_force(
         theory.equivalent_radius(float(ds.attrs["real_contact_area"])), 1.0, 1.0)
     assert expected == pytest.approx(aspect ** -0.25, rel=1e-12)
-    assert 1.0 < at_first / expected < 1.10, (at_first, expected)
+    assert 0.9 < at_first / expected < 1.1, (at_first, expected)
     assert float(ds.adhesive_force_normalized) > 1.01 * at_first
 
 

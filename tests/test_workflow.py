@@ -333,12 +333,39 @@ def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: d
         # a literal beyond a float had read as inf, i.e. rigid pillars
         ("kbar: [1.0e+400, 1.0]\n",
          r"bad.yaml, line 1: 1.0e\+400 is beyond the largest float .*write .inf"),
-        ("kbar: [1e400, 1.0]\n", r"config key 'kbar.0': 1e400 is beyond the largest float"),
+        ("kbar: [1e400, 1.0]\n", r"bad.yaml, line 1: 1e400 is beyond the largest float"),
+        # on one line (flow style, JSON), beside a merge key, and JSON's 1e400
+        ("solver: {rtol: 1.0e-5, rtol: 1.0e-6}\n", r"key 'rtol' is given twice .*both on line 1"),
+        ('{"kbar": [0.001], "kbar": [1.0]}\n', r"key 'kbar' is given twice .*both on line 1"),
+        ("solver:\n  <<: {rtol: 1.0e-5}\n  rtol: 1.0e-6\n  rtol: 1.0e-7\n",
+         r"key 'rtol' is given twice in one mapping \(lines 3 and 4\)"),
+        ('{\n  "kbar": [1e400, 1.0]\n}\n', r"bad.yaml, line 2: 1e400 is beyond the largest float"),
     ],
 )
 def test_config_text_that_yaml_would_misread_is_refused(repo_copy: Path, tmp_path: Path,
                                                         text: str, message: str) -> None:
     assert_refused_at_plan_time(repo_copy, tmp_path, text, message)
+
+
+def test_an_overflowing_number_on_the_command_line_is_refused(repo_copy: Path) -> None:
+    """`--config kbar=[1e400]` reaches the checks as text, which they would
+    turn into inf (rigid pillars); they name the key instead."""
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     "--config", "kbar=[1e400]")
+    text = output(proc)
+    assert proc.returncode != 0, text
+    assert "config key 'kbar.0': 1e400 is beyond the largest float" in text, text
+
+
+def test_a_merge_key_overridden_once_is_no_duplicate(repo_copy: Path, tmp_path: Path,
+                                                      test_config: dict) -> None:
+    """YAML's merge key `<<` with a key overriding what it merged plans as usual."""
+    config = tmp_path / "merge.yaml"
+    config.write_text("solver:\n  <<: {rtol: 1.0e-5}\n  rtol: 1.0e-6\n")
+    proc = snakemake(repo_copy, "-n", "--forceall", "--configfile", "config/test.yaml",
+                     str(config))
+    assert proc.returncode == 0, output(proc)[-3000:]
+    assert planned_simulations(output(proc)) == len(expected_cases(test_config))
 
 
 def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict | str,

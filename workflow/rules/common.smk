@@ -100,40 +100,60 @@ _OVERFLOW = "is beyond the largest float (about 1.8e308); for rigid pillars writ
 class _StrictLoader(yaml.SafeLoader):
     """PyYAML's safe loader, refusing what it would otherwise take silently:
     a key twice in one mapping (the second wins) and a number too large for
-    a float (1.0e400 reads as inf: rigid pillars for a kbar)."""
+    a float (1.0e+400 reads as inf: rigid pillars for a kbar; 1e400, text to
+    PyYAML, would become inf in `_exponent_numbers` or in a JSON config)."""
 
     path = ""
 
     def construct_mapping(self, node, deep=False):
         seen = {}
         for key_node, _ in node.value:
+            if (
+                key_node.tag == "tag:yaml.org,2002:merge"
+            ):  # '<<', which keys may override
+                continue
             key = self.construct_object(key_node, deep=deep)
             line = key_node.start_mark.line + 1
             try:
-                first = seen.setdefault(key, line)
+                first = seen.get(key)
+                seen[key] = line
             except TypeError:  # an unhashable key: YAML's own error follows
                 continue
-            if first != line:
+            if first is not None:
+                where = f"lines {first} and {line}" if first != line else f"both on line {line}"
                 raise _Refused(
                     f"config file {self.path}: key '{key}' is given twice in one "
-                    f"mapping (lines {first} and {line}), and YAML would keep the "
-                    "second silently; allowed once"
+                    f"mapping ({where}), and YAML would keep the second silently; "
+                    "allowed once"
                 )
         return super().construct_mapping(node, deep)
+
+    def _overflow(self, node, text):
+        return _Refused(
+            f"config file {self.path}, line {node.start_mark.line + 1}: {text} {_OVERFLOW}"
+        )
 
     def construct_yaml_float(self, node):
         value = super().construct_yaml_float(node)
         if math.isinf(value) and "inf" not in node.value.lower():
-            raise _Refused(
-                f"config file {self.path}, line {node.start_mark.line + 1}: "
-                f"{node.value} {_OVERFLOW}"
-            )
+            raise self._overflow(node, node.value)
+        return value
+
+    def construct_yaml_str(self, node):
+        value = super().construct_yaml_str(node)
+        if (
+            node.style is None  # plain, not quoted: a number to JSON and to the checks
+            and _EXPONENT_NUMBER.fullmatch(value.strip())
+            and math.isinf(float(value))
+        ):
+            raise self._overflow(node, value)
         return value
 
 
 _StrictLoader.add_constructor(
     "tag:yaml.org,2002:float", _StrictLoader.construct_yaml_float
 )
+_StrictLoader.add_constructor("tag:yaml.org,2002:str", _StrictLoader.construct_yaml_str)
 
 
 def check_config_files(paths):
