@@ -357,17 +357,6 @@ def test_an_overflowing_number_on_the_command_line_is_refused(repo_copy: Path) -
     assert "config key 'kbar.0': 1e400 is beyond the largest float" in text, text
 
 
-def test_a_merge_key_overridden_once_is_no_duplicate(repo_copy: Path, tmp_path: Path,
-                                                      test_config: dict) -> None:
-    """YAML's merge key `<<` with a key overriding what it merged plans as usual."""
-    config = tmp_path / "merge.yaml"
-    config.write_text("solver:\n  <<: {rtol: 1.0e-5}\n  rtol: 1.0e-6\n")
-    proc = snakemake(repo_copy, "-n", "--forceall", "--configfile", "config/test.yaml",
-                     str(config))
-    assert proc.returncode == 0, output(proc)[-3000:]
-    assert planned_simulations(output(proc)) == len(expected_cases(test_config))
-
-
 def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict | str,
                                 message: str) -> None:
     """`snakemake -n` with `bad` (a mapping, or the file's text) over the test
@@ -383,12 +372,17 @@ def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict | str
     assert "Job stats" not in text and "rule simulate" not in text, text
 
 
-def test_exponent_without_a_point_is_a_number(repo_copy: Path, tmp_path: Path,
-                                               test_config: dict) -> None:
-    """PyYAML reads 1e-4 (no point) as text; the config means a number and
-    plans as if it had written 1.0e-4 (it was refused as "not of type 'number'")."""
-    config = tmp_path / "exponent.yaml"
-    config.write_text("kbar: [1e-4, 1.0e-2, 1E0]\nsolver:\n  rtol: 1e-5\n")
+@pytest.mark.parametrize("text", [
+    # PyYAML reads 1e-4 (no point) as text; the config means a number and plans
+    # as if it had written 1.0e-4 (it was refused as "not of type 'number'")
+    "kbar: [1e-4, 1.0e-2, 1E0]\nsolver:\n  rtol: 1e-5\n",
+    # a key overriding what YAML's merge key `<<` merged is no duplicate
+    "solver:\n  <<: {rtol: 1.0e-5}\n  rtol: 1.0e-6\n",
+], ids=["exponent without a point", "merge key overridden"])
+def test_config_text_plans_as_meant(repo_copy: Path, tmp_path: Path, test_config: dict,
+                                    text: str) -> None:
+    config = tmp_path / "meant.yaml"
+    config.write_text(text)
     proc = snakemake(repo_copy, "-n", "--forceall", "--configfile", "config/test.yaml",
                      str(config))
     assert proc.returncode == 0, output(proc)[-3000:]
