@@ -120,7 +120,11 @@ class _StrictLoader(yaml.SafeLoader):
             except TypeError:  # an unhashable key: YAML's own error follows
                 continue
             if first is not None:
-                where = f"lines {first} and {line}" if first != line else f"both on line {line}"
+                where = (
+                    f"lines {first} and {line}"
+                    if first != line
+                    else f"both on line {line}"
+                )
                 raise _Refused(
                     f"config file {self.path}: key '{key}' is given twice in one "
                     f"mapping ({where}), and YAML would keep the second silently; "
