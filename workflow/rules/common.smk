@@ -95,6 +95,7 @@ def _exponent_numbers(value, where=""):
 
 
 _OVERFLOW = "is beyond the largest float (about 1.8e308); for rigid pillars write .inf"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
 
 
 class _StrictLoader(yaml.SafeLoader):
@@ -108,9 +109,7 @@ class _StrictLoader(yaml.SafeLoader):
     def construct_mapping(self, node, deep=False):
         seen = {}
         for key_node, _ in node.value:
-            if (
-                key_node.tag == "tag:yaml.org,2002:merge"
-            ):  # '<<', which keys may override
+            if key_node.tag == _MERGE_TAG:  # '<<': keys may override what it merges
                 continue
             key = self.construct_object(key_node, deep=deep)
             line = key_node.start_mark.line + 1
