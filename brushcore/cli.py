@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import difflib
-import math
 import re
 import sys
 import time
@@ -27,7 +26,7 @@ from brushcore.model.params import LAYOUTS, MAX_ASPECT, MIN_KBAR, BrushParams
 from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.threads import MAX_THREADS
-from brushcore.validation import ParameterError
+from brushcore.validation import ParameterError, overflows
 from brushcore.model.provenance import version
 from brushcore.numerics.pulloff import SolverError
 from brushcore.model.shapes import SHAPES
@@ -67,7 +66,7 @@ def _kbar(text: str) -> float:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not a number; allowed a number in [{MIN_KBAR:g}, inf], 'inf' means rigid"
         ) from None
-    if math.isinf(value) and "inf" not in text.lower():  # 1e400: a typo, not "rigid"
+    if overflows(text):
         raise argparse.ArgumentTypeError(
             f"{text!r} overflows a float; allowed a finite number >= {MIN_KBAR:g} or 'inf' "
             "for rigid pillars")

@@ -9,6 +9,7 @@ hold the rules.
 from __future__ import annotations
 
 import dataclasses
+import math
 import numbers
 import re
 from collections.abc import Mapping
@@ -78,6 +79,16 @@ def is_real(value: object) -> bool:
 def is_integer(value: object) -> bool:
     """Python and NumPy integers, not booleans."""
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
+def overflows(text: str) -> bool:
+    """Whether a numeral reads as an infinite float without spelling "inf"
+    (1e400, 1.0e+400): a typo that would pass for rigid pillars."""
+    try:
+        value = float(text)
+    except ValueError:
+        return False
+    return math.isinf(value) and "inf" not in text.lower()
 
 
 def require_switches(obj: object, names: tuple[str, ...], allowed: str) -> None:

@@ -13,6 +13,7 @@ from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint, hinted_params
 from brushcore.numerics.options import SolverOptions
 from brushcore.model.shapes import parse_shape_label, shape_label
+from brushcore.validation import overflows
 
 
 def check_config(config, schema_path):
@@ -87,7 +88,7 @@ def _exponent_numbers(value, where=""):
         path = f"{where}.{key}" if where else str(key)
         if isinstance(item, str) and _EXPONENT_NUMBER.fullmatch(item.strip()):
             value[key] = float(item)
-            if math.isinf(value[key]) and refused is None:
+            if overflows(item) and refused is None:
                 refused = f"config key '{path}': {item.strip()} {_OVERFLOW}"
         else:
             refused = refused or _exponent_numbers(item, path)
@@ -137,18 +138,14 @@ class _StrictLoader(yaml.SafeLoader):
         )
 
     def construct_yaml_float(self, node):
-        value = super().construct_yaml_float(node)
-        if math.isinf(value) and "inf" not in node.value.lower():
+        if overflows(node.value):
             raise self._overflow(node, node.value)
-        return value
+        return super().construct_yaml_float(node)
 
     def construct_yaml_str(self, node):
         value = super().construct_yaml_str(node)
-        if (
-            node.style is None  # plain, not quoted: a number to JSON and to the checks
-            and _EXPONENT_NUMBER.fullmatch(value.strip())
-            and math.isinf(float(value))
-        ):
+        # plain, not quoted: a number to JSON and to the checks
+        if node.style is None and overflows(value):
             raise self._overflow(node, value)
         return value
 
