@@ -41,6 +41,11 @@ def pytest_unconfigure(config):
         shutil.rmtree(path, ignore_errors=True)
 
 
+def full_contact_stiffness(ds) -> float:
+    """Full-contact stiffness F/d from the first (linear) segment of a curve [E* h]."""
+    return float(ds.force[1] / ds.displacement[1])
+
+
 def punch_params(radius: float, kbar: float = math.inf, **kw) -> BrushParams:
     """One centred circular punch of the given radius [elements] on a snug grid."""
     n = int(math.ceil(2.6 * radius))

@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import punch_params
+from conftest import full_contact_stiffness, punch_params
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate, theory
 from brushcore.model.solve import run
@@ -321,11 +321,6 @@ def test_file_params_refuse_counts_that_differ_from_the_file(tmp_path):
 
 # -- square punch --------------------------------------------------------------------
 
-def _full_contact_stiffness(ds) -> tuple[float, float]:
-    """F/d of the curve's first (linear) segment [E* h] and the realised area [h^2]."""
-    return float(ds.force[1] / ds.displacement[1]), float(ds.attrs["real_contact_area"])
-
-
 def _square_punch(side: int) -> BrushParams:
     """One rigid square punch of `side` elements, centred on an element corner (exact area)."""
     n = 2 * math.ceil(0.8 * side)
@@ -349,7 +344,7 @@ def test_square_punch_stiffness_converges_to_the_square_plates_capacitance(squar
     from brushcore.data.convergence import extrapolate
 
     sides = sorted(square_punches)
-    per_side = [_full_contact_stiffness(square_punches[s])[0] / s for s in sides]
+    per_side = [full_contact_stiffness(square_punches[s]) / s for s in sides]
     assert per_side == sorted(per_side), per_side  # from below, grid by grid
     fit = extrapolate([1 / s for s in sides], per_side)
     assert fit.value == pytest.approx(theory.square_punch_stiffness(1.0, 1.0), rel=1e-3), fit
@@ -423,9 +418,9 @@ def test_elliptic_punch_stiffness_is_galins(elliptic_punches, aspect, orientatio
     for 3.  Measured at a0 = 30 elements: within 6.7e-4 (4e-5 to 6.4e-4 at
     40); an aspect 10 % off moves the ratio by 8.6e-3 (2) and 1.3e-2 (3).
     """
-    disc, disc_area = _full_contact_stiffness(elliptic_punches[None])
-    ds = elliptic_punches[aspect, orientation]
-    ellipse, area = _full_contact_stiffness(ds)
+    disc_run, ds = elliptic_punches[None], elliptic_punches[aspect, orientation]
+    disc, disc_area = full_contact_stiffness(disc_run), float(disc_run.attrs["real_contact_area"])
+    ellipse, area = full_contact_stiffness(ds), float(ds.attrs["real_contact_area"])
     galin = theory.elliptic_punch_stiffness(*_semi_axes(ds, aspect), 1.0)
     assert -0.01 < ellipse / galin - 1 < 0, f"stiffness / Galin's = {ellipse / galin:.5f}"
     measured = (ellipse / math.sqrt(area)) / (disc / math.sqrt(disc_area))

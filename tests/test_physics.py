@@ -6,16 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from conftest import punch_params
+from conftest import full_contact_stiffness, punch_params
 
 from brushcore import BrushParams, SolverOptions, simulate, theory
 from brushcore.model.solve import run
 from brushcore.model.layout import build_labels
-
-
-def _stiffness(ds) -> float:
-    """Full-contact stiffness F/d from the first (linear) segment of the curve."""
-    return float(ds.force[1] / ds.displacement[1])
 
 
 def _a0(ds) -> float:
@@ -52,7 +47,7 @@ def test_flat_punch_stiffness_is_2aE(rigid_punches, a):
     error times a0 / h is 0.115-0.118 at a = 10 ... 40 (measured), so < 1.5 %
     from a = 20 on."""
     ds = rigid_punches[a]
-    ratio = _stiffness(ds) / theory.flat_punch_stiffness(_a0(ds), 1.0)
+    ratio = full_contact_stiffness(ds) / theory.flat_punch_stiffness(_a0(ds), 1.0)
     assert abs(ratio - 1) < 0.015, f"a={a}: stiffness / 2aE* = {ratio:.4f}"
     # the staircase is softer, by a first-order term: (ratio - 1) a0 / h
     assert -0.13 < (ratio - 1) * _a0(ds) < -0.10, f"a={a}: {(ratio - 1) * _a0(ds):.4f}"
@@ -106,7 +101,7 @@ def test_mesh_convergence_of_stiffness(rigid_punches):
     from brushcore.data.convergence import extrapolate
 
     radii = (10, 20, 40)
-    ratios = [_stiffness(rigid_punches[a]) / (2 * _a0(rigid_punches[a])) for a in radii]
+    ratios = [full_contact_stiffness(rigid_punches[a]) / (2 * _a0(rigid_punches[a])) for a in radii]
     err = [abs(r - 1) for r in ratios]
     assert err[0] > err[1] > err[2], f"stiffness errors {err} do not decrease with a/h"
     fit = extrapolate([1 / _a0(rigid_punches[a]) for a in radii], ratios)
@@ -125,7 +120,7 @@ def test_units_scale_out():
     for e_star, dgamma, h in ((1.0, 1.0, 1.0), (2.0, 3.0, 0.5)):
         ds = simulate(replace(base, e_star=e_star, dgamma=dgamma, h=h))
         a0 = _a0(ds)
-        ratios.append((_stiffness(ds) / theory.flat_punch_stiffness(a0, e_star),
+        ratios.append((full_contact_stiffness(ds) / theory.flat_punch_stiffness(a0, e_star),
                        float(ds.adhesive_force) / theory.kendall_force(a0, e_star, dgamma),
                        float(ds.adhesive_force_normalized),
                        float(ds.work_of_separation_normalized)))
@@ -174,7 +169,7 @@ def test_soft_work_approaches_spring_energy(single_pillar):
     Soft pillars all let go at once, so W is the energy stored at that
     moment: per pillar f^2 (1/k + 1/k_c) / 2 with f = F_ad / N.
     """
-    kc = _stiffness(single_pillar)
+    kc = full_contact_stiffness(single_pillar)
     errors = []
     for kbar in (1e-2, 1e-3, 1e-5):
         ds = simulate(_four_pillars(kbar))
