@@ -25,8 +25,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.fft_choice import bare_fft_pair_ms
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.halfspace.fft_choice import bare_fft_pair_ms
 
 CASES = [("regular", 256, 0.455), ("regular", 64, 1e-3), ("regular", 2304, 1e-4)]
 

@@ -22,7 +22,7 @@ import argparse
 import time
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.numerics.threads import pin_threads
+from brushcore.numerics.platform.threads import pin_threads
 
 
 def main() -> None:

@@ -37,12 +37,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.numerics import mkl
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.mirror import MirrorConvolver
-from brushcore.numerics.threads import pin_threads
+from brushcore.numerics.platform import mkl
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.halfspace.mirror import MirrorConvolver
+from brushcore.numerics.platform.threads import pin_threads
 
-from brushcore.numerics.fft_choice import bare_fft_pair_ms  # noqa: E402
+from brushcore.numerics.halfspace.fft_choice import bare_fft_pair_ms  # noqa: E402
 
 
 def _ms(conv, fill: int, repeats: int = 20) -> float:
@@ -56,7 +56,7 @@ def _ms(conv, fill: int, repeats: int = 20) -> float:
 
 def mkl_pair_ms(n: int, repeats: int = 10) -> float:
     """ms for MKL's own rfft2 + irfft2 of a 2n x 2n double array, one thread
-    (MKL's sequential layer, `brushcore.numerics.mkl`)."""
+    (MKL's sequential layer, `brushcore.numerics.platform.mkl`)."""
     fft = mkl._module()
     a = np.random.default_rng(0).random((2 * n, 2 * n))
     b = fft.rfft2(a)

@@ -35,7 +35,7 @@ import time
 import numpy as np
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.numerics import pulloff
+from brushcore.numerics.events import pulloff
 
 FACTORS = (1, 3, 10, 30, 100)
 

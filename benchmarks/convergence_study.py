@@ -25,7 +25,7 @@ from brushcore.data.aggregate import build_sweep
 from brushcore.data.convergence import QUANTITIES, extrapolate, extrapolate_sweep
 from brushcore.data.convergence_report import convergence_table, to_markdown
 from brushcore.data.io import write_curve
-from brushcore.numerics.threads import pin_threads
+from brushcore.numerics.platform.threads import pin_threads
 
 
 def _kbar(text: str) -> float:

@@ -26,10 +26,10 @@ import numpy as np
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
 from brushcore.model.solve import grid_convolver, spring_compliance
 from brushcore.model.layout import build_labels
-from brushcore.numerics.backend import Backend, resolve_backend
-from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.platform.backend import Backend, resolve_backend
+from brushcore.numerics.linear.operator import BrushOperator
 
-from brushcore.numerics.fft_choice import bare_fft_pair_ms  # noqa: E402
+from brushcore.numerics.halfspace.fft_choice import bare_fft_pair_ms  # noqa: E402
 
 #: (label, pillars, kbar, grids) of the issue.
 CASES = (("16x16 kbar 0.455", 256, 0.455, (512, 1024, 2048)),

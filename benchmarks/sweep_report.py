@@ -68,8 +68,8 @@ def pair_ms(grid: int, fold: int, single: bool, library: str, repeats: int = 30)
     from threadpoolctl import threadpool_limits
 
     from bench_speed import _ms
-    from brushcore.numerics.convolution import Convolver
-    from brushcore.numerics.mirror import MirrorConvolver
+    from brushcore.numerics.halfspace.convolution import Convolver
+    from brushcore.numerics.halfspace.mirror import MirrorConvolver
     with threadpool_limits(1):
         if fold == 4:
             conv, fill = MirrorConvolver(grid, single=single), grid // 2

@@ -7,8 +7,9 @@ event-driven displacement-controlled pull-off (He, Li & Popov 2020).
 
 The package is layered; imports point down only:
 
-- ``brushcore.numerics``: the engine (kernel, DC-FFT convolution, operator,
-  preconditioners, CG, event-driven pull-off and protocols, options, threads);
+- ``brushcore.numerics``: the engine, itself layered: ``platform`` (arrays, threads,
+  FFT libraries), ``halfspace`` (kernel, DC-FFT convolution), ``linear`` (operator,
+  preconditioners, CG), ``events`` (event-driven pull-off and protocols), and options;
 - ``brushcore.model``: the physical problem (parameters, layouts and shapes,
   rough and graded inputs, theory, one curve as a Dataset, provenance);
 - ``brushcore.data``: files and analysis (curve files, the aggregated sweep,
@@ -22,7 +23,7 @@ from brushcore.model.curve import simulate
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.protocol import Waypoint
+from brushcore.numerics.events.protocol import Waypoint
 from brushcore.validation import ParameterError
 
 __all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "file_params",

@@ -18,17 +18,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from brushcore.numerics.cg import ConvergenceError
+from brushcore.numerics.linear.cg import ConvergenceError
 from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTED, Terminated,
                                    on_sigterm, terminate)
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.params import LAYOUTS, MAX_ASPECT, MIN_KBAR, BrushParams
-from brushcore.numerics.backend import USER_BACKENDS, resolve_backend
+from brushcore.numerics.platform.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.threads import MAX_THREADS
+from brushcore.numerics.platform.threads import MAX_THREADS
 from brushcore.validation import ParameterError, overflows
 from brushcore.model.provenance import version
-from brushcore.numerics.pulloff import SolverError
+from brushcore.numerics.events.pulloff import SolverError
 from brushcore.model.shapes import SHAPES
 
 #: API parameter -> the flag that sets it, for error messages.
@@ -306,7 +306,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
     from brushcore.model.inputs import read_gap_map, read_pillar_values
-    from brushcore.numerics.threads import pin_threads
+    from brushcore.numerics.platform.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
     started = time.time()

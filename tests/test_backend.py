@@ -18,19 +18,19 @@ import types
 import numpy as np
 import pytest
 
-import brushcore.numerics.backend as backend_module
+import brushcore.numerics.platform.backend as backend_module
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
 from brushcore.cli import main
 from brushcore.data.aggregate import build_sweep
 from brushcore.data.io import read_curve, write_curve
 from brushcore.model import curve as curve_module
 from brushcore.model import solve as solve_module
-from brushcore.numerics.backend import resolve_backend
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.device_blocks import DeviceBlocks
-from brushcore.numerics.device_convolution import DeviceConvolver
-from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.tiles import TileCoarse
+from brushcore.numerics.platform.backend import resolve_backend
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.linear.device_blocks import DeviceBlocks
+from brushcore.numerics.halfspace.device_convolution import DeviceConvolver
+from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.linear.tiles import TileCoarse
 
 pytest.importorskip("array_api_strict")
 
@@ -185,7 +185,7 @@ def test_device_setup_computes_the_hosts_numbers():
     blocks, computed in the device's namespace (strict here), are the host's
     numbers: the same formula, one namespace for both."""
     from brushcore.model.layout import build_labels
-    from brushcore.numerics.kernel import wrapped_kernel
+    from brushcore.numerics.halfspace.kernel import wrapped_kernel
     strict = resolve_backend("strict")
     host = wrapped_kernel(48, 0.5, 2.0)
     device = strict.to_host(wrapped_kernel(48, 0.5, 2.0, strict.xp))

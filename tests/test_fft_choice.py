@@ -1,5 +1,5 @@
 """``fft_library: auto``: the faster library for a case, timed once per machine
-and remembered (`brushcore.numerics.fft_choice`)."""
+and remembered (`brushcore.numerics.halfspace.fft_choice`)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ import json
 import pytest
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.numerics import fft_choice, mkl
-from brushcore.numerics.threads import fft_threads
+from brushcore.numerics.halfspace import fft_choice
+from brushcore.numerics.platform import mkl
+from brushcore.numerics.platform.threads import fft_threads
 
 needs_mkl = pytest.mark.skipif(not mkl.available(),
                                reason="mkl_fft not installed (pip install 'brushcore[mkl]')")

@@ -9,10 +9,10 @@ import pytest
 
 from brushcore import BrushParams, SolverOptions, simulate
 from brushcore.model.layout import build_labels
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.kernel import dense_influence_matrix
-from brushcore.numerics.mirror import MirrorConvolver, mirror_quadrant
-from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.halfspace.kernel import dense_influence_matrix
+from brushcore.numerics.halfspace.mirror import MirrorConvolver, mirror_quadrant
+from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.validation import ParameterError
 
 

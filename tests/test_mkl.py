@@ -1,4 +1,4 @@
-"""The whole-grid transforms on Intel MKL (`brushcore.numerics.mkl`) against
+"""The whole-grid transforms on Intel MKL (`brushcore.numerics.platform.mkl`) against
 Boussinesq sums and against FFTW, and the choice between them."""
 
 from __future__ import annotations
@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from brushcore import BrushParams, SolverOptions, simulate
-from brushcore.numerics import mkl
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.kernel import dense_influence_matrix, love_coefficient
-from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.platform import mkl
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.halfspace.kernel import dense_influence_matrix, love_coefficient
+from brushcore.numerics.linear.precondition import BlockInverse
 from brushcore.validation import ParameterError
 
 needs_mkl = pytest.mark.skipif(not mkl.available(),

@@ -8,11 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brushcore.model import theory
-from brushcore.numerics.cg import ConvergenceError, pcg
-from brushcore.numerics.convolution import HAVE_PYFFTW, Convolver, planner_flags
-from brushcore.numerics.mirror import MirrorConvolver
-from brushcore.numerics.kernel import dense_influence_matrix, love_coefficient
-from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.linear.cg import ConvergenceError, pcg
+from brushcore.numerics.halfspace.convolution import HAVE_PYFFTW, Convolver, planner_flags
+from brushcore.numerics.halfspace.mirror import MirrorConvolver
+from brushcore.numerics.halfspace.kernel import dense_influence_matrix, love_coefficient
+from brushcore.numerics.linear.operator import BrushOperator
 
 
 def test_love_coefficient_matches_quadrature():
@@ -65,7 +65,7 @@ def test_certificate_backoff_spaces_failing_tries_and_resets_on_success():
     """A local cascade tries the far-field certificate every round at first;
     after each TRIES failures in a row the gap between tries doubles, up to
     2^DOUBLINGS rounds; one success brings back every round."""
-    from brushcore.numerics.pulloff import _Backoff
+    from brushcore.numerics.events.pulloff import _Backoff
 
     b = _Backoff()
     tries = []
@@ -180,7 +180,7 @@ def _assert_exact_block_inverse(op, labels, compliance, rng) -> None:
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, seed):
-    from brushcore.numerics.precondition import BlockInverse
+    from brushcore.numerics.linear.precondition import BlockInverse
 
     rng, labels, compliance = _random_problem(seed)
     with pytest.MonkeyPatch.context() as mp:
@@ -224,7 +224,7 @@ def test_single_precision_blocks_round_at_float32_with_exact_pillar_totals(packe
     1) and float32 round-off alone gets wrong by a median 20 % (3.3 % at
     the least over 400 seeds); its `refined` solves apply the float64
     blocks."""
-    from brushcore.numerics.precondition import BlockInverse, _stack_times
+    from brushcore.numerics.linear.precondition import BlockInverse, _stack_times
 
     rng, labels, _ = _random_problem(seed, n=12)
     compliance = np.full(3, 1e5)  # h^2 / k: very soft springs
@@ -273,7 +273,7 @@ def test_two_level_preconditioner_is_spd_and_the_balancing_formula(single, seed)
     float32 (~1e-7 relative), and `refined` solves get the float64 form."""
     from brushcore import BrushParams
     from brushcore.model.layout import build_labels
-    from brushcore.numerics.precondition import BlockInverse
+    from brushcore.numerics.linear.precondition import BlockInverse
 
     rng = np.random.default_rng(seed)
     # allow_coarse: 3 of the 1,000 brushes (seeds 235, 548, 715) realise phi
@@ -349,7 +349,7 @@ def test_detach_warm_start_is_the_local_solve_and_its_neighbours_first_order(see
     exactly with the others held (B_p' y_p = (B_p x_p) on its remaining
     elements), and each other pillar's first-order answer to that change,
     y_q = x_q - B_q^-1 K_qp (y_p - x_p)."""
-    from brushcore.numerics.precondition import BlockInverse
+    from brushcore.numerics.linear.precondition import BlockInverse
 
     rng, labels, compliance = _random_problem(seed)
     with pytest.MonkeyPatch.context() as mp:
@@ -388,7 +388,7 @@ def test_detach_bookkeeping_is_what_a_fresh_count_gives(seed):
     the neighbour coefficients sliced from a pillar's cached block
     (`BlockInverse._near_block`) equal `_coefficients` bit for bit, with
     at most NEAR_BLOCKS_KEPT blocks kept."""
-    from brushcore.numerics.precondition import BlockInverse
+    from brushcore.numerics.linear.precondition import BlockInverse
 
     rng, labels, compliance = _random_problem(seed, n=16, n_pillars=8)
     with pytest.MonkeyPatch.context() as mp:
@@ -418,7 +418,7 @@ def _far_response_error(mirrored: bool, distance: float, compliance: float) -> n
     """Largest relative error of `BlockInverse._far_response` against the
     exact first-order answer G_q K_qp dsigma_p, for two pillars at
     ``distance`` (in y and in x) from a changed pillar of radius 4.5 h."""
-    from brushcore.numerics.precondition import BlockInverse
+    from brushcore.numerics.linear.precondition import BlockInverse
 
     n = 160
     y, x = np.mgrid[:n, :n]
@@ -463,7 +463,7 @@ def test_far_response_is_the_first_order_answer_to_second_order_in_size(mirrored
 
 
 def test_settled_needs_every_decision_clear_of_the_error():
-    from brushcore.numerics.pulloff import SETTLE_SAFETY, _settles
+    from brushcore.numerics.events.pulloff import SETTLE_SAFETY, _settles
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.9, 0.5])
@@ -485,7 +485,7 @@ def test_settled_needs_every_decision_clear_of_the_error():
 def test_settled_weighs_each_element_by_its_own_error():
     """At the tolerance a large error on an element far from every cut does
     not hold the solve back; the same error on the runner-up does."""
-    from brushcore.numerics.pulloff import _settles
+    from brushcore.numerics.events.pulloff import _settles
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.99, 0.5])  # no element over 1.2: the next event takes 1.0
@@ -502,7 +502,7 @@ def test_decided_weighs_each_element_by_its_own_error():
     by DECISION_SAFETY times its own error estimate plus DECISION_FLOOR
     times the largest: a large error far from the threshold does not hold
     back the round, one near it does."""
-    from brushcore.numerics.pulloff import DECISION_FLOOR, DECISION_SAFETY, _decides
+    from brushcore.numerics.events.pulloff import DECISION_FLOOR, DECISION_SAFETY, _decides
 
     stopped: list[float] = []
     x = np.array([1.2, 0.5, 0.9])  # threshold 1.0: the first element goes
@@ -522,7 +522,7 @@ def test_float32_band_hands_near_ties_to_double():
     only the band leaves unsettled stops at once (verdict False: refined in
     double), one the estimate itself leaves unsettled iterates on, and the
     early exit of a cascade round waits until the band is clear."""
-    from brushcore.numerics.pulloff import _decides, _settles
+    from brushcore.numerics.events.pulloff import _decides, _settles
 
     verdicts: list[bool] = []
     z = np.full(3, 1e-6)  # margins 3.3e-6
@@ -574,8 +574,8 @@ def test_far_field_bound_holds_against_the_dense_field(seed):
     cascade skip a global solve it needs."""
     from brushcore import BrushParams
     from brushcore.model.layout import build_labels
-    from brushcore.numerics.farfield import FarFieldBound, near_influence
-    from brushcore.numerics.kernel import love_coefficient, pillar_centroids
+    from brushcore.numerics.halfspace.farfield import FarFieldBound, near_influence
+    from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_centroids
 
     h, e_star = 1.0, 1.0
     labels = build_labels(BrushParams("random", 24, 1e-2, 64, phi=0.2, seed=seed))

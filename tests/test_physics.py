@@ -30,7 +30,7 @@ def test_detachment_constant_is_the_energy_balance_of_one_element():
     Boussinesq integral in test_numerics), not taken from the closed form in
     theory: Gauss-Legendre, 200^2 points on one quadrant of the element
     (the edges' weak singularities lie on its boundary), 1e-10 converged."""
-    from brushcore.numerics.kernel import love_coefficient
+    from brushcore.numerics.halfspace.kernel import love_coefficient
 
     nodes, weights = np.polynomial.legendre.leggauss(200)
     x, w = 0.25 * (nodes + 1), 0.25 * weights  # [0, 1/2]

@@ -8,10 +8,10 @@ import scipy.fft as scipy_fft
 
 from brushcore import BrushParams, SolverOptions, simulate
 from brushcore.model.layout import build_labels
-from brushcore.numerics.kernel import folded_coefficient, love_coefficient
-from brushcore.numerics.pillar_solve import BoxTransforms, PillarSolver
-from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.tiles import TileCoarse
+from brushcore.numerics.halfspace.kernel import folded_coefficient, love_coefficient
+from brushcore.numerics.linear.pillar_solve import BoxTransforms, PillarSolver
+from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.linear.tiles import TileCoarse
 
 
 def _blobs(n: int, rng: np.random.Generator) -> np.ndarray:

@@ -18,12 +18,12 @@ import pytest
 from conftest import punch_params
 
 from brushcore import BrushParams, SolverOptions, Waypoint, simulate, theory  # the public API
-from brushcore.numerics.convolution import Convolver
+from brushcore.numerics.halfspace.convolution import Convolver
 from brushcore.model.solve import run, run_protocol_curve
 from brushcore.model.layout import build_labels
-from brushcore.numerics.operator import BrushOperator
-from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.protocol import dispatches, loop_energy, positive_work, preload_protocol
+from brushcore.numerics.linear.operator import BrushOperator
+from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.events.protocol import dispatches, loop_energy, positive_work, preload_protocol
 
 EXACT = SolverOptions.exact()  # CG to 1e-8, global cascades: reference results
 
@@ -773,7 +773,7 @@ def test_gap_map_file_shape_is_checked(tmp_path):
 def test_cg_carries_the_field_of_its_iterate():
     """pcg_image: the same iterate as pcg, and y = K x at every pillar element
     without applying K to x (what the engine reads the gaps from)."""
-    from brushcore.numerics.cg import pcg, pcg_image
+    from brushcore.numerics.linear.cg import pcg, pcg_image
 
     params = BrushParams("regular", 4, 0.01, 64, phi=0.2)
     op = BrushOperator(Convolver(64), build_labels(params), np.full(4, 1 / 0.64), 1.0, 1.0)

@@ -29,7 +29,7 @@ xr = pytest.importorskip("xarray")
 
 from brushcore import BrushParams, SolverOptions, simulate  # noqa: E402
 from brushcore.data.aggregate import AggregationError, build_sweep  # noqa: E402
-from brushcore.numerics.cg import ConvergenceError  # noqa: E402
+from brushcore.numerics.linear.cg import ConvergenceError  # noqa: E402
 from brushcore.data.io import CurveFileError, read_curve, write_curve  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -367,7 +367,7 @@ def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
 
 
 def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:
-    import brushcore.numerics.pulloff as pulloff
+    import brushcore.numerics.events.pulloff as pulloff
 
     real_pcg = pulloff.pcg
     calls = []
@@ -387,12 +387,12 @@ def test_non_finite_operator_raises(monkeypatch: pytest.MonkeyPatch) -> None:
 
 CLI_FAILING = textwrap.dedent("""
     import sys
-    import brushcore.numerics.cg, brushcore.numerics.pulloff, brushcore.cli
+    import brushcore.numerics.linear.cg, brushcore.numerics.events.pulloff, brushcore.cli
 
     def fail(*args, **kwargs):
-        raise brushcore.numerics.cg.ConvergenceError("injected CG failure")
+        raise brushcore.numerics.linear.cg.ConvergenceError("injected CG failure")
 
-    brushcore.numerics.cg.pcg = brushcore.numerics.pulloff.pcg = fail
+    brushcore.numerics.linear.cg.pcg = brushcore.numerics.events.pulloff.pcg = fail
     sys.exit(brushcore.cli.main(sys.argv[1:]))
 """)
 
@@ -485,7 +485,7 @@ def test_writing_to_a_folder_says_so_before_writing(cli_curves: list[Path],
 #: that fails is one whose solve fails.
 FAILING_RANDOM_SOLVES = textwrap.dedent("""
     import brushcore.model.curve as curve
-    from brushcore.numerics.pulloff import SolverError
+    from brushcore.numerics.events.pulloff import SolverError
 
     solve = curve.run
 
@@ -648,7 +648,7 @@ def test_git_commit_says_dirty_for_an_edit_anywhere_in_the_package(monkeypatch) 
 
     def fake_run(args, **kwargs):
         asked.append(args)
-        out = "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/cg.py\n"
+        out = "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/linear/cg.py\n"
         return subprocess.CompletedProcess(args, 0, stdout=out, stderr="")
 
     monkeypatch.setattr(provenance.subprocess, "run", fake_run)

@@ -1,4 +1,4 @@
-"""Work shared out by slabs (`brushcore.numerics.threads`): the same
+"""Work shared out by slabs (`brushcore.numerics.platform.threads`): the same
 numbers whatever the thread count, and errors that reach the caller."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brushcore.numerics.threads import slab, stacked_matmul, team
+from brushcore.numerics.platform.threads import slab, stacked_matmul, team
 
 
 def test_slabs_cover_the_items_once():
@@ -34,12 +34,12 @@ def test_stacked_matmul_gives_the_same_bits_on_any_thread_count(dtype):
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_packed_products_are_scipys_spmv_on_any_thread_count(dtype):
     """The packed blocks' products through SciPy's exported BLAS pointer
-    (`brushcore.numerics.spmv`) are SciPy's f2py spmv to the bit, against
+    (`brushcore.numerics.platform.spmv`) are SciPy's f2py spmv to the bit, against
     the dense symmetric product to round-off, and zero off ``which``."""
     from scipy.linalg import blas
 
-    from brushcore.numerics.precondition import _pack_index
-    from brushcore.numerics.spmv import packed_products
+    from brushcore.numerics.linear.precondition import _pack_index
+    from brushcore.numerics.platform.spmv import packed_products
 
     rng = np.random.default_rng(5)
     m, n_items = 41, 9

@@ -10,12 +10,12 @@ from hypothesis import strategies as st
 from brushcore import BrushParams, SolverOptions, simulate
 from brushcore.model.solve import spring_compliance
 from brushcore.model.layout import build_labels
-from brushcore.numerics.cg import pcg
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.kernel import dense_influence_matrix
-from brushcore.numerics.operator import BrushOperator
-from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.tiles import TileCoarse, max_tiles, tile_block, tile_size
+from brushcore.numerics.linear.cg import pcg
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.halfspace.kernel import dense_influence_matrix
+from brushcore.numerics.linear.operator import BrushOperator
+from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.linear.tiles import TileCoarse, max_tiles, tile_block, tile_size
 
 
 def _dense_coarse(tiles: TileCoarse, k: np.ndarray, attached: np.ndarray,

@@ -24,7 +24,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     from brushcore import BrushParams, SolverOptions, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
-    from brushcore.numerics.threads import pin_threads
+    from brushcore.numerics.platform.threads import pin_threads
 
     orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
 

@@ -24,11 +24,11 @@ from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
                                    single_transforms)
-from brushcore.numerics.backend import resolve_backend
+from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.protocol import (APPROACH, RETRACT, START, Waypoint, loop_energy,
+from brushcore.numerics.events.protocol import (APPROACH, RETRACT, START, Waypoint, loop_energy,
                                          positive_work, preload_protocol)
-from brushcore.numerics.pulloff import Progress
+from brushcore.numerics.events.pulloff import Progress
 from brushcore.validation import ParameterError
 
 #: How to read dimensional values: the inputs define the unit system.

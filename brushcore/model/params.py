@@ -21,7 +21,7 @@ from brushcore.model.lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, ne
 from brushcore.model.shapes import SHAPES
 from brushcore.model.draws import lognormal_kbar
 from brushcore.model.theory import stiffness_from_kbar
-from brushcore.numerics.backend import BACKENDS
+from brushcore.numerics.platform.backend import BACKENDS
 
 LAYOUTS = ("regular", "random", "hexagonal", "file")
 #: Largest ellipse aspect ratio: beyond it the minor axis of a pillar that
@@ -127,7 +127,7 @@ class BrushParams:
         offset z_i = z_p - gap_i (a spherical tip is r^2 / 2R, a tilt a
         linear ramp).
     backend : where the numbers are crunched, "cpu" (NumPy, default) or
-        "gpu" (CuPy; see `brushcore.numerics.backend`).  Not part of the
+        "gpu" (CuPy; see `brushcore.numerics.platform.backend`).  Not part of the
         problem: excluded from equality, hashing, `as_attrs` and the
         parameter hash, so a curve's identity does not depend on where it
         ran.  Only the name is checked here; CuPy and the card are checked

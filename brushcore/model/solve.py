@@ -15,18 +15,18 @@ from threadpoolctl import threadpool_limits
 from brushcore.model import theory
 from brushcore.model.layout import build_labels
 from brushcore.model.params import BrushParams
-from brushcore.numerics.backend import Backend, resolve_backend
-from brushcore.numerics.cg import ConvergenceError
-from brushcore.numerics.convolution import HAVE_PYFFTW, cached_convolver
-from brushcore.numerics.device_convolution import cached_device_convolver
-from brushcore.numerics.fft_choice import faster_library
-from brushcore.numerics.mirror import cached_mirror_convolver, mirror_quadrant
-from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.platform.backend import Backend, resolve_backend
+from brushcore.numerics.linear.cg import ConvergenceError
+from brushcore.numerics.halfspace.convolution import HAVE_PYFFTW, cached_convolver
+from brushcore.numerics.halfspace.device_convolution import cached_device_convolver
+from brushcore.numerics.halfspace.fft_choice import faster_library
+from brushcore.numerics.halfspace.mirror import cached_mirror_convolver, mirror_quadrant
+from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.protocol import ProtocolCurve, Waypoint, dispatches, run_protocol
-from brushcore.numerics.pulloff import Progress, PullOffCurve, SolverError, pull_off
-from brushcore.numerics.threads import fft_threads
+from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.events.protocol import ProtocolCurve, Waypoint, dispatches, run_protocol
+from brushcore.numerics.events.pulloff import Progress, PullOffCurve, SolverError, pull_off
+from brushcore.numerics.platform.threads import fft_threads
 from brushcore.validation import brief
 
 
@@ -140,7 +140,7 @@ def host_library(params: BrushParams, options: SolverOptions) -> str:
     """The library of a host run's whole-grid FFTs, "fftw" or "mkl":
     ``options.fft_library``, with "auto" (both installed) resolved to the
     faster for this grid, thread count and precision on this machine
-    (`brushcore.numerics.fft_choice`).  A solve handed over to double
+    (`brushcore.numerics.halfspace.fft_choice`).  A solve handed over to double
     precision stays on the same library."""
     library = options.host_fft_library()
     if options.fft_library == "auto" and library == "mkl":
@@ -188,7 +188,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     Parameters
     ----------
     params, options : the problem and the numerics
-    protocol : waypoints (see `brushcore.numerics.protocol`), e.g. `preload_protocol(P)`
+    protocol : waypoints (see `brushcore.numerics.events.protocol`), e.g. `preload_protocol(P)`
     heights : protrusion z_p per pillar in label order [length] (default 0);
         a larger z reaches the substrate first
     gap_map : extra gap per element, shape (n, n) [length] (default 0): the

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from brushcore.numerics.kernel import self_compliance  # noqa: F401 - a limit like the rest
+from brushcore.numerics.halfspace.kernel import self_compliance  # noqa: F401 - a limit like the rest
 
 #: Griffith energy balance over one square element of side h under a flat
 #: punch's edge singularity (Pohrt & Popov 2015, eq. 14):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from brushcore.numerics import mkl
+from brushcore.numerics.platform import mkl
 from brushcore.validation import is_integer, is_real, normalise, require, require_switches
 
 
@@ -40,33 +40,33 @@ class SolverOptions:
         a decision.  Both give the same contact sets.
     symmetry : solve a brush symmetric about both mid-lines (every regular
         flat brush with equal springs) on one quadrant with quarter-size
-        transforms (`brushcore.numerics.mirror`); True by default, F_ad and
+        transforms (`brushcore.numerics.halfspace.mirror`); True by default, F_ad and
         W within 1e-8 of the whole grid (exact mode).  Protocol runs (preload, rough or
         graded brushes) always solve the whole grid.
     precision : "auto" (default), "mixed" or "double".  "mixed" runs the
         host's FFTs in single precision and applies the block inverses from
         a float32 copy; CG's vectors, dot products, springs and downdates
         stay double, every decision keeps
-        `brushcore.numerics.pulloff.PRECISION_BAND` more margin, and a solve
+        `brushcore.numerics.events.pulloff.PRECISION_BAND` more margin, and a solve
         unsettled only by it goes on in double.  Float32 breaks the ties of
         mirror images, so "auto" is "mixed" only for layouts without exact
         symmetries (random ones) at rtol >= 1e-6, else "double"; "mixed"
         needs rtol >= 1e-6.  GPU runs are always double.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round
-        (`brushcore.numerics.pulloff.DECISION_SAFETY`); rounds whose
+        (`brushcore.numerics.events.pulloff.DECISION_SAFETY`); rounds whose
         stresses enter F_ad or W always run to the tolerance.  True by
         default, off in `exact()`.
     settle_decisions : a solve at the tolerance goes on (to 1e-9 at most)
         while an element lies within its margin of sigma_c or of the next
         event's cut, so that which elements detach follows the model, not
-        CG's rounding (`brushcore.numerics.pulloff._settles`).  True by
+        CG's rounding (`brushcore.numerics.events.pulloff._settles`).  True by
         default, off in `exact()`.
     fft_library : "auto" (default), "fftw" or "mkl": whose FFTs the host's
         whole-grid transforms run on.  "mkl" needs the ``mkl`` extra
         (``pip install 'brushcore[mkl]'``).  "auto" times both pairs once
         per machine, grid, thread count and precision and runs the faster,
-        remembered beside FFTW's wisdom (`brushcore.numerics.fft_choice`);
+        remembered beside FFTW's wisdom (`brushcore.numerics.halfspace.fft_choice`);
         without mkl_fft it is "fftw".  The two round differently, so curves
         agree to round-off, not to the bit.  The mirror quadrant's DCTs and
         the tiles' local pillar solves stay on FFTW, a GPU on CuPy.

@@ -25,19 +25,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brushcore.numerics.convolution import HAVE_PYFFTW, HostBuffers, planning
-from brushcore.numerics.kernel import wrapped_kernel
+from brushcore.numerics.halfspace.convolution import HAVE_PYFFTW, HostBuffers, planning
+from brushcore.numerics.halfspace.kernel import wrapped_kernel
 
 if HAVE_PYFFTW:
     import pyfftw
 if TYPE_CHECKING:
-    from brushcore.numerics.pulloff import PullOffCurve
+    from brushcore.numerics.events.pulloff import PullOffCurve
 
 
 class MirrorConvolver(HostBuffers):
     """u = K * sigma on the quadrant of a field symmetric about both mid-lines.
 
-    Same interface as `brushcore.numerics.convolution.Convolver`, with
+    Same interface as `brushcore.numerics.halfspace.convolution.Convolver`, with
     ``n`` the quadrant's size (half the grid): an operator built on it sees
     the quadrant as its grid.
 
@@ -47,7 +47,7 @@ class MirrorConvolver(HostBuffers):
     h, e_star, threads, use_pyfftw, single : as for `Convolver`
     """
 
-    #: The operator's images: see `brushcore.numerics.kernel.folded_coefficient`.
+    #: The operator's images: see `brushcore.numerics.halfspace.kernel.folded_coefficient`.
     mirrored = True
 
     def __init__(self, grid: int, h: float = 1.0, e_star: float = 1.0, threads: int = 1,

@@ -1,6 +1,6 @@
 """Non-periodic DC-FFT convolution on any array namespace (the GPU's convolver).
 
-The same operation as `brushcore.numerics.convolution.Convolver`: the n x n
+The same operation as `brushcore.numerics.halfspace.convolution.Convolver`: the n x n
 stress is zero-padded to 2n x 2n and multiplied by the wrapped kernel's
 spectrum.  Here the padding is left to the FFT (``s=(2n, 2n)``) and one
 2-D real transform pair does the work: on a GPU one cuFFT call per
@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from brushcore.numerics.backend import Backend
-from brushcore.numerics.kernel import wrapped_kernel
+from brushcore.numerics.platform.backend import Backend
+from brushcore.numerics.halfspace.kernel import wrapped_kernel
 
 
 class DeviceConvolver:
@@ -27,7 +27,7 @@ class DeviceConvolver:
     n : grid size (elements per side)
     h : element size [length]
     e_star : effective modulus E* [stress]
-    backend : where the arrays live (`brushcore.numerics.backend`)
+    backend : where the arrays live (`brushcore.numerics.platform.backend`)
 
     Notes
     -----

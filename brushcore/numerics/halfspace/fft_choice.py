@@ -27,7 +27,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from brushcore.numerics.convolution import (Convolver, cache_dir, machine_lock, planner_flags,
+from brushcore.numerics.halfspace.convolution import (Convolver, cache_dir, machine_lock, planner_flags,
                                             save_to_cache)
 
 #: Alternating rounds of the timing; the median of each library's rounds counts.

@@ -1,6 +1,6 @@
 """The per-pillar block preconditioner with its stacks on a device.
 
-Same mathematics as `brushcore.numerics.precondition.BlockInverse` (read
+Same mathematics as `brushcore.numerics.linear.precondition.BlockInverse` (read
 its docstring): exact inverses of each pillar's block, downdated on
 detachment, with the balancing coarse space over pillars.  What differs is
 where the work happens:
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from brushcore.numerics.backend import Backend
-from brushcore.numerics.kernel import love_coefficient
-from brushcore.numerics.precondition import BlockInverse
+from brushcore.numerics.platform.backend import Backend
+from brushcore.numerics.halfspace.kernel import love_coefficient
+from brushcore.numerics.linear.precondition import BlockInverse
 
 #: Fraction of the device's free memory the stacks may take: the FFT
 #: buffers, cuFFT work areas and CG vectors need the rest.

@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from brushcore.numerics.convolution import Convolver
-from brushcore.numerics.device_blocks import DeviceBlocks
-from brushcore.numerics.precondition import BlockInverse
-from brushcore.numerics.pillar_solve import PillarSolver
-from brushcore.numerics.tiles import TileCoarse
-from brushcore.numerics.kernel import self_compliance
+from brushcore.numerics.halfspace.convolution import Convolver
+from brushcore.numerics.linear.device_blocks import DeviceBlocks
+from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.linear.pillar_solve import PillarSolver
+from brushcore.numerics.linear.tiles import TileCoarse
+from brushcore.numerics.halfspace.kernel import self_compliance
 
 
 class BrushOperator:
@@ -52,7 +52,7 @@ class BrushOperator:
     array.  Vectors are compressed to the attached elements in the order of
     `elements[attached]`.  `detach` shrinks the set; it never grows during
     a pull-off.  `attach` grows it again (approach and re-attachment, see
-    `brushcore.numerics.protocol`).
+    `brushcore.numerics.events.protocol`).
     """
 
     def __init__(self, convolver: Convolver, labels: np.ndarray, compliance: np.ndarray,

@@ -1,8 +1,8 @@
 """How far other pillars' stress changes can move a pillar's stresses (a bound).
 
 A local cascade updates each pillar exactly with the others held fixed
-(`brushcore.numerics.precondition.BlockInverse.detach`,
-`brushcore.numerics.pillar_solve.PillarSolver`); what it misses is the other
+(`brushcore.numerics.linear.precondition.BlockInverse.detach`,
+`brushcore.numerics.linear.pillar_solve.PillarSolver`); what it misses is the other
 pillars' far field.  Stress changes of summed magnitude L_q = sum |d sigma|
 over pillar q's elements move the surface under pillar p by at most
 R_pq L_q, with R the influence coefficient at the closest approach of the
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import image_coordinate, images, love_coefficient
+from brushcore.numerics.halfspace.kernel import image_coordinate, images, love_coefficient
 
 
 def near_influence(cy: np.ndarray, cx: np.ndarray, radius: np.ndarray, h: float,
@@ -28,7 +28,7 @@ def near_influence(cy: np.ndarray, cx: np.ndarray, radius: np.ndarray, h: float,
     radius : largest distance of a pillar's element centre from its
         centroid [length], shape (N,)
     h, e_star : element size [length] and modulus [stress]
-    mirrored : the grid is a mirror quadrant (`brushcore.numerics.mirror`):
+    mirrored : the grid is a mirror quadrant (`brushcore.numerics.halfspace.mirror`):
         each pillar also feels the other pillars' three images
 
     Returns

@@ -96,7 +96,7 @@ def folded_coefficient(ya: np.ndarray, xa: np.ndarray, yb: np.ndarray, xb: np.nd
 
     Coordinates [length] are element centres in the quadrant of a field that
     is mirror-symmetric about y = -h/2 and x = -h/2 (see
-    `brushcore.numerics.mirror`); the image of y is -h - y.  This is the
+    `brushcore.numerics.halfspace.mirror`); the image of y is -h - y.  This is the
     operator the quadrant problem solves, so sums of it are the exact
     influence between quadrant elements.
 

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from brushcore.numerics.backend import namespace
+from brushcore.numerics.platform.backend import namespace
 
 
 class ConvergenceError(RuntimeError):

@@ -38,12 +38,12 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.linalg import blas
 
-from brushcore.numerics.backend import CPU
-from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import love_coefficient, pillar_influence
-from brushcore.numerics.multipole import field_terms
-from brushcore.numerics.spmv import packed_products
-from brushcore.numerics.threads import stacked_matmul
+from brushcore.numerics.platform.backend import CPU
+from brushcore.numerics.halfspace.farfield import FarFieldBound, near_influence
+from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_influence
+from brushcore.numerics.halfspace.multipole import field_terms
+from brushcore.numerics.platform.spmv import packed_products
+from brushcore.numerics.platform.threads import stacked_matmul
 
 
 def _remove_slots(g: np.ndarray, gone: np.ndarray, values: np.ndarray | None = None
@@ -137,14 +137,14 @@ class BlockInverse:
     coarse : allow the pillar-level coarse space (used for 1 < N <= MAX_COARSE
         when the pillars are coupled enough, see COUPLING_PER_PILLAR)
     mirrored : the grid is the quadrant of a field mirrored about both
-        mid-lines (`brushcore.numerics.mirror`): every influence includes
+        mid-lines (`brushcore.numerics.halfspace.mirror`): every influence includes
         the three images, and each block is the exact diagonal block of the
         folded operator (a pillar near a mirror line feels its own images)
     single : apply the blocks from a float32 copy (`_blocks_times`), for an
         operator whose transforms are single precision already; `single`
         is also the attribute its `refined` solves turn off
     threads : threads that share each application's unpacked stack
-        (`brushcore.numerics.threads.stacked_matmul`)
+        (`brushcore.numerics.platform.threads.stacked_matmul`)
     """
 
     #: Where the stacks live (`DeviceBlocks` sets its device's backend).
@@ -415,8 +415,8 @@ class BlockInverse:
         budget and the block size limit.
 
         4 GB keeps a 2048^2 curve within 8 GB.  Larger pillars take the tile
-        preconditioner (`brushcore.numerics.tiles`) with exact local
-        responses on small FFT grids (`brushcore.numerics.pillar_solve`):
+        preconditioner (`brushcore.numerics.linear.tiles`) with exact local
+        responses on small FFT grids (`brushcore.numerics.linear.pillar_solve`):
         2-3x the applications of the blocks, but each block application
         and downdate streams N m^2 numbers, so from m ~ 1,500 up the tiles
         are faster.  Measured, wall time tiles / blocks: 1.3 and 1.1 at m =

@@ -8,7 +8,7 @@ columns (length 2n, n + 1 of them) -> multiply by the real kernel spectrum ->
 columns back -> only the first n rows back.  That is 3/4 of the work of a
 full pair.  FFTW plans are made once per grid (with wisdom cached on disk)
 and reused for every application; scipy.fft is the fallback without pyfftw,
-and Intel MKL (`brushcore.numerics.mkl`) the faster choice where the
+and Intel MKL (`brushcore.numerics.platform.mkl`) the faster choice where the
 ``mkl`` extra is installed.
 """
 
@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from brushcore.numerics import mkl
-from brushcore.numerics.backend import CPU
-from brushcore.numerics.kernel import wrapped_kernel
+from brushcore.numerics.platform import mkl
+from brushcore.numerics.platform.backend import CPU
+from brushcore.numerics.halfspace.kernel import wrapped_kernel
 
 try:  # pyfftw is a declared dependency; the fallback keeps the package importable
     import pyfftw
@@ -143,7 +143,7 @@ class HostBuffers:
     Subclasses provide ``buffer`` (the padded input) and ``apply_buffer``.
     """
 
-    #: Arrays are NumPy arrays (see `brushcore.numerics.backend`).
+    #: Arrays are NumPy arrays (see `brushcore.numerics.platform.backend`).
     array_backend = CPU
 
     @property
@@ -196,10 +196,10 @@ class Convolver(HostBuffers):
         relative error ~1e-7, see `SolverOptions.precision`); the scipy
         fallback stays in double precision
     library : "fftw" (pyfftw, or scipy.fft where it is missing) or "mkl"
-        (`brushcore.numerics.mkl`; see `SolverOptions.fft_library`)
+        (`brushcore.numerics.platform.mkl`; see `SolverOptions.fft_library`)
     """
 
-    #: A plain grid: no mirror images (see `brushcore.numerics.mirror`).
+    #: A plain grid: no mirror images (see `brushcore.numerics.halfspace.mirror`).
     mirrored = False
 
     def __init__(self, n: int, h: float = 1.0, e_star: float = 1.0, threads: int = 1,

@@ -1,6 +1,6 @@
 """Boussinesq fields of multipole sources at pillar centroids (pure functions).
 
-The far-field warm start (`brushcore.numerics.precondition.BlockInverse`)
+The far-field warm start (`brushcore.numerics.linear.precondition.BlockInverse`)
 needs, at each pillar's centroid, the surface displacement caused by stress
 changes elsewhere, with its gradient and Hessian.  A change of moments M0
 (its total) and M1 (its first moment about the source's centroid), in
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import image_coordinate, images
+from brushcore.numerics.halfspace.kernel import image_coordinate, images
 
 
 def field_terms(moments: np.ndarray, source: np.ndarray, target: np.ndarray,

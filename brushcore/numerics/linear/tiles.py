@@ -6,7 +6,7 @@ at 2048^2 (m ~ 7,850).  The half-space operator K is of order -1 (its symbol
 falls as 1/|q|), so a point-Jacobi preconditioner fails on the smooth modes,
 where K is largest: CG needs ~ sqrt(radius / h) iterations.  (The exact
 local responses that the blocks give come from small per-pillar FFT solves
-on this path, `brushcore.numerics.pillar_solve`, preconditioned by
+on this path, `brushcore.numerics.linear.pillar_solve`, preconditioned by
 `apply_pillar`.)
 
 Grouping each pillar's elements into a x a tiles splits the residual into
@@ -42,7 +42,7 @@ refreshed when a pillar's attached count moved by REFRESH since the last
 inversion, or a tile empty then has elements again; between refreshes the
 stale inverse still gives an SPD M.
 Across pillars, M is balanced with the block path's pillar-level coarse
-space (`brushcore.numerics.precondition`), one vector z_p = M_p^-1 1 a
+space (`brushcore.numerics.linear.precondition`), one vector z_p = M_p^-1 1 a
 pillar: it carries the pillars' forces acting on each other, about 40 %
 of what the tiles missed against dense blocks (random 64 rigid on 1024^2:
 9,749 against 11,115 applications; docs/SPEED.md).
@@ -55,10 +55,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.kernel import (love_coefficient, pillar_centroids, pillar_influence,
+from brushcore.numerics.halfspace.kernel import (love_coefficient, pillar_centroids, pillar_influence,
                                       self_compliance)
-from brushcore.numerics.precondition import BlockInverse, coarse_inverse
-from brushcore.numerics.threads import stacked_matmul
+from brushcore.numerics.linear.precondition import BlockInverse, coarse_inverse
+from brushcore.numerics.platform.threads import stacked_matmul
 
 
 class TileCoarse:
@@ -67,14 +67,14 @@ class TileCoarse:
     Parameters
     ----------
     elements, pillar_of, n, compliance, h, e_star : as for
-        `brushcore.numerics.precondition.BlockInverse`
+        `brushcore.numerics.linear.precondition.BlockInverse`
     tile : tile side a in elements (default: `tile_size`)
     threads : threads that share each application's stacked inverses
-        (`brushcore.numerics.threads.stacked_matmul`)
+        (`brushcore.numerics.platform.threads.stacked_matmul`)
     mirrored : the grid is a mirror quadrant (the coarse space's R
         includes the images)
     coarse : allow the block path's pillar-level coarse space
-        (`brushcore.numerics.precondition`), with z_p = M_p^-1 1 from the
+        (`brushcore.numerics.linear.precondition`), with z_p = M_p^-1 1 from the
         tiles' own pillar blocks, under the same rule (1 < N <=
         `BlockInverse.MAX_COARSE`, coupling >= `BlockInverse.COUPLING_PER_PILLAR` N)
     """
@@ -281,7 +281,7 @@ class TileCoarse:
                      diag: float) -> np.ndarray:
         """M^-1 r on pillar p alone, for a residual over its attached
         ``members`` (operator-order indices; ``diag`` as for `apply`): the
-        local solves of `brushcore.numerics.pillar_solve`."""
+        local solves of `brushcore.numerics.linear.pillar_solve`."""
         slot = self._slot[members]
         sums = np.bincount(slot, weights=r, minlength=self.mc)
         counts = self.counts[p * self.mc:(p + 1) * self.mc]

@@ -35,12 +35,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brushcore.numerics.backend import namespace
-from brushcore.numerics.cg import ConvergenceError, pcg_image
-from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.platform.backend import namespace
+from brushcore.numerics.linear.cg import ConvergenceError, pcg_image
+from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.validation import is_real, normalise, require
-from brushcore.numerics.pulloff import Progress, SolverError, pull_off
+from brushcore.numerics.events.pulloff import Progress, SolverError, pull_off
 
 APPROACH, START, RETRACT = -1, 0, 1
 KINDS = ("force", "displacement", "separation")

@@ -1,7 +1,7 @@
 """Packed symmetric products of a stack of blocks, on the job's threads.
 
 The block preconditioner applies large pillars' inverses from packed upper
-triangles (`brushcore.numerics.precondition`), one BLAS spmv per pillar:
+triangles (`brushcore.numerics.linear.precondition`), one BLAS spmv per pillar:
 half the bytes of the full blocks, and memory-bound (random N = 1620 at
 2048^2 streams 325 MB of float32 an application).  SciPy's f2py wrapper
 (`scipy.linalg.blas.sspmv`) holds the GIL, so a second thread cannot share
@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from brushcore.numerics.threads import in_slabs
+from brushcore.numerics.platform.threads import in_slabs
 
 _P = ctypes.c_void_p
 _SPMV = ctypes.CFUNCTYPE(None, ctypes.c_char_p, _P, _P, _P, _P, _P, _P, _P, _P)

@@ -1,6 +1,6 @@
 """Exact per-pillar responses on small FFT grids, for pillars without dense inverses.
 
-The local cascade of the block path (`brushcore.numerics.precondition`)
+The local cascade of the block path (`brushcore.numerics.linear.precondition`)
 answers a detachment with each pillar's exact response, the other pillars
 held fixed: with D the detached elements of pillar p and p' the rest,
 
@@ -17,7 +17,7 @@ mirror quadrant the pillar's own three images enter the same way: an
 image's influence depends on i + j, a convolution of the flipped box.
 
 What the local response leaves out is the far field of the other pillars'
-changes, bounded as on the block path (`brushcore.numerics.farfield`), with
+changes, bounded as on the block path (`brushcore.numerics.halfspace.farfield`), with
 the reach sum_j |G_p[i, j]| <= REACH / K_ii in place of the dense rows.
 """
 
@@ -26,11 +26,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
-from brushcore.numerics.cg import pcg
-from brushcore.numerics.convolution import HAVE_PYFFTW, planning
-from brushcore.numerics.farfield import FarFieldBound, near_influence
-from brushcore.numerics.kernel import love_coefficient, pillar_centroids, self_compliance
-from brushcore.numerics.tiles import TileCoarse
+from brushcore.numerics.linear.cg import pcg
+from brushcore.numerics.halfspace.convolution import HAVE_PYFFTW, planning
+from brushcore.numerics.halfspace.farfield import FarFieldBound, near_influence
+from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_centroids, self_compliance
+from brushcore.numerics.linear.tiles import TileCoarse
 
 
 class PillarSolver:
@@ -39,7 +39,7 @@ class PillarSolver:
     Parameters
     ----------
     elements, pillar_of, n, compliance, h, e_star, mirrored : as for
-        `brushcore.numerics.precondition.BlockInverse`
+        `brushcore.numerics.linear.precondition.BlockInverse`
     tiles : the tile preconditioner, whose per-pillar blocks precondition
         the local solves
     """
@@ -157,7 +157,7 @@ class PillarSolver:
                               pillar_of: np.ndarray) -> np.ndarray:
         """Bound on each attached element's stress change from the other
         pillars' summed changes ``pillar_change`` [stress] (first order;
-        see `brushcore.numerics.farfield`); ``pillar_of`` per attached element."""
+        see `brushcore.numerics.halfspace.farfield`); ``pillar_of`` per attached element."""
         if self.bound is None:
             return np.zeros(pillar_of.size)
         shift = self.bound.shift(np.abs(pillar_change))

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brushcore.numerics.cg import ConvergenceError, pcg
-from brushcore.numerics.operator import BrushOperator
+from brushcore.numerics.linear.cg import ConvergenceError, pcg
+from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 
 
@@ -43,7 +43,7 @@ class PullOffCurve:
     pillar_force_at_peak : force of each pillar [force] at the largest force
         (load sharing at F_ad)
     symmetry_fold : 4 when solved on one quadrant of a mirror-symmetric
-        brush and unfolded (`brushcore.numerics.mirror`), else 1
+        brush and unfolded (`brushcore.numerics.halfspace.mirror`), else 1
     preconditioner : `BrushOperator.preconditioner` of the run
     """
 

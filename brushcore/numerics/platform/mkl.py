@@ -10,7 +10,7 @@ against 10.6 ms in double; a soft random curve 25-27 % faster.
 MKL runs here on its sequential layer (no OpenMP runtime beside FFTW's and
 OpenBLAS's).  With T > 1 FFT threads the passes are cut into T slabs of
 rows or columns, each transformed by one thread of a
-`brushcore.numerics.threads.Team` (mkl_fft releases the GIL), meeting at a
+`brushcore.numerics.platform.threads.Team` (mkl_fft releases the GIL), meeting at a
 barrier between passes.  Every row and column is transformed
 as in one thread, so the numbers are the same to the bit whatever T.
 Measured with T = 2 on the 2-core Intel Xeon, single precision, against one
@@ -29,7 +29,7 @@ from types import ModuleType
 
 import numpy as np
 
-from brushcore.numerics.threads import slab, team
+from brushcore.numerics.platform.threads import slab, team
 
 
 def available() -> bool:
