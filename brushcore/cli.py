@@ -21,6 +21,7 @@ from typing import NoReturn
 from brushcore.numerics.linear.cg import ConvergenceError
 from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTED, Terminated,
                                    on_sigterm, terminate)
+from brushcore.model.inputs import PROTOCOL_SYNTAX
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.params import LAYOUTS, MAX_ASPECT, MIN_KBAR, BrushParams
 from brushcore.numerics.platform.backend import USER_BACKENDS, resolve_backend
@@ -42,7 +43,7 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
          "heights": "--heights", "kbar_values": "--kbar-file", "gap_map": "--gap-map",
-         "backend": "--backend"}
+         "backend": "--backend", "protocol": "--protocol"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
 
@@ -188,6 +189,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar")
     rough.add_argument("--gap-map", type=_path, default=None, metavar="FILE",
                        help="extra gap of every element [d_K], grid x grid (rows y)")
+    rough.add_argument("--protocol", default=None, metavar="WAYPOINTS",
+                       help="loading-unloading cycles in place of --preload: "
+                            + PROTOCOL_SYNTAX + "; the file then holds every retraction's "
+                            "F_ad and W (pull_*); F_ad and W of the last")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
                      help="approximate: detach (rough brushes: also attach) within this relative "
@@ -305,7 +310,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.curve import simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
-    from brushcore.model.inputs import read_gap_map, read_pillar_values
+    from brushcore.model.inputs import parse_protocol, read_gap_map, read_pillar_values
     from brushcore.numerics.platform.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
@@ -337,6 +342,10 @@ def _simulate(args: argparse.Namespace) -> int:
                                 early_decisions=args.early_decisions,
                                 settle_decisions=args.settle_decisions,
                                 fft_library=args.fft_library)
+        protocol = None if args.protocol is None else parse_protocol(args.protocol)
+        if protocol is not None and params.preload:
+            raise ParameterError("preload", params.preload,
+                                 "0 when a protocol is given (its force waypoints are the loads)")
         if not 1 <= args.threads <= MAX_THREADS:
             raise ParameterError("threads", args.threads, f"an integer in [1, {MAX_THREADS}]")
         check_output_path(args.out)
@@ -354,7 +363,7 @@ def _simulate(args: argparse.Namespace) -> int:
         # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
         previous = on_sigterm(terminate)
         try:
-            ds = simulate(params, options, progress=progress, labels=labels)
+            ds = simulate(params, options, progress=progress, labels=labels, protocol=protocol)
             try:
                 write_curve(ds, args.out)
             except OSError as exc:  # the disk filled up or the folder went away
@@ -366,6 +375,8 @@ def _simulate(args: argparse.Namespace) -> int:
         finally:
             on_sigterm(previous)
     except ParameterError as exc:
+        if exc.name == "protocol":  # as typed, not as the waypoints it was read into
+            exc = ParameterError(exc.name, args.protocol, exc.allowed, exc.reason)
         _error(exc.in_terms_of(FLAGS, sep=" "), progress)
         return 2
     except _Missing as exc:
@@ -389,9 +400,19 @@ def _simulate(args: argparse.Namespace) -> int:
           f"-> {args.out}")
     if "pillars_in_contact_at_preload" in ds:  # an approach ran: say how far it pressed
         touching = int(ds.pillars_in_contact_at_preload)
-        print(f"{touching} of {params.n_pillars} pillars in contact at the preload"
+        print(f"{touching} of {params.n_pillars} pillars in contact at the "
+              + ("first waypoint" if protocol else "preload")
               + (" (--preload 0 stops the approach at first touch; give --preload P to press "
-                 "the brush on)" if touching < params.n_pillars and not params.preload else ""))
+                 "the brush on)" if touching < params.n_pillars and not params.preload
+                 and protocol is None else ""))
+    if ds.sizes.get("pull", 0) > 1:  # cycles: every retraction's own pull-off
+        area = float(ds.attrs["real_contact_area"])
+        for k in range(ds.sizes["pull"]):
+            pull = ds.isel(pull=k)
+            print(f"retraction {k}: F_ad/F_K = {float(pull.pull_adhesive_force_normalized):.4f}"
+                  f"  W/W_K = {float(pull.pull_work_of_separation_normalized):.4f}"
+                  f"  in contact at its end: {float(pull.pull_contact_area_at_end) / area:.1%}"
+                  " of the pillar area")
     return 0
 
 

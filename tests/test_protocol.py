@@ -299,6 +299,108 @@ def test_reattachment_in_two_cycles(soft_reference):
         single.displacement, single.force)  # two pull-offs dissipate more than one
 
 
+ROUGH9 = BrushParams("regular", 9, 0.003, 48,
+                     heights=np.array([0.2, 0.0, -0.1, 0.05, 0.15, -0.2, 0.0, 0.1, -0.05]))
+
+
+def _pull(ds, k: int) -> tuple[float, float, float]:
+    """F_ad / F_K, W / W_K and the cycle's energy of retraction branch k of a file."""
+    pull = ds.isel(pull=k)
+    return (float(pull.pull_adhesive_force_normalized),
+            float(pull.pull_work_of_separation_normalized), float(pull.pull_cycle_energy))
+
+
+def test_every_retraction_of_a_cycle_has_its_own_pull_off():
+    """Pulled off completely, a brush keeps no memory: each cycle of
+    (press to P_k, separate) pulls off as a fresh run pressed to P_k, and
+    the cycles' energies add up to the protocol's dissipated energy."""
+    loads = (0.01, 2.0)  # 8 of 9 pillars pressed on, then all 9
+    cycles = simulate(ROUGH9, EXACT, protocol=[w for p in loads for w in
+                                               (Waypoint("force", -p), Waypoint("separation"))])
+    assert cycles.sizes["pull"] == 2
+    for k, p in enumerate(loads):
+        fresh = simulate(ROUGH9, EXACT, protocol=[Waypoint("force", -p), Waypoint("separation")])
+        f, w, energy = _pull(cycles, k)
+        # other warm starts along another path: CG's 1e-8 separates them
+        assert f == pytest.approx(float(fresh.adhesive_force_normalized), rel=1e-6), (k, p)
+        assert w == pytest.approx(float(fresh.work_of_separation_normalized), rel=1e-6), (k, p)
+        assert energy == pytest.approx(float(fresh.dissipated_energy), rel=1e-6), (k, p)
+        assert float(cycles.pull_contact_area_at_end[k]) == 0
+    assert _pull(cycles, 1)[:2] == (float(cycles.adhesive_force_normalized),
+                                    float(cycles.work_of_separation_normalized))
+    assert float(cycles.pull_cycle_energy.sum()) == pytest.approx(
+        float(cycles.dissipated_energy), rel=1e-12)
+    # the two loads press different contacts: the pulls differ (so the test can fail)
+    assert abs(_pull(cycles, 0)[0] / _pull(cycles, 1)[0] - 1) > 1e-3
+
+
+def test_a_partial_retraction_is_a_pull_of_its_own():
+    """A retraction stopped short of separation is the first pull, with the
+    contact it left; it is the last pull of the protocol that stops there."""
+    back = (Waypoint("force", -1.0), Waypoint("displacement", 25.0))  # 3 of 9 pillars let go
+    cycles = simulate(ROUGH9, protocol=[*back, Waypoint("force", -1.0), Waypoint("separation")])
+    prefix = simulate(ROUGH9, protocol=list(back))
+    first, last = (int(v) for v in cycles.isel(pull=0)[["pull_first_step", "pull_last_step"]]
+                   .to_array())
+    assert cycles.branch.values[first] == 0 and set(cycles.branch.values[first + 1:last + 1]) \
+        == {1}  # the turning point, then the retraction leg
+    assert _pull(cycles, 0)[:2] == (float(prefix.adhesive_force_normalized),
+                                    float(prefix.work_of_separation_normalized))
+    left = cycles.pull_contact_area_at_end.values
+    assert 0 < left[0] < float(cycles.contact_area[first]) and left[1] == 0
+
+
+def test_cli_runs_a_protocol_and_reports_every_pull(tmp_path, capsys):
+    from brushcore.cli import main
+    from brushcore.data.io import read_curve
+
+    out = tmp_path / "cycles.nc"
+    text = "force:-0.5, separation, force:-2, separation"
+    rc = main(["simulate", "--layout", "regular", "--pillars", "9", "--kbar", "0.003",
+               "--grid", "48", "--roughness", "0.3", "--out", str(out), "--quiet",
+               "--protocol", text])
+    printed = capsys.readouterr().out
+    assert rc == 0 and "retraction 0: F_ad/F_K" in printed and "retraction 1:" in printed
+    ds = read_curve(out)
+    assert ds.sizes["pull"] == 2 and ds.attrs["protocol"].count("separation") == 2
+    pytest.importorskip("compliance_checker")
+    from test_cf import cf_errors
+
+    assert cf_errors(out, tmp_path) == []  # the pull dimension and its variables
+
+
+@pytest.mark.parametrize("text,message", [
+    ("force:-1, push:2", "waypoint 1 ('push:2') is of no kind in"),
+    ("force:-1, separation:3", "waypoint 1 ('separation:3') takes no value"),
+    ("force, separation", "waypoint 0 ('force') needs a finite number after 'force:'"),
+    ("force:1e400, separation", "needs a finite number"),
+    ("displacement:nan", "needs a finite number"),
+    (" , ", "it holds no waypoint"),
+    ("force:-5000, separation", "waypoint 0 is a force of -5000 F_K"),
+])
+def test_cli_refuses_bad_protocols_before_any_work(tmp_path, capsys, text, message):
+    from brushcore.cli import main
+
+    out = tmp_path / "curve.nc"
+    rc = main(["simulate", "--layout", "regular", "--pillars", "16", "--kbar", "0.1",
+               "--grid", "64", "--out", str(out), "--quiet", "--protocol", text])
+    err = capsys.readouterr().err
+    assert rc == 2 and f"--protocol {text} is invalid" in err and message in err, err
+    assert "allowed" in err and not out.exists()
+
+
+def test_cli_refuses_a_preload_beside_a_protocol(tmp_path, capsys):
+    from brushcore.cli import main
+
+    out = tmp_path / "curve.nc"
+    rc = main(["simulate", "--layout", "regular", "--pillars", "16", "--kbar", "0.1",
+               "--grid", "64", "--out", str(out), "--quiet", "--preload", "1",
+               "--protocol", "force:-1, separation"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--preload 1.0 is invalid: allowed 0 when a --protocol" in err, err
+    assert not out.exists()
+
+
 def test_retraction_split_by_waypoints_is_one_branch():
     """F_ad and W are taken over the retraction branch, not its last waypoint leg.
 
@@ -427,7 +529,7 @@ def test_the_parameters_own_label_map_is_accepted():
     ((FLAT,), {"protocol": "separation"},
      r"^protocol='separation' is invalid: allowed None or a list"),
     ((FLAT,), {"protocol": [Waypoint("force", -1e300), Waypoint("separation")]},
-     r"^protocol=.* is invalid \(element 0 is a force of -1e\+300 F_K\): allowed force "
+     r"^protocol=.* is invalid \(waypoint 0 is a force of -1e\+300 F_K\): allowed force "
      r"waypoints in \[-1000, 1000\] F_K"),  # was an rtol=1e-303 the user never set
     ((FLAT,), {"progress": 5},
      r"^progress=5 is invalid: allowed None or a function"),  # was a TypeError mid-solve

@@ -236,7 +236,7 @@ def check_arguments(params: object, options: object, protocol: object,
             raise ParameterError("protocol", _shown(protocol),
                                  f"force waypoints in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}] F_K "
                                  "(the preload's range)",
-                                 f"element {k} is a force of {leg.value:g} F_K")
+                                 f"waypoint {k} is a force of {leg.value:g} F_K")
 
 
 def _shown(value: object) -> object:
@@ -429,9 +429,9 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     area_total = float(np.count_nonzero(labels >= 0)) * h * h
     ws = theory.work_scale(area_total, dg)
     d, f = curve.displacement, curve.force
-    ret = curve.retraction
-    i_max, f_ad, d_ad, work = _retraction_peak(d, f, ret)
-    if not ret.any():  # a loading-only protocol is legitimate, but say why F_ad is NaN
+    peaks = [_retraction_peak(d, f, first, last) for first, last in curve.pulls]
+    i_max, f_ad, d_ad, work = peaks[-1] if peaks else (-1, math.nan, math.nan, math.nan)
+    if not peaks:  # a loading-only protocol is legitimate, but say why F_ad is NaN
         warnings.warn("the protocol never retracts: adhesive_force and work_of_separation "
                       "are NaN (end it with Waypoint('separation') for a pull-off)",
                       stacklevel=3)
@@ -466,7 +466,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         "direction": _var("step", curve.direction.astype(np.int8), "direction of motion",
                          "1", flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
                          flag_meanings="approach first_touch retraction"),
-        "retraction": _var("step", ret.astype(np.int8),
+        "retraction": _var("step", curve.retraction.astype(np.int8),
                           "step belongs to the last retraction branch", "1",
                           flag_values=np.array([0, 1], dtype=np.int8),
                           flag_meanings="other last_retraction"),
@@ -493,6 +493,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                             "adhesive force (maximum tensile force of the last retraction)",
                             "work of separation, integral of max(F, 0) dd over the last "
                             "retraction"),
+        **_pull_variables(d, f, area, curve.pulls, peaks, fs, ws),
         "dissipated_energy": _var((), dissipated, "energy dissipated over the protocol, "
                                  "integral of F dd", "J"),
         "dissipated_energy_normalized": _var((), dissipated / ws, "dissipated energy / W_K",
@@ -526,22 +527,59 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     return xr.Dataset(data, coords={
         **_coords(params, d.size, len(steps), "step of the protocol (one per event or solve)"),
         "pillar": _pillar_coord(n_pillars),
+        "pull": _var("pull", np.arange(len(peaks), dtype=np.int32),
+                     "retraction branch index, in order", "1"),
     }, attrs=attrs)
 
 
-def _retraction_peak(d: np.ndarray, f: np.ndarray,
-                     retraction: np.ndarray) -> tuple[int, float, float, float]:
-    """Step, force [N], displacement [m] and work [J] of the last retraction's
-    pull-off: its largest tensile force and the integral of max(F, 0) dd.
-
-    A retraction that stays compressive has no tensile force (NaN, step -1)
-    and no work (0); a protocol that never retracts has neither (NaN).
+def _retraction_peak(d: np.ndarray, f: np.ndarray, first: int,
+                     last: int) -> tuple[int, float, float, float]:
+    """Step, force [N], displacement [m] and work [J] of the pull-off of the
+    retraction over steps first ... last: its largest tensile force and the
+    integral of max(F, 0) dd.  One that stays compressive has no tensile
+    force (NaN, step -1) and no work (0).
     """
-    if retraction.any() and f[retraction].max() > 0:
-        i_max = int(np.flatnonzero(retraction)[np.argmax(f[retraction])])
-        return (i_max, float(f[i_max]), float(d[i_max]),
-                positive_work(d[retraction], f[retraction]))
-    return -1, math.nan, math.nan, (0.0 if retraction.any() else math.nan)
+    on = slice(first, last + 1)
+    if f[on].max() > 0:
+        i_max = first + int(np.argmax(f[on]))
+        return i_max, float(f[i_max]), float(d[i_max]), positive_work(d[on], f[on])
+    return -1, math.nan, math.nan, 0.0
+
+
+def _pull_variables(d: np.ndarray, f: np.ndarray, area: np.ndarray, pulls: np.ndarray,
+                    peaks: list[tuple[int, float, float, float]], f_unit: float,
+                    w_unit: float) -> dict[str, xr.Variable]:
+    """Per retraction branch (dimension ``pull``, in order): its steps, F_ad,
+    the d of F_ad, W, the contact left at its end and the energy of its cycle.
+
+    A pull's cycle runs from the end of the previous pull (first touch for
+    the first) to the end of this one, so over a protocol that ends on a
+    retraction the cycles' energies sum to the dissipated energy.
+    """
+    first = pulls[:, 0].astype(np.int32)
+    last = pulls[:, 1].astype(np.int32)
+    starts = np.concatenate([[0], last[:-1]]).astype(int)
+    cycle = np.array([loop_energy(d[a:b + 1], f[a:b + 1]) for a, b in zip(starts, last)])
+    f_ad, d_ad, work = np.array([peak[1:] for peak in peaks], dtype=float).reshape(-1, 3).T
+    return {
+        "pull_first_step": _var("pull", first, "first step of the retraction branch", "1"),
+        "pull_last_step": _var("pull", last, "last step of the retraction branch", "1"),
+        "pull_adhesive_force": _var("pull", f_ad, "maximum tensile force of the retraction "
+                                    "branch", "N"),
+        "pull_adhesive_force_normalized": _var("pull", f_ad / f_unit, "F_ad / F_K of the "
+                                               "retraction branch", "1"),
+        "pull_displacement_at_adhesive_force": _var("pull", d_ad, "d at the branch's maximum "
+                                                    "tensile force", "m"),
+        "pull_work_of_separation": _var("pull", work, "integral of max(F, 0) dd over the "
+                                        "retraction branch", "J"),
+        "pull_work_of_separation_normalized": _var("pull", work / w_unit, "W / W_K of the "
+                                                   "retraction branch", "1"),
+        "pull_contact_area_at_end": _var("pull", area[last], "real contact area at the "
+                                         "branch's last step", "m2"),
+        "pull_cycle_energy": _var("pull", cycle, "integral of F dd from the end of the "
+                                  "previous retraction branch (first touch) to the end of "
+                                  "this one", "J"),
+    }
 
 
 def _snapshot_names(protocol: Sequence[Waypoint] | None) -> list[str]:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from brushcore.model.params import MIN_KBAR
+from brushcore.numerics.events.protocol import KINDS, Waypoint
 from brushcore.validation import ParameterError
 
 
@@ -154,3 +155,40 @@ def _load_npy(path: Path, name: str) -> np.ndarray:
     if not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
         raise ParameterError(name, str(path), "real numbers", f"its dtype is {arr.dtype}")
     return np.asarray(arr, dtype=float)
+
+
+#: How a protocol is written on a command line or in a config file.
+PROTOCOL_SYNTAX = ("waypoints separated by commas, each 'force:F' (total force F in F_K, "
+                   "tensile positive, so a preload P is force:-P), 'displacement:D' (d in d_K) "
+                   "or 'separation', e.g. 'force:-1, displacement:0.5, force:-1, separation'")
+
+
+def parse_protocol(text: str, name: str = "protocol") -> tuple[Waypoint, ...]:
+    """Waypoints from their text form, normalised values (F_K, d_K) as given.
+
+    ``"force:-1, displacement:0.5, force:-1, separation"`` presses to 1 F_K,
+    retracts to d = 0.5 d_K, presses again and pulls off: two loading cycles.
+    Refused with a `ParameterError` naming ``name`` and the waypoint: an
+    empty list, an unknown kind, a missing or extra value, text that is no
+    finite number.
+    """
+    items = [item.strip() for item in str(text).split(",")]
+    if not any(items):
+        raise ParameterError(name, text, PROTOCOL_SYNTAX, "it holds no waypoint")
+    waypoints = []
+    for k, item in enumerate(items):
+        kind, colon, value = (part.strip() for part in item.partition(":"))
+        where = f"waypoint {k} ({item!r})"
+        if kind not in KINDS:
+            raise ParameterError(name, text, PROTOCOL_SYNTAX,
+                                 f"{where} is of no kind in {KINDS}")
+        if kind == "separation":
+            if colon:
+                raise ParameterError(name, text, PROTOCOL_SYNTAX, f"{where} takes no value")
+            waypoints.append(Waypoint(kind))
+            continue
+        if not _NUMBER.fullmatch(value) or not math.isfinite(float(value)):
+            raise ParameterError(name, text, PROTOCOL_SYNTAX,
+                                 f"{where} needs a finite number after '{kind}:'")
+        waypoints.append(Waypoint(kind, float(value)))
+    return tuple(waypoints)

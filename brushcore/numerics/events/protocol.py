@@ -106,10 +106,10 @@ class ProtocolCurve:
         still attached or never touched)
     attached_at_waypoint : per waypoint, attached elements (operator order)
     attached_at_peak : attached elements at ``peak_step``
-    retraction : per step, whether it belongs to the last retraction branch:
-        the retraction waypoints that follow one another from the last turn
+    pulls : (P, 2) int, the first and last step of every retraction branch in
+        order: the retraction waypoints that follow one another from a turn
         out of an approach (included) to the next turn back into one
-        (included) or the end; F_ad and W are taken over it
+        (included) or the end; F_ad and W are taken over the last
     events, cg_iterations : counts over the run
     """
 
@@ -129,7 +129,16 @@ class ProtocolCurve:
     attached_at_peak: np.ndarray
     events: int
     cg_iterations: int
-    retraction: np.ndarray
+    pulls: np.ndarray
+
+    @property
+    def retraction(self) -> np.ndarray:
+        """Per step, whether it belongs to the last retraction branch (bool)."""
+        on = np.zeros(self.displacement.size, dtype=bool)
+        if len(self.pulls):
+            first, last = self.pulls[-1]
+            on[first:last + 1] = True
+        return on
 
 
 def positive_work(displacement: np.ndarray, force: np.ndarray) -> float:
@@ -247,8 +256,6 @@ def _flat(op: BrushOperator, z0: float, preload: float, sigma_c: float, h: float
     branch[0], direction[0] = -1, START
     if preload > 0:
         branch[1], direction[1] = 0, APPROACH
-    retraction = np.zeros(steps, dtype=bool)
-    retraction[head // 2:] = True  # from the preload point on
     disp = d_rel + z0
     detach_step = curve.detach_step + head
     peak = int(np.argmax(f))
@@ -261,7 +268,8 @@ def _flat(op: BrushOperator, z0: float, preload: float, sigma_c: float, h: float
         pillar_force_at_peak=curve.pillar_force_at_peak, peak_step=peak, let_go=disp[last],
         attached_at_waypoint=(np.ones(total, dtype=bool), np.zeros(total, dtype=bool)),
         attached_at_peak=detach_step > peak, events=curve.events,
-        cg_iterations=curve.cg_iterations, retraction=retraction)
+        cg_iterations=curve.cg_iterations,
+        pulls=np.array([[head // 2, steps - 1]]))  # from the preload point on
 
 
 class _Engine:
@@ -501,18 +509,19 @@ class _Engine:
         self._solve_unit()
         self._record()  # first touch: no force
         waypoint_step, at_waypoint = [], []
-        # The last retraction branch: the retraction waypoints that follow
-        # one another (a retraction split by a waypoint is one branch), from
-        # the last turn out of an approach to the next turn back into one.
-        retraction, moving = [0, 0], START  # empty until a retraction starts
+        # The retraction branches: the retraction waypoints that follow one
+        # another (a retraction split by a waypoint is one branch), from a
+        # turn out of an approach to the next turn back into one, both
+        # turning points included.
+        pulls, moving = [], START
         for k, wp in enumerate(protocol):
             self.leg = k
             s = self._direction(wp)
             if s == RETRACT and moving != RETRACT:
-                retraction = [len(self.rec["d"]) - 1, None]
+                pulls.append([len(self.rec["d"]) - 1, None])
                 self.peak = self._no_peak()
             elif s == APPROACH and moving == RETRACT:
-                retraction[1] = len(self.rec["d"])  # the turning point included
+                pulls[-1][1] = len(self.rec["d"]) - 1
             moving = s or moving
             while s != 0:
                 self.dir = s
@@ -537,8 +546,8 @@ class _Engine:
             waypoint_step.append(len(self.rec["d"]) - 1)
             at_waypoint.append(xp.asarray(op.attached, copy=True))
         r = self.rec
-        on_branch = np.zeros(len(r["d"]), dtype=bool)
-        on_branch[retraction[0]:retraction[1]] = True
+        if pulls and pulls[-1][1] is None:
+            pulls[-1][1] = len(r["d"]) - 1
         _, i_peak, pillar_force, attached_peak = self.peak
         host = be.to_host  # the curve comes back to the host at the end
         return ProtocolCurve(
@@ -550,4 +559,4 @@ class _Engine:
             peak_step=i_peak, let_go=host(self.let_go),
             attached_at_waypoint=tuple(host(a) for a in at_waypoint),
             attached_at_peak=host(attached_peak), events=self.events, cg_iterations=self.cg_iters,
-            retraction=on_branch)
+            pulls=np.array(pulls, dtype=np.int64).reshape(-1, 2))
