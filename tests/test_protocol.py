@@ -367,6 +367,12 @@ def test_cli_runs_a_protocol_and_reports_every_pull(tmp_path, capsys):
     from test_cf import cf_errors
 
     assert cf_errors(out, tmp_path) == []  # the pull dimension and its variables
+    from brushcore.data import figures
+
+    legend = figures.rough_loop(ds).axes[0].get_legend().get_texts()
+    marked = [t.get_text() for t in legend if t.get_text().startswith("retraction ")]
+    assert marked == [rf"retraction {k}: $\bar F_{{ad}}$ = {f:.3g}"
+                      for k, f in enumerate(ds.pull_adhesive_force_normalized.values)]
 
 
 @pytest.mark.parametrize("text,message", [

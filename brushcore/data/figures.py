@@ -588,32 +588,54 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
     return fig
 
 
-def rough_loop(curve: xr.Dataset) -> Figure:
-    """One approach-retract loop with the contact at the preload and at F_ad.
+def _pull_ranges(curve: xr.Dataset) -> list[tuple[int, int]]:
+    """(first, last) step of every retraction branch; files without ``pull_*``
+    (written before 2026-12-06) give their last one, ``retraction``."""
+    if "pull_first_step" in curve:
+        return list(zip(curve["pull_first_step"].values.tolist(),
+                        curve["pull_last_step"].values.tolist()))
+    back = np.flatnonzero(curve["retraction"].values) if "retraction" in curve else []
+    return [(int(back[0]), int(back[-1]))] if len(back) else []
 
-    Left: F / F_K against d / d_K, approach and retraction in two colours
-    (compression is negative), the preload and F_ad marked.  Right: the
-    contact maps the curve file keeps at those two stages (red attached,
-    grey detached pillar elements).
+
+def rough_loop(curve: xr.Dataset) -> Figure:
+    """The approach-retract loop (every cycle of a protocol) with the contact
+    at the first waypoint (the preload) and at F_ad.
+
+    Left: F / F_K against d / d_K, approaches and retractions in two colours
+    (compression is negative), the preload and each retraction's F_ad
+    marked.  Right: the contact maps the curve file keeps at those two
+    stages (red attached, grey detached pillar elements).
     """
     fig = _new_figure(10.5, 3.6)
     ax, *maps = fig.subplots(1, 3, width_ratios=[1.6, 1, 1])
     d = curve["displacement_normalized"].values
     f = curve["force_normalized"].values
-    back = curve["retraction"].values.astype(bool) if "retraction" in curve else np.ones_like(d,
-                                                                                               bool)
-    ax.plot(d[~back], f[~back], color="C0", lw=1, label="approach to the preload")
-    ax.plot(d[back], f[back], color="C3", lw=1, label="retraction")
-    i_max = int(np.nanargmax(np.where(back, f, -np.inf)))
-    ax.plot(d[i_max], f[i_max], "k^", label=rf"$\bar F_{{ad}}$ = {f[i_max]:.3g}")
+    pulls = _pull_ranges(curve) or [(0, d.size - 1)]
+    # Approaches run from the end of one pull (first touch) to the start of the next.
+    starts = [0] + [last for _, last in pulls]
+    ends = [first for first, _ in pulls] + [d.size - 1]
+    for k, (a, b) in enumerate(zip(starts, ends)):
+        if b > a:
+            ax.plot(d[a:b + 1], f[a:b + 1], color="C0", lw=1,
+                    label="approach" if k == 0 else None)
+    for k, (a, b) in enumerate(pulls):
+        ax.plot(d[a:b + 1], f[a:b + 1], color="C3", lw=1, label="retraction" if k == 0 else None)
+        i = a + int(np.argmax(f[a:b + 1]))
+        if f[i] > 0:
+            name = rf"$\bar F_{{ad}}$ = {f[i]:.3g}" if len(pulls) == 1 else \
+                rf"retraction {k}: $\bar F_{{ad}}$ = {f[i]:.3g}"
+            ax.plot(d[i], f[i], "^", color="k" if k == len(pulls) - 1 else "0.5", label=name)
     i_pre = int(np.nanargmin(f))
-    ax.plot(d[i_pre], f[i_pre], "kv", label=rf"preload {-f[i_pre]:.3g} $F_K$")
+    ax.plot(d[i_pre], f[i_pre], "kv", label=rf"largest load {-f[i_pre]:.3g} $F_K$"
+            if len(pulls) > 1 else rf"preload {-f[i_pre]:.3g} $F_K$")
     ax.axhline(0.0, color="0.6", lw=0.5)
     ax.set_xlabel(r"$\bar d = d / d_K$")
     ax.set_ylabel(r"$\bar F = F / F_K$ (tensile > 0)")
     ax.legend(fontsize=7)
     labels = [str(s) for s in curve["snapshot_label"].values] if "snapshot_label" in curve else []
-    for axm, stage in zip(maps, ("preload", "maximum force")):
+    first = labels[0] if labels and labels[0] != "maximum force" else "preload"
+    for axm, stage in zip(maps, (first, "maximum force")):
         axm.set_axis_off()
         if stage not in labels:
             _no_data(axm, f"no map at {stage}")
@@ -621,8 +643,8 @@ def rough_loop(curve: xr.Dataset) -> Figure:
         state = curve["contact_snapshot"].isel(snapshot=labels.index(stage)).values
         axm.imshow(state + 1, cmap=SNAPSHOT_CMAP, vmin=0, vmax=2, origin="lower",
                    interpolation="nearest")
-        axm.set_title("contact at " + ("the preload" if stage == "preload" else r"$F_{ad}$"),
-                      fontsize=9)
+        title = {"preload": "the preload", "maximum force": r"$F_{ad}$"}.get(stage, stage)
+        axm.set_title("contact at " + title, fontsize=9)
     a = curve.attrs
     fig.suptitle(f"{a.get('layout')} brush, N = {a.get('n_pillars')}, "
                  rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, roughness "
