@@ -375,8 +375,6 @@ def _simulate(args: argparse.Namespace) -> int:
         finally:
             on_sigterm(previous)
     except ParameterError as exc:
-        if exc.name == "protocol":  # as typed, not as the waypoints it was read into
-            exc = ParameterError(exc.name, args.protocol, exc.allowed, exc.reason)
         _error(exc.in_terms_of(FLAGS, sep=" "), progress)
         return 2
     except _Missing as exc:

@@ -16,10 +16,11 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import theory
+from brushcore.model.inputs import PROTOCOL_LOADS, load_beyond_range, protocol_text
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap
-from brushcore.model.params import MAX_ROUGH, BrushParams
+from brushcore.model.params import BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
@@ -232,11 +233,9 @@ def check_arguments(params: object, options: object, protocol: object,
                                  f"a list of Waypoint, e.g. {PROTOCOL_EXAMPLE}",
                                  f"element {k} is a {type(leg).__name__}: write "
                                  "Waypoint(kind, value)")
-        if leg.kind == "force" and not abs(leg.value) <= MAX_ROUGH:
-            raise ParameterError("protocol", _shown(protocol),
-                                 f"force waypoints in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}] F_K "
-                                 "(the preload's range)",
-                                 f"waypoint {k} is a force of {leg.value:g} F_K")
+    beyond = load_beyond_range(protocol)
+    if beyond:
+        raise ParameterError("protocol", _shown(protocol), PROTOCOL_LOADS, beyond)
 
 
 def _shown(value: object) -> object:
@@ -524,6 +523,8 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
         "pillar_order": PILLAR_ORDER,
     })
+    if protocol is not None:  # as given (normalised), the form --protocol and the config take
+        attrs["protocol_normalized"] = protocol_text(protocol)
     return xr.Dataset(data, coords={
         **_coords(params, d.size, len(steps), "step of the protocol (one per event or solve)"),
         "pillar": _pillar_coord(n_pillars),
@@ -579,6 +580,7 @@ def _pull_variables(d: np.ndarray, f: np.ndarray, area: np.ndarray, pulls: np.nd
         "pull_cycle_energy": _var("pull", cycle, "integral of F dd from the end of the "
                                   "previous retraction branch (first touch) to the end of "
                                   "this one", "J"),
+        "pull_cycle_energy_normalized": _var("pull", cycle / w_unit, "cycle energy / W_K", "1"),
     }
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brushcore.model.params import MIN_KBAR
+from brushcore.model.params import MAX_ROUGH, MIN_KBAR
 from brushcore.numerics.events.protocol import KINDS, Waypoint
 from brushcore.validation import ParameterError
 
@@ -163,6 +163,24 @@ PROTOCOL_SYNTAX = ("waypoints separated by commas, each 'force:F' (total force F
                    "or 'separation', e.g. 'force:-1, displacement:0.5, force:-1, separation'")
 
 
+#: The loads a protocol may ask for: the preload's range (its CG tolerance shrinks with the load).
+PROTOCOL_LOADS = f"force waypoints in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}] F_K (the preload's range)"
+
+
+def load_beyond_range(protocol) -> str:
+    """Why a normalised protocol asks for too large a load ("" if it does not)."""
+    for k, leg in enumerate(protocol):
+        if leg.kind == "force" and not abs(leg.value) <= MAX_ROUGH:
+            return f"waypoint {k} is a force of {leg.value:g} F_K"
+    return ""
+
+
+def protocol_text(protocol) -> str:
+    """The text form `parse_protocol` reads, of normalised waypoints (exact reprs)."""
+    return ", ".join(w.kind if w.kind == "separation" else f"{w.kind}:{w.value!r}"
+                     for w in protocol)
+
+
 def parse_protocol(text: str, name: str = "protocol") -> tuple[Waypoint, ...]:
     """Waypoints from their text form, normalised values (F_K, d_K) as given.
 
@@ -170,7 +188,7 @@ def parse_protocol(text: str, name: str = "protocol") -> tuple[Waypoint, ...]:
     retracts to d = 0.5 d_K, presses again and pulls off: two loading cycles.
     Refused with a `ParameterError` naming ``name`` and the waypoint: an
     empty list, an unknown kind, a missing or extra value, text that is no
-    finite number.
+    finite number, a load beyond `PROTOCOL_LOADS`.
     """
     items = [item.strip() for item in str(text).split(",")]
     if not any(items):
@@ -191,4 +209,7 @@ def parse_protocol(text: str, name: str = "protocol") -> tuple[Waypoint, ...]:
             raise ParameterError(name, text, PROTOCOL_SYNTAX,
                                  f"{where} needs a finite number after '{kind}:'")
         waypoints.append(Waypoint(kind, float(value)))
+    beyond = load_beyond_range(waypoints)
+    if beyond:
+        raise ParameterError(name, text, PROTOCOL_LOADS, beyond)
     return tuple(waypoints)
