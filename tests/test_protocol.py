@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+import xarray as xr
 from conftest import punch_params
 
 from brushcore import BrushParams, SolverOptions, Waypoint, simulate, theory  # the public API
@@ -935,6 +936,42 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     line = fig.axes[0].lines[0]
     assert len(line.get_xdata()) == sweep.sizes["roughness"]
     assert figures.rough_preload(sweep, "regular", 4).axes
+
+
+def test_a_sweep_of_cycles_keeps_every_pull(tmp_path):
+    """Curves that follow one protocol aggregate with their pulls along
+    ``pull`` (NaN-padded) and the protocol as an attribute; curves of two
+    protocols are refused, naming both files; the sweep is CF-clean."""
+    from brushcore.data.aggregate import AggregationError, build_sweep, write_sweep
+    from brushcore.data.io import write_curve
+
+    cycles = [Waypoint("force", -1.0), Waypoint("displacement", 25.0), Waypoint("force", -1.0),
+              Waypoint("separation")]
+    files = []
+    for kbar in (0.003, math.inf):
+        files.append(tmp_path / f"k{kbar}.nc")
+        write_curve(simulate(replace(ROUGH9, kbar=kbar), protocol=cycles), files[-1])
+    sweep = build_sweep(files, keep_snapshots=[])
+    assert sweep.attrs["protocol_normalized"] == "force:-1.0, displacement:25.0, force:-1.0, " \
+        "separation"
+    for path in files:
+        curve = xr.open_dataset(path)
+        at = sweep.sel(kbar=float(curve.attrs["kbar"])).squeeze()
+        for name in ("pull_adhesive_force_normalized", "pull_work_of_separation_normalized",
+                     "pull_cycle_energy_normalized", "pull_contact_area_at_end"):
+            assert at[name].dims == ("pull",)
+            assert np.array_equal(at[name].values, curve[name].values), name
+        assert float(at.dissipated_energy_normalized) == float(
+            curve.dissipated_energy_normalized)
+    write_sweep(sweep, tmp_path / "sweep.nc")
+    pytest.importorskip("compliance_checker")
+    from test_cf import cf_errors
+
+    assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
+    other = tmp_path / "other.nc"
+    write_curve(simulate(replace(ROUGH9, kbar=0.01), protocol=cycles[:2]), other)
+    with pytest.raises(AggregationError, match=r"disagree on protocol_normalized.*other\.nc"):
+        build_sweep([*files, other])
 
 
 def test_loop_and_load_sharing_figures_show_the_curve():

@@ -11,6 +11,7 @@ import inspect
 import math
 import re
 import shutil
+import hashlib
 import subprocess
 import sys
 from pathlib import Path
@@ -298,6 +299,14 @@ def test_snakefmt_clean() -> None:
         ({"fig5": {"n_pillars": 5}}, "config: fig5.n_pillars = 5 is invalid: allowed a perfect"),
         ({"grid_by_n": [{"n_pillars": 16, "grid": 16}]},
          r"config: grid_by_n.grid = 16 is invalid .*allowed grid_by_n.grid 41, the next "),
+        # cycles: the waypoint and the syntax named, and no preload beside them
+        ({"protocol": "force:-1, push:2"},
+         r"config: protocol = force:-1, push:2 is invalid \(waypoint 1 \('push:2'\) is of "
+         r"no kind in .*allowed waypoints separated by commas"),
+        ({"protocol": "force:-5000, separation"},
+         r"waypoint 0 is a force of -5000 F_K\): allowed force waypoints in \[-1000, 1000\]"),
+        ({"protocol": "force:-1, separation", "preload": [0.0, 1.0]},
+         r"config key 'preload': \[0.0, 1.0\] must be \[0.0\] when 'protocol' is given"),
         ({"colour": "red"}, "config key 'colour' is unknown"),
         ({"grid": 64.5}, "config key 'grid': 64.5 fits none of its forms: 64.5 is not of type "
                          "'integer'; 64.5 is not of type 'array'"),
@@ -474,6 +483,27 @@ def test_rough_keys_plan_suffixed_curves_and_leave_flat_names(repo_copy: Path,
         *(f"results/curves/regular/N16_kbar0.01_seed{s}_grid64_phi0.12_S0.2_P{p}_C0.0.nc"
           for s in (0, 1) for p in ("0.0", "1.0")),
     }, names
+
+
+def test_a_protocol_names_every_curve_by_its_digest(repo_copy: Path, tmp_path: Path) -> None:
+    """`protocol`: every curve, flat ones included, carries the protocol's
+    digest in its name (another protocol, other files), and the job gets
+    the rough curves' time (re-attachment is an approach element by element)."""
+    config = tmp_path / "cycles.yaml"
+    text = "force:-1, displacement:2.5, force:-1, separation"
+    config.write_text(yaml.safe_dump({"regular": [16], "random": [], "kbar": [0.01],
+                                      "fig5": {"n_pillars": 16, "kbar": [0.01]},
+                                      "protocol": text}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config), "--forceall")
+    assert proc.returncode == 0, output(proc)
+    names = set(re.findall(r"results/curves/\S+\.nc", output(proc)))
+    canonical = b"force:-1.0, displacement:2.5, force:-1.0, separation"  # parse_protocol's
+    digest = hashlib.sha256(canonical).hexdigest()[:8]
+    assert names == {
+        f"results/curves/regular/N16_kbar0.01_seed0_grid64_phi0.12_S0.0_P0.0_C0.0_Q{digest}.nc"
+    }, names
+    assert "rough_loop.png" in output(proc)  # the loop of every cycle is drawn
 
 
 def test_rough_curves_get_the_time_their_approach_takes(repo_copy: Path,

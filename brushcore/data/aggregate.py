@@ -71,13 +71,22 @@ ATTRIBUTE_SCALARS = {
     "touching_pillar_pairs": ("1", "pillar pairs whose footprints share an element edge"),
 }
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
-SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols")
+SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols",
+                     "protocol_normalized")
 #: ... and those that may differ (numerics): kept as attributes, distinct values joined by "; ".
 SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "symmetry",
                      "precision", "fft_precision", "fft_library", "fft_library_used",
                      "preconditioner",
                      "early_decisions",
                      "settle_decisions", "allow_coarse")
+#: Per retraction branch of a sweep whose curves follow a given protocol
+#: (attribute ``protocol_normalized``), NaN-padded along ``pull``.
+PULL_VARIABLES = (
+    "pull_adhesive_force_normalized",
+    "pull_work_of_separation_normalized",
+    "pull_cycle_energy_normalized",
+    "pull_contact_area_at_end",
+)
 #: Per-step curves, NaN-padded to the longest curve of the sweep.
 CURVE_VARIABLES = (
     "displacement",
@@ -326,13 +335,17 @@ def build_sweep(
     # for a flat pull-off too, not the other way round.
     first = next((c for _, c in curves.values() if "retraction" in c),
                  next(iter(curves.values()))[1])
-    rough_scalars = ROUGH_SCALARS if ROUGH_DIMS[0] in dims else ()
+    protocol = _common_attr(curves, "protocol_normalized")  # None: approach to each preload
+    rough_scalars = ROUGH_SCALARS if ROUGH_DIMS[0] in dims or protocol else ()
+    pull_names = PULL_VARIABLES if protocol else ()
+    n_pulls = max((curve.sizes.get("pull", 0) for _, curve in curves.values()), default=0)
 
     data: dict[str, xr.DataArray] = {}
     scalars = {name: np.full(shape, np.nan)
                for name in (*SCALAR_VARIABLES, *ATTRIBUTE_SCALARS, *rough_scalars)}
     scalars["n_steps"] = np.full(shape, np.nan)
     lines = {name: np.full((*shape, n_steps), np.nan) for name in CURVE_VARIABLES}
+    pulls = {name: np.full((*shape, n_pulls), np.nan) for name in pull_names}
     for key, (_, curve) in curves.items():
         at = _index(coords, key, dims)
         for name in (*SCALAR_VARIABLES, *rough_scalars):
@@ -344,6 +357,9 @@ def build_sweep(
         for name in CURVE_VARIABLES:
             values = np.asarray(curve[name].values, dtype=np.float64)
             lines[name][at][: values.size] = values
+        for name in pull_names:
+            values = np.asarray(curve[name].values, dtype=np.float64)
+            pulls[name][at][: values.size] = values
 
     for name in SCALAR_VARIABLES:
         data[name] = xr.DataArray(scalars[name], dims=dims, attrs=dict(first[name].attrs))
@@ -362,6 +378,8 @@ def build_sweep(
         data[name] = xr.DataArray(
             lines[name], dims=(*dims, "step"), attrs=dict(first[name].attrs)
         )
+    for name in pull_names:
+        data[name] = xr.DataArray(pulls[name], dims=(*dims, "pull"), attrs=dict(first[name].attrs))
     data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb, dims))
 
     sweep = xr.Dataset(data, coords=_coordinate_arrays(coords, dims))

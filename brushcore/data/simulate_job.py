@@ -24,6 +24,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     from brushcore import BrushParams, SolverOptions, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
+    from brushcore.model.inputs import parse_protocol
     from brushcore.numerics.platform.threads import pin_threads
 
     orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
@@ -49,7 +50,10 @@ def _simulate(smk, clock: CurveClock) -> None:
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
-    curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress)
+    text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
+    protocol = None if text is None else parse_protocol(text)
+    curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
+                     protocol=protocol)
     orphaned()
     write_curve(curve, smk.output[0])
     print(

@@ -9,6 +9,9 @@ import jsonschema
 import yaml
 from snakemake.logging import logger
 
+import hashlib
+
+from brushcore.model.inputs import parse_protocol, protocol_text
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint, hinted_params
 from brushcore.numerics.options import SolverOptions
@@ -262,6 +265,7 @@ def check_cases(config, main=True):
     except ParameterError as exc:
         keys = {k: f"solver.{k}" for k in config["solver"]}
         raise ConfigError(f"config: {exc.in_terms_of(keys, sep=' = ')}") from None
+    config_protocol(config)
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -350,30 +354,62 @@ def kbar_tag(kbar):
     return repr(float(kbar))
 
 
-def rough_tag(roughness, preload, kbar_spread):
-    """File-name suffix of a rough brush; "" for the flat brush (names unchanged)."""
-    values = (float(roughness), float(preload), float(kbar_spread))
-    if values == (0.0, 0.0, 0.0):
+def config_protocol(config):
+    """The config's `protocol` as waypoints (None when not given), refused at
+    plan time, naming the key, when it does not parse or comes with a preload."""
+    text = config.get("protocol")
+    if text is None:
+        return None
+    try:
+        protocol = parse_protocol(text)
+    except ParameterError as exc:
+        raise ConfigError(f"config: {exc.in_terms_of({}, sep=' = ')}") from None
+    if [float(p) for p in config["preload"]] != [0.0]:
+        raise ConfigError(
+            f"config key 'preload': {config['preload']} must be [0.0] when 'protocol' is "
+            "given (its force waypoints are the loads)"
+        )
+    return protocol
+
+
+def protocol_digest(config):
+    """Eight hex digits naming the config's protocol in file names ("" for none)."""
+    protocol = config_protocol(config)
+    if protocol is None:
         return ""
-    return "_S{!r}_P{!r}_C{!r}".format(*values)
+    return hashlib.sha256(protocol_text(protocol).encode()).hexdigest()[:8]
+
+
+def rough_tag(roughness, preload, kbar_spread, protocol=""):
+    """File-name suffix of a rough brush or a protocol (`protocol_digest`); ""
+    for the flat brush pulled off from full contact (names unchanged)."""
+    values = (float(roughness), float(preload), float(kbar_spread))
+    if values == (0.0, 0.0, 0.0) and not protocol:
+        return ""
+    return "_S{!r}_P{!r}_C{!r}".format(*values) + (f"_Q{protocol}" if protocol else "")
 
 
 def parse_rough_tag(tag):
-    """BrushParams fields of a `rough_tag` suffix."""
+    """BrushParams fields of a `rough_tag` suffix (the protocol comes from the config)."""
     if not tag:
         return {}
     s, rest = tag[2:].split("_P")
     p, c = rest.split("_C")
-    return {"roughness": float(s), "preload": float(p), "kbar_spread": float(c)}
+    return {
+        "roughness": float(s),
+        "preload": float(p),
+        "kbar_spread": float(c.split("_Q")[0]),
+    }
 
 
 def _rough_tags(config, kbar):
-    """Suffixes of every (roughness, preload, kbar_spread) asked for; rigid
-    pillars have no stiffness spread."""
+    """Suffixes of every (roughness, preload, kbar_spread) asked for, with the
+    config's protocol; rigid pillars have no stiffness spread."""
     spreads = [0.0] if float(kbar) == float("inf") else config["kbar_spread"]
+    digest = protocol_digest(config)
     return sorted(
         {
-            rough_tag(s, p, c)
+            rough_tag(s, p, c, digest)
             for s in config["roughness"]
             for p in config["preload"]
             for c in spreads
@@ -588,8 +624,8 @@ def curve_kind(layout, shape, rough, solver=None):
     """The `SLOWEST_CURVE_S` kind of a curve from its wildcards (shape and rough
     suffixes) and the config's solver settings (``symmetry: false`` solves a
     regular brush on the whole grid)."""
-    if parse_rough_tag(rough).get("roughness", 0.0) > 0:
-        return "rough"
+    if parse_rough_tag(rough).get("roughness", 0.0) > 0 or "_Q" in rough:
+        return "rough"  # an approach element by element (re-attachment in cycles)
     folded = (solver or {}).get("symmetry", True)
     return (
         "mirror"
@@ -740,7 +776,7 @@ def rough_figure_files(config):
         for key in ("roughness", "preload", "kbar_spread")
         for v in config[key]
     )
-    if flat:
+    if flat and config.get("protocol") is None:
         return []
     names = ROUGH_FIGURES + (CURVE_FIGURES if rough_example_curve(config) else ())
     return [f"results/figures/{name}.{ext}" for name in names for ext in ("png", "pdf")]

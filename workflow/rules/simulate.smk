@@ -14,7 +14,7 @@ rule simulate:
         grid=r"[0-9]+",
         phi=r"[0-9][0-9.e+-]*",
         shape=r"(_square(_-?[0-9][0-9.e+-]*)?|_ellipse[0-9][0-9.e+-]*_-?[0-9][0-9.e+-]*)?",
-        rough=r"(_S[0-9][0-9.e+-]*_P[0-9][0-9.e+-]*_C[0-9][0-9.e+-]*)?",
+        rough=r"(_S[0-9][0-9.e+-]*_P[0-9][0-9.e+-]*_C[0-9][0-9.e+-]*(_Q[0-9a-f]{8})?)?",
     threads: config["threads"]
     resources:
         mem_mb=simulate_mem_mb,
