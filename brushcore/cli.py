@@ -14,6 +14,7 @@ import difflib
 import re
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
@@ -416,6 +417,9 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``brushcore`` command."""
+    # Warnings read as the errors do: one line, no source line of brushcore's.
+    previous = warnings.formatwarning
+    warnings.formatwarning = lambda message, *args, **kwargs: f"brushcore: warning: {message}\n"
     try:
         args = build_parser().parse_args(argv)
         if args.command == "simulate":
@@ -423,6 +427,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:  # during start-up (imports, parsing)
         _error(INTERRUPTED)
         return EXIT_INTERRUPTED
+    finally:
+        warnings.formatwarning = previous
     return 2  # pragma: no cover - argparse enforces the sub-command
 
 

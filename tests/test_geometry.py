@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -219,6 +220,25 @@ def test_image_layout_reads_connected_components_as_pillars(tmp_path):
     # each pillar of the image is one pillar of the map
     pairs = {(int(a), int(b)) for a, b in zip(read[labels >= 0], labels[labels >= 0])}
     assert len(pairs) == 12
+
+
+def test_image_corners_that_join_blobs_are_said(tmp_path):
+    """Two squares meeting at a corner are one pillar in an image (8-connected),
+    and the reader says so; a label map keeps them apart."""
+    import matplotlib.pyplot as plt
+
+    corner = np.full((32, 32), -1)
+    corner[4:8, 4:8], corner[8:12, 8:12], corner[20:24, 20:24] = 0, 1, 2
+    path = tmp_path / "corner.png"
+    plt.imsave(path, (corner >= 0)[::-1], cmap="gray_r", vmin=0, vmax=1)
+    with pytest.warns(UserWarning, match=r"corner\.png: corners join 3 edge-connected blobs "
+                      r"into 2 pillars .*\.npy label map"):
+        assert read_label_map(path, 32).max() + 1 == 2
+    apart = tmp_path / "apart.png"
+    plt.imsave(apart, (corner >= 1)[::-1], cmap="gray_r", vmin=0, vmax=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # separate blobs: nothing to say
+        assert read_label_map(apart, 32).max() + 1 == 2
 
 
 def _save(tmp_path, name, array):

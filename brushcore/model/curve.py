@@ -434,6 +434,10 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         warnings.warn("the protocol never retracts: adhesive_force and work_of_separation "
                       "are NaN (end it with Waypoint('separation') for a pull-off)",
                       stacklevel=3)
+    elif curve.attached_elements[curve.pulls[-1][1]] > 0:
+        warnings.warn("the last retraction ends in contact: adhesive_force is the largest "
+                      "force it reached, not a pull-off (end the protocol with "
+                      "Waypoint('separation') for one)", stacklevel=3)
     dissipated = loop_energy(d, f)
     area = curve.attached_elements * h * h
     n_pillars = op.n_pillars
