@@ -24,7 +24,7 @@ from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTE
                                    on_sigterm, terminate)
 from brushcore.model.inputs import PROTOCOL_SYNTAX
 from brushcore.model.labelmap import count_touching_pairs
-from brushcore.model.params import LAYOUTS, MAX_ASPECT, MIN_KBAR, BrushParams
+from brushcore.model.params import LAYOUTS, MAX_ASPECT, MAX_PHI_ERROR, MIN_KBAR, BrushParams
 from brushcore.numerics.platform.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.threads import MAX_THREADS
@@ -354,7 +354,9 @@ def _simulate(args: argparse.Namespace) -> int:
         area = int((labels >= 0).sum())
         touching = count_touching_pairs(labels)  # random discs on grids coarser than 512
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements,"
-              f" phi realised {area / labels.size:.4g} (requested {params.phi:g}), "
+              f" phi realised {area / labels.size:.4g} (requested {params.phi:g}"
+              + (f", {100 * (area / labels.size / params.phi - 1):+.0f} %: --allow-coarse ran it"
+                 if abs(area / labels.size / params.phi - 1) > MAX_PHI_ERROR else "") + "), "
               f"{int(labels.max()) + 1} pillars"
               + ("" if backend.on_host else f", on {backend.device_name}")
               + (f"; {touching} pillar pairs share an element edge (their gap is under "

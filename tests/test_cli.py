@@ -326,3 +326,21 @@ def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     assert rest.strip().splitlines()[-1] == "brushcore: error: interrupted; nothing written"
     assert "Traceback" not in rest
     assert not list(tmp_path.iterdir())
+
+
+def test_a_coarse_grid_is_suggested_with_the_phi_it_realises(tmp_path, capsys):
+    """Under --allow-coarse the filling factor is not checked, so the grid the
+    hint names need not realise phi within 5 %: the hint and the run say
+    what it comes out as (4 pillars of 4 elements on 8^2: 0.25, not 0.12)."""
+    from brushcore.cli import main
+
+    out = tmp_path / "coarse.nc"
+    base = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.1",
+            "--allow-coarse", "--quiet", "--out", str(out)]
+    assert main([*base, "--grid", "4"]) == 2
+    err = capsys.readouterr().err
+    assert ("--grid 8, the next that resolves the pillars and realises phi as 0.25 "
+            "(--allow-coarse: not checked; 0.12 asked for)") in err, err
+    assert main([*base, "--grid", "8"]) == 0
+    assert "phi realised 0.25 (requested 0.12, +108 %: --allow-coarse ran it)" in \
+        capsys.readouterr().err

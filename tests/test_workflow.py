@@ -366,6 +366,20 @@ def test_an_overflowing_number_on_the_command_line_is_refused(repo_copy: Path) -
     assert "config key 'kbar.0': 1e400 is beyond the largest float" in text, text
 
 
+def test_config_values_on_the_command_line_read_as_in_a_file(repo_copy: Path) -> None:
+    """Snakemake reads `--config` lists through YAML's BaseLoader, as text:
+    `kbar=[0.001]`, `regular=[16]`, `kbar=[.inf]` and `allow_coarse=true` were
+    refused as "not of type 'number'"; they mean what a config file means."""
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     "--config", "kbar=[0.001, .inf]", "regular=[16]", "random=[]",
+                     "allow_coarse=true", "--forceall")
+    text = output(proc)
+    assert proc.returncode == 0, text
+    names = set(re.findall(r"results/curves/\S+\.nc", text))
+    assert {"results/curves/regular/N16_kbar0.001_seed0_grid64_phi0.12.nc",
+            "results/curves/regular/N16_kbarinf_seed0_grid64_phi0.12.nc"} <= names, names
+
+
 def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict | str,
                                 message: str) -> None:
     """`snakemake -n` with `bad` (a mapping, or the file's text) over the test

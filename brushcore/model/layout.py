@@ -318,9 +318,15 @@ def grid_hint(exc: ParameterError, make: Callable[[int], BrushParams], grid: int
         return exc
     coarse = "" if "allow_coarse" not in exc.allowed else ", or allow_coarse to run it anyway"
     which = "every brush that shares it" if others else "the pillars"
+    params = make(found)
+    if params.allow_coarse:  # phi was not checked there: say what it comes out as
+        labels = build_labels(params)
+        phi = f"realises phi as {np.count_nonzero(labels >= 0) / labels.size:.3g} " \
+              f"(allow_coarse: not checked; {params.phi:g} asked for)"
+    else:
+        phi = f"realises phi within {100 * MAX_PHI_ERROR:g} %"
     return ParameterError("grid", exc.value, f"grid {found}, the next that resolves {which} "
-                          f"and realises phi within {100 * MAX_PHI_ERROR:g} %"
-                          + coarse, exc.reason)
+                          f"and {phi}" + coarse, exc.reason)
 
 
 def hinted_params(make: Callable[[int], BrushParams], grid: int,

@@ -27,7 +27,7 @@ def check_config(config, schema_path):
     known key for a typo.  Defaults are filled in afterwards by `validate`.
     """
     schema = _schema(schema_path)
-    overflow = _exponent_numbers(config)
+    overflow = _typed_text(config)
     if overflow:
         raise ConfigError(overflow)
     error = jsonschema.exceptions.best_match(
@@ -82,19 +82,39 @@ def _children(value):
     return []
 
 
-def _exponent_numbers(value, where=""):
-    """Turn "1e-8" into 1e-8 wherever the config holds it (in place), so that
-    `kbar: [1e-6, 1e-3]` means what it says rather than failing as text.
-    Returns the message for the first that overflows a float, or None."""
+#: What `_typed_text` leaves as text.
+_TEXT = object()
+
+
+def _typed(text):
+    """The number, bool or null a config file would read `text` as, else `_TEXT`."""
+    if _EXPONENT_NUMBER.fullmatch(text.strip()):
+        return float(text)
+    try:
+        typed = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return _TEXT
+    return typed if typed is None or isinstance(typed, (bool, int, float)) else _TEXT
+
+
+def _typed_text(value, where=""):
+    """Read text as a config file would, wherever the config holds it (in place):
+    "1e-8" (text to PyYAML, which reads YAML 1.1) becomes 1e-8, so that
+    `kbar: [1e-6, 1e-3]` means what it says, and `--config kbar=[0.001]`,
+    `regular=[64]` or `allow_coarse=true`, which Snakemake reads as text
+    (its --config lists go through YAML's BaseLoader), become the numbers and
+    switches a config file gives.  Returns the message for the first numeral
+    that overflows a float, or None."""
     refused = None
     for key, item in _children(value):
         path = f"{where}.{key}" if where else str(key)
-        if isinstance(item, str) and _EXPONENT_NUMBER.fullmatch(item.strip()):
-            value[key] = float(item)
+        typed = _typed(item) if isinstance(item, str) else _TEXT
+        if typed is not _TEXT:
+            value[key] = typed
             if overflows(item) and refused is None:
                 refused = f"config key '{path}': {item.strip()} {_OVERFLOW}"
         else:
-            refused = refused or _exponent_numbers(item, path)
+            refused = refused or _typed_text(item, path)
     return refused
 
 
@@ -106,7 +126,7 @@ class _StrictLoader(yaml.SafeLoader):
     """PyYAML's safe loader, refusing what it would otherwise take silently:
     a key twice in one mapping (the second wins) and a number too large for
     a float (1.0e+400 reads as inf: rigid pillars for a kbar; 1e400, text to
-    PyYAML, would become inf in `_exponent_numbers` or in a JSON config)."""
+    PyYAML, would become inf in `_typed_text` or in a JSON config)."""
 
     path = ""
 
