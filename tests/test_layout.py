@@ -77,8 +77,11 @@ def test_radius_follows_phi():
 
 
 def test_random_layout_that_cannot_fit_fails_fast():
-    with pytest.raises(ParameterError, match="n_pillars=400 .*fewer pillars, a smaller phi"):
+    with pytest.raises(ParameterError, match="n_pillars=400 .*allowed fewer pillars or a "
+                       "smaller phi$"):  # min_gap is at its least, 1: not a way out
         build_labels(BrushParams("random", 400, 1.0, 256, phi=0.5, seed=0))
+    with pytest.raises(ParameterError, match="fewer pillars, a smaller phi or a smaller min_gap"):
+        build_labels(BrushParams("random", 400, 1.0, 256, phi=0.5, seed=0, min_gap=2.0))
 
 
 def test_count_touching_pairs_counts_pairs_sharing_an_edge() -> None:

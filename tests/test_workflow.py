@@ -322,7 +322,11 @@ def test_snakefmt_clean() -> None:
         # a random layout too dense to pack, found by packing it as its job would
         ({"regular": [], "random": [16], "phi": 0.5},
          r"config: random = 16 is invalid \(random layout: only 14 discs .*allowed fewer "
-         r"pillars, a smaller phi or a smaller min_gap \(CLI only: --min-gap\)"),
+         r"pillars or a smaller phi \(case random"),  # the gap is at its least: no way out
+        # the case in the keys the user wrote, not the file name's suffix
+        ({"regular": [64], "random": [], "grid": 64, "roughness": [0.5],
+          "fig5": {"n_pillars": 64, "kbar": [0.1]}},
+         r"\(case regular N = 64, grid = 64, phi = 0.12, roughness = 0.5\)"),
     ],
 )
 def test_bad_config_stops_before_any_job(repo_copy: Path, tmp_path: Path, bad: dict,

@@ -229,8 +229,15 @@ def generated_centres(params: BrushParams) -> np.ndarray:
         return hexagonal_centres(params.n_pillars, params.side)
     radius = (params.pillar_radius if params.shape == "disc"
               else pillar_shape(params).circumradius(params.pillar_area))
-    return random_centres(params.n_pillars, params.side, radius,
-                          random_gap(params), params.seed)
+    try:
+        return random_centres(params.n_pillars, params.side, radius,
+                              random_gap(params), params.seed)
+    except ParameterError as exc:
+        if params.min_gap > 1.0:
+            raise
+        # the gap is at its least: a smaller one is no way out
+        raise ParameterError(exc.name, exc.value, "fewer pillars or a smaller phi",
+                             exc.reason) from None
 
 
 #: Grids tried above a refused one for the grid a message suggests: the

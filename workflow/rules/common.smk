@@ -335,10 +335,16 @@ def check_cases(config, main=True):
                 "allow_coarse": "allow_coarse: true",
                 "min_gap": "min_gap (CLI only: --min-gap)",
             }
+            rough_keys = [
+                f"{k} = {v!r}" for k, v in parse_rough_tag(rough).items() if v
+            ]
+            case = ", ".join(
+                [f"{layout} N = {n}", f"grid = {grid}", f"phi = {phi}"]
+                + ([f"shape = {shape[1:]}"] if shape else [])
+                + rough_keys
+            )
             raise ConfigError(
-                f"config: {exc.in_terms_of(keys, sep=' = ')} "
-                f"(case {layout} N = {n}, grid = {grid}, phi = {phi}"
-                f"{', shape ' + shape[1:] if shape else ''}{rough})"
+                f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
             ) from None
 
 
