@@ -373,9 +373,10 @@ def test_an_overflowing_number_on_the_command_line_is_refused(repo_copy: Path) -
 def test_config_values_on_the_command_line_read_as_in_a_file(repo_copy: Path) -> None:
     """Snakemake reads `--config` lists through YAML's BaseLoader, as text:
     `kbar=[0.001]`, `regular=[16]`, `kbar=[.inf]` and `allow_coarse=true` were
-    refused as "not of type 'number'"; they mean what a config file means."""
+    refused as "not of type 'number'"; they mean what a config file means (and
+    inf what the CLI's --kbar inf means)."""
     proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
-                     "--config", "kbar=[0.001, .inf]", "regular=[16]", "random=[]",
+                     "--config", "kbar=[0.001, inf]", "regular=[16]", "random=[]",
                      "allow_coarse=true", "--forceall")
     text = output(proc)
     assert proc.returncode == 0, text

@@ -86,9 +86,14 @@ def _children(value):
 _TEXT = object()
 
 
+#: Infinity as the CLI's --kbar and Python spell it; YAML wants .inf.
+_INF = re.compile(r"[-+]?inf(?:inity)?", re.IGNORECASE)
+
+
 def _typed(text):
-    """The number, bool or null a config file would read `text` as, else `_TEXT`."""
-    if _EXPONENT_NUMBER.fullmatch(text.strip()):
+    """The number, bool or null a config file would read `text` as (and inf
+    as the CLI reads it), else `_TEXT`."""
+    if _EXPONENT_NUMBER.fullmatch(text.strip()) or _INF.fullmatch(text.strip()):
         return float(text)
     try:
         typed = yaml.safe_load(text)
