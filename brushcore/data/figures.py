@@ -13,6 +13,7 @@ a panel with nothing to show says so instead of failing.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -514,6 +515,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     kbars = [float(k) for k in sweep.kbar.values]
     colors = {k: f"C{i}" for i, k in enumerate(kbars)}
     s_axis = np.asarray(sweep.roughness.values, dtype=float)
+    protocol = sweep.attrs.get("protocol_normalized")  # its loads stand for the preload
     for ax, preload in zip(axes, preloads):
         for kbar in kbars:
             mean, low, high = _rough_series(sweep, "adhesive_force_normalized", layout,
@@ -528,7 +530,8 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                 soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
                 ax.plot(span, n_pillars**0.25 * np.asarray(soft), "--", lw=1,
                         color=colors[kbar])
-        ax.set_title(f"preload {preload:g} " + r"$F_K$", fontsize=9)
+        ax.set_title(f"preload {preload:g} " + r"$F_K$" if protocol is None else
+                     "last retraction of\n" + textwrap.fill(protocol, 36), fontsize=8)
         ax.set_xlabel(r"roughness $S$ [$d_K$]")
         ax.set_ylabel(FAD_LABEL)
     axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
@@ -545,7 +548,8 @@ def _side_legend(fig: Figure, axes) -> None:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)
     if handles:
-        fig.legend(list(handles.values()), list(handles), loc="outside right upper", fontsize=7)
+        # centred: at the top it ran into the title of a one-panel figure
+        fig.legend(list(handles.values()), list(handles), loc="outside right center", fontsize=7)
 
 
 def _no_false_zoom(ax, span: float = 0.05) -> None:
