@@ -117,6 +117,79 @@ def test_bad_lattice_config_stops_before_any_job(repo_copy: Path,  # noqa: F811
     assert_refused_at_plan_time(repo_copy, tmp_path, bad, message)
 
 
+# -- brushes of one's own: layout_files ---------------------------------------------------
+
+def _own_array(workdir: Path, name: str = "my_array.npy") -> Path:
+    """A label map of one's own in `workdir`/arrays: random 16 of seed 3 on 64^2."""
+    from brushcore import BrushParams
+    from brushcore.model.layout import build_labels
+    from brushcore.model.layout_file import save_label_map
+
+    (workdir / "arrays").mkdir(exist_ok=True)
+    return save_label_map(build_labels(BrushParams("random", 16, 0.01, 64, seed=3)),
+                          workdir / "arrays" / name)
+
+
+def test_layout_files_plan_their_own_n_grid_and_phi(repo_copy: Path,  # noqa: F811
+                                                    tmp_path: Path) -> None:
+    """Each file runs every kbar on its own grid, N and phi, seed 0 (nothing drawn)."""
+    _own_array(repo_copy)
+    names = planned_curves(repo_copy, tmp_path, {
+        "regular": [], "random": [], "kbar": [0.01, math.inf],
+        "layout_files": ["arrays/my_array.npy"], "fig5": {"n_pillars": 16, "kbar": [0.01]}})
+    files = {n for n in names if "/file_" in n}
+    assert files == {f"results/curves/file_my_array/N16_kbar{k}_seed0_grid64_phi0.1201171875.nc"
+                     for k in ("0.01", "inf")}, names
+
+
+@pytest.mark.parametrize(
+    ("files", "message"),
+    [
+        (["arrays/missing.npy"], r"config key 'layout_files\.0': 'arrays/missing\.npy' is "
+                                 r"invalid \(no such file\): allowed an existing"),
+        (["arrays/my array.npy"], r"config key 'layout_files\.0': 'arrays/my array\.npy' is "
+                                  r"invalid: allowed a file whose name"),
+        (["arrays/my_array.npy", "my_array.png"], r"config key 'layout_files\.1': "
+                                                  r"'my_array\.png' is invalid: its name"),
+    ],
+)
+def test_bad_layout_files_stop_before_any_job(repo_copy: Path, tmp_path: Path,  # noqa: F811
+                                              files: list, message: str) -> None:
+    _own_array(repo_copy)
+    assert_refused_at_plan_time(repo_copy, tmp_path, {"layout_files": files}, message)
+
+
+def test_a_brush_of_ones_own_runs_through_the_workflow(tmp_path: Path) -> None:
+    """End to end: the file brush enters sweep.nc as layout file_my_array with the
+    file's N and phi, and its numbers are those of `simulate(file_params(...))`
+    (to round-off) and of the random brush the map was drawn from (within the
+    3e-7 that single- against double-precision transforms leave)."""
+    import shutil
+
+    from brushcore import BrushParams, SolverOptions, file_params, simulate
+    from test_workflow import IGNORE, REPO
+
+    work = tmp_path / "repo"
+    shutil.copytree(REPO, work, ignore=IGNORE)
+    path = _own_array(work)
+    config = tmp_path / "own.yaml"
+    config.write_text(yaml.safe_dump({
+        "regular": [], "random": [], "kbar": [0.01, math.inf], "layout_files": [
+            "arrays/my_array.npy"], "fig5": {"n_pillars": 4, "kbar": [0.01]}}))
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/test.yaml", str(config))
+    assert proc.returncode == 0, output(proc)[-4000:]
+    with xr.open_dataset(work / "results/sweep.nc") as sweep:
+        own = sweep.sel(layout="file_my_array", n_pillars=16).squeeze()
+        assert float(own.phi_actual.sel(kbar=0.01)) == 0.1201171875
+        for kbar in (0.01, math.inf):
+            f_ad = float(own.adhesive_force_normalized.sel(kbar=kbar))
+            direct = simulate(file_params(path, kbar))
+            assert f_ad == pytest.approx(float(direct.adhesive_force_normalized), rel=1e-12)
+            drawn = simulate(BrushParams("random", 16, kbar, 64, seed=3))
+            assert f_ad == pytest.approx(float(drawn.adhesive_force_normalized), rel=1e-5)
+    assert (work / "results/figures/fig6.png").exists()
+
+
 # -- sweep.nc with a shape dimension, and the figures ------------------------------------
 
 #: (layout, kbar, shape) of the tiny sweep; hexagonal squares at kbar 1 are left out.

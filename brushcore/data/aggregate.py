@@ -31,6 +31,7 @@ import xarray as xr
 
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID
+from brushcore.model.layout_file import file_layout
 from brushcore.model.shapes import shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
 from brushcore.validation import brief
@@ -137,9 +138,12 @@ class CaseKey:
 def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
+    layout = str(a["layout"])
+    if layout == "file":  # a brush of one's own, named by its file as the workflow names it
+        layout = file_layout(str(a.get("layout_file", "")))
     shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
                         float(a.get("orientation", 0.0)))  # files without a shape: discs
-    return CaseKey(str(a["layout"]), int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
+    return CaseKey(layout, int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
                    int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS),
                    shape=shape)
 
@@ -325,7 +329,10 @@ def build_sweep(
         Naming the offending file when one cannot be read or cases clash.
     """
     curves = load_curves(paths, expected)
-    phi = _common_attr(curves, "phi")
+    # A file brush has its file's phi (each case's phi_actual); the attribute is
+    # that of the generated brushes, whose phi the figures' theory lines take.
+    generated = {k: pc for k, pc in curves.items() if pc[1].attrs.get("layout") != "file"}
+    phi = _common_attr(generated, "phi") if generated else None
     coords = _case_coords(curves)
     dims = case_dims(curves)
     shape = tuple(len(coords[d]) for d in dims)

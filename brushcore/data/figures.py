@@ -81,7 +81,11 @@ def _no_data(ax, message: str) -> None:
     ax.text(0.5, 0.5, message, ha="center", va="center", transform=ax.transAxes)
 
 
-def _phi(sweep: xr.Dataset) -> float:
+def _phi(sweep: xr.Dataset, layout: str | None = None) -> float:
+    """The filling factor a layout's theory lines take: the sweep's, or for a
+    brush read from a file (layout "file_..."), the file's own."""
+    if layout is not None and layout.startswith("file_") and "phi_actual" in sweep:
+        return float(sweep["phi_actual"].sel(layout=layout).mean(skipna=True))
     return float(sweep.attrs.get("phi", math.nan))
 
 
@@ -269,10 +273,10 @@ def fig6(sweep: xr.Dataset) -> Figure:
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
-    phi = _phi(sweep)
     kbars = np.asarray(sweep.kbar.values, dtype=float)
     x_inf = _rigid_x(kbars)
     for index, (layout, ax) in enumerate(axes.items()):
+        phi = _phi(sweep, layout)
         brushes = _brush_series(sweep, "adhesive_force_normalized", layout)
         for n, series in brushes:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
@@ -381,10 +385,10 @@ def fig8(sweep: xr.Dataset) -> Figure:
     sweep = finest_grid(sweep)
     fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
     colors = _brush_colors(sweep.n_pillars.values)
-    phi = _phi(sweep)
     kbars = np.asarray(sweep.kbar.values, dtype=float)
     x_inf = _rigid_x(kbars)
     for index, (layout, ax) in enumerate(axes.items()):
+        phi = _phi(sweep, layout)
         brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
         for n, series in brushes:
             ax.plot(*_break_before_rigid(x_inf, _kbar_x(series.kbar, x_inf), series), "o-",

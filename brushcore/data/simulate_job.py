@@ -25,6 +25,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.model.inputs import parse_protocol
+    from brushcore.model.layout_file import file_params
     from brushcore.numerics.platform.threads import pin_threads
 
     orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
@@ -37,10 +38,8 @@ def _simulate(smk, clock: CurveClock) -> None:
     remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)
     w = smk.wildcards
-    params = BrushParams(
-        layout=w.layout,
+    fields = dict(
         n_pillars=int(w.n_pillars),
-        kbar=float(w.kbar),
         grid=int(w.grid),
         phi=float(w.phi),
         seed=int(w.seed),
@@ -49,6 +48,10 @@ def _simulate(smk, clock: CurveClock) -> None:
         **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
+    if smk.params.layout_file:  # a brush of one's own: the file's N, grid and phi checked
+        params = file_params(smk.params.layout_file, float(w.kbar), **fields)
+    else:
+        params = BrushParams(layout=w.layout, kbar=float(w.kbar), **fields)
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
     text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
     protocol = None if text is None else parse_protocol(text)

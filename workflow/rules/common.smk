@@ -2,16 +2,17 @@
 
 import difflib
 import functools
+import hashlib
 import math
 import re
+from pathlib import Path
 
 import jsonschema
 import yaml
 from snakemake.logging import logger
 
-import hashlib
-
 from brushcore.model.inputs import parse_protocol, protocol_text
+from brushcore.model.layout_file import file_layout, file_params
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint, hinted_params
 from brushcore.numerics.options import SolverOptions
@@ -261,6 +262,15 @@ def canonical_solver(config, schema_path):
 def _case_params(config, key, kbar, grid):
     """The parameters of a case (layout, n, seed, grid, phi, rough, shape) on ``grid``."""
     layout, n, seed, _, phi, rough, shape = key
+    if layout in file_brushes(config):
+        return file_params(
+            file_brushes(config)[layout][0],
+            kbar,
+            grid=grid,
+            seed=seed,
+            allow_coarse=config["allow_coarse"],
+            **parse_rough_tag(rough),
+        )
     return BrushParams(
         layout,
         n,
@@ -291,6 +301,7 @@ def check_cases(config, main=True):
         keys = {k: f"solver.{k}" for k in config["solver"]}
         raise ConfigError(f"config: {exc.in_terms_of(keys, sep=' = ')}") from None
     config_protocol(config)
+    file_brushes(config)  # every layout file read once, and refused here
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -462,6 +473,47 @@ def parse_shape_tag(tag):
     return parse_shape_label(tag[1:]) if tag else {}
 
 
+#: What a layout file's name (without suffix) may hold: it names curve files.
+_FILE_NAME = re.compile(r"[A-Za-z0-9._-]+")
+
+
+def file_brushes(config):
+    """{layout: (path, N, grid, phi)} of the config's `layout_files`, the
+    layout `file_layout` of the path ("file_" + its name); refused at
+    plan time, naming the key, where a file cannot be read as a layout, its
+    name does not fit a file name, or two files share one."""
+    brushes = {}
+    for i, path in enumerate(config.get("layout_files", [])):
+        key = f"config key 'layout_files.{i}'"
+        stem = Path(path).stem
+        if not _FILE_NAME.fullmatch(stem):
+            raise ConfigError(
+                f"{key}: {path!r} is invalid: allowed a file whose name (without its "
+                "suffix) holds letters, digits, '.', '-' and '_' only"
+            )
+        layout = file_layout(path)
+        if layout in brushes:
+            raise ConfigError(
+                f"{key}: {path!r} is invalid: its name {stem!r} is that of "
+                f"{brushes[layout][0]!r}; allowed one file per name (it names the brush)"
+            )
+        try:
+            brushes[layout] = (path, *_file_geometry(path))
+        except ParameterError as exc:  # the file's own problem, told as the file's
+            reason = f" ({exc.reason})" if exc.reason else ""
+            raise ConfigError(
+                f"{key}: {path!r} is invalid{reason}: allowed {exc.allowed}"
+            ) from None
+    return brushes
+
+
+@functools.lru_cache(maxsize=None)
+def _file_geometry(path):
+    """(N, grid, phi) a layout file holds, read once (its checks come with each case)."""
+    params = file_params(path, 1.0, allow_coarse=True)
+    return params.n_pillars, params.grid, params.phi
+
+
 def sweep_cases(config):
     """Every (layout, n_pillars, kbar, seed, grid, phi, rough, shape) the config asks for, once.
 
@@ -499,11 +551,23 @@ def sweep_cases(config):
                     for shape in shapes:
                         cases.add(("random", n, kbar_tag(kbar), seed, rough, shape))
     ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[5], c[4]))
+    files = set()  # on the file's own grid, with its own N and phi; discs of any shape
+    for layout, (_, n, grid, file_phi) in file_brushes(config).items():
+        for kbar in config["kbar"]:
+            for rough in _rough_tags(config, kbar):
+                fields = parse_rough_tag(rough)
+                drawn = (
+                    fields.get("roughness", 0.0) + fields.get("kbar_spread", 0.0) > 0
+                )
+                for seed in config["seeds"] if drawn else [0]:
+                    files.add(
+                        (layout, n, kbar_tag(kbar), seed, grid, file_phi, rough, "")
+                    )
     return [
         (*case[:4], grid, phi, case[4], case[5])
         for case in ordered
         for grid in case_grids(config, case[1])
-    ]
+    ] + sorted(files, key=lambda c: (c[0], float(c[2]), c[3], c[6]))
 
 
 def grid_list(value):
@@ -555,6 +619,12 @@ def curve_file(layout, n_pillars, kbar, seed, grid, phi, rough, shape=""):
         rough=rough,
     )
     return f"results/curves/{name}.nc"
+
+
+def layout_file(config, layout):
+    """The file a `file_brushes` layout is read from; "" for generated layouts."""
+    brush = file_brushes(config).get(layout)
+    return brush[0] if brush else ""
 
 
 def curve_files(config):

@@ -7,7 +7,7 @@ rule simulate:
     benchmark:
         f"results/benchmarks/simulate/{CURVE_NAME}.tsv"
     wildcard_constraints:
-        layout="regular|hexagonal|random",
+        layout=r"regular|hexagonal|random|file_[A-Za-z0-9._-]+",
         n_pillars=r"[0-9]+",
         kbar=r"[0-9][0-9.e+-]*|inf",
         seed=r"[0-9]+",
@@ -25,6 +25,7 @@ rule simulate:
         solver=config["solver"],
         rough=lambda wildcards: parse_rough_tag(wildcards.rough),
         shape=lambda wildcards: parse_shape_tag(wildcards.shape),
+        layout_file=lambda wildcards: layout_file(config, wildcards.layout),
     # allow_coarse and backend are read from the config by the script, not
     # passed as params: they change no curve (a coarse case runs the same
     # once allowed; a GPU curve is a CPU one within CG's tolerance), so a
