@@ -344,9 +344,6 @@ def _simulate(args: argparse.Namespace) -> int:
                                 settle_decisions=args.settle_decisions,
                                 fft_library=args.fft_library)
         protocol = None if args.protocol is None else parse_protocol(args.protocol)
-        if protocol is not None and params.preload:
-            raise ParameterError("preload", params.preload,
-                                 "0 when a protocol is given (its force waypoints are the loads)")
         if not 1 <= args.threads <= MAX_THREADS:
             raise ParameterError("threads", args.threads, f"an integer in [1, {MAX_THREADS}]")
         check_output_path(args.out)

@@ -121,9 +121,9 @@ def _read_png(path: Path) -> np.ndarray:
     _, pieces = ndimage.label(pillar)  # 4-connected
     if pieces > count:  # said, not silent: a label map keeps such pillars apart
         warnings.warn(f"{path}: corners join {pieces} edge-connected blobs into {count} "
-                      f"pillar{'s' * (count != 1)} (pixels that touch only at a corner are one pillar in an "
-                      "image); give the layout as a .npy label map if they are separate "
-                      "pillars", stacklevel=2)  # one location: said once a run
+                      f"pillar{'s' * (count != 1)} (pixels that touch only at a corner are "
+                      "one pillar in an image); give the layout as a .npy label map if they "
+                      "are separate pillars", stacklevel=2)  # one location: said once a run
     return (blobs - 1).astype(np.int32)
 
 
