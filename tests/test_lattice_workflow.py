@@ -108,7 +108,7 @@ def test_disc_config_makes_no_lattice_figure(repo_copy: Path) -> None:  # noqa: 
          r"config key 'fig5\.layout': 'random' is not one of"),
         # squares of a regular 4 x 4 brush quantise badly on 64^2: the shape is named
         ({"shape": ["square"], "orientation": 30.0, "regular": [16], "random": []},
-         r"phi is realised as .*shape square_30\.0"),
+         r"phi is realised as .*shape = square_30\.0"),
     ],
 )
 def test_bad_lattice_config_stops_before_any_job(repo_copy: Path,  # noqa: F811

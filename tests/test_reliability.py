@@ -583,7 +583,7 @@ def test_simulate_script_killed_by_sigterm_writes_no_curve(tmp_path: Path) -> No
             wildcards=SimpleNamespace(layout="random", n_pillars="1620", kbar="1e-05",
                                       grid="512", phi="0.12", seed="0"),
             config={{"allow_coarse": False, "backend": "cpu"}},
-            params=SimpleNamespace(solver={{}}, rough={{}}, shape={{}}))
+            params=SimpleNamespace(solver={{}}, rough={{}}, shape={{}}, layout_file=""))
         runpy.run_path({str(REPO / "workflow/scripts/simulate.py")!r},
                        init_globals={{"snakemake": smk}})
     """)
