@@ -80,3 +80,9 @@ rule all:
             if wants_convergence(config)
             else []
         ),
+
+
+# Once the executor is known (not while the Snakefile is read): a local run
+# with backend gpu needs CuPy and a card here, a cluster's jobs on their node.
+onstart:
+    check_local_backend(config, workflow.local_exec)

@@ -385,6 +385,28 @@ def test_config_values_on_the_command_line_read_as_in_a_file(repo_copy: Path) ->
             "results/curves/regular/N16_kbarinf_seed0_grid64_phi0.12.nc"} <= names, names
 
 
+def test_a_local_gpu_run_without_a_card_stops_before_any_job(repo_copy: Path) -> None:
+    """`backend: gpu` on a machine without CuPy or a card: a local run stops
+    once the executor is known, naming the key, before its first job (a dry
+    run cannot tell where the jobs will run, and a cluster's jobs check on
+    their node)."""
+    from brushcore import ParameterError
+    from brushcore.numerics.platform.backend import resolve_backend
+
+    try:
+        resolve_backend("gpu")
+        pytest.skip("this machine has CuPy and a card")
+    except ParameterError:
+        pass
+    proc = snakemake(repo_copy, "--cores", "2", "--configfile", "config/test.yaml",
+                     "--config", "backend=gpu", "--forceall")
+    text = output(proc)
+    assert proc.returncode != 0, text
+    assert "config key 'backend': 'gpu' is invalid on this machine (CuPy is not installed" \
+        in text, text
+    assert "rule simulate" not in text and "Finished job" not in text, text
+
+
 def assert_refused_at_plan_time(repo_copy: Path, tmp_path: Path, bad: dict | str,
                                 message: str) -> None:
     """`snakemake -n` with `bad` (a mapping, or the file's text) over the test

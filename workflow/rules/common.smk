@@ -16,6 +16,7 @@ from brushcore.model.layout_file import file_layout, file_params
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint, hinted_params
 from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.model.shapes import parse_shape_label, shape_label
 from brushcore.validation import overflows
 
@@ -664,6 +665,23 @@ def simulate_mem_mb(wildcards):
     grid = int(wildcards.grid)
     blocks = 4000 if grid > 512 else 0
     return int(1000 + 150 * (grid / 512) ** 2 + blocks)
+
+
+def check_local_backend(config, local):
+    """Refuse `backend: gpu` before the first job where the jobs run on this
+    machine (``local``: Snakemake's local executor) and it has no CuPy or no
+    card; jobs sent to a cluster check on their own node, as each job does
+    before any work.  Called from `onstart`, once the executor is known."""
+    if not local or config.get("backend", "cpu") != "gpu":
+        return
+    try:
+        resolve_backend("gpu")
+    except ParameterError as exc:
+        raise ConfigError(
+            f"config key 'backend': 'gpu' is invalid on this machine ({exc.reason}): "
+            "allowed 'cpu' here, or 'gpu' where CuPy and a CUDA device are (a cluster "
+            "executor's jobs check on their node)"
+        ) from None
 
 
 def simulate_gpus(config):
