@@ -24,7 +24,9 @@ from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTE
                                    on_sigterm, terminate)
 from brushcore.model.inputs import PROTOCOL_SYNTAX
 from brushcore.model.labelmap import count_touching_pairs
-from brushcore.model.params import LAYOUTS, MAX_ASPECT, MAX_PHI_ERROR, MIN_KBAR, BrushParams
+from brushcore.model.params import (LAYOUTS, MAX_ASPECT, MAX_GRID, MAX_KBAR_SPREAD, MAX_PHI_ERROR,
+                                    MAX_ROUGH, MAX_SEED, MIN_GRID, MIN_KBAR, RANDOM_GAP_GRID,
+                                    UNIT_RANGE, BrushParams)
 from brushcore.numerics.platform.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.threads import MAX_THREADS
@@ -142,20 +144,25 @@ def build_parser() -> argparse.ArgumentParser:
                      help="number of pillars N (required, except for --layout file: the "
                           "file's)")
     sim.add_argument("--kbar", type=_kbar, required=True,
-                     help="spring stiffness k/(E* L); 'inf' for rigid pillars")
+                     help=f"spring stiffness k/(E* L), in [{MIN_KBAR:g}, inf]; 'inf' for rigid "
+                          "pillars")
     sim.add_argument("--grid", type=int, action=_Given,
-                     help="elements per side n (required, except for --layout file: the "
-                          "file's)")
+                     help=f"elements per side n, in [{MIN_GRID}, {MAX_GRID}] (required, except "
+                          "for --layout file: the file's)")
     sim.add_argument("--phi", type=float, default=0.12, action=_Given,
                      help="filling factor (0, 0.5] (--layout file: the file's)")
-    sim.add_argument("--seed", type=int, default=0, help="seed of the random layout and of drawn heights "
-                     "(--roughness) and stiffnesses (--kbar-spread)")
+    sim.add_argument("--seed", type=int, default=0,
+                     help=f"seed of the random layout and of drawn heights (--roughness) and "
+                          f"stiffnesses (--kbar-spread), in [0, {MAX_SEED}]")
     sim.add_argument("--min-gap", type=float, default=1.0,
-                     help="minimum gap between random pillars [elements of the 512 x 512 "
-                          "grid, L/512, on every grid]")
-    sim.add_argument("--e-star", type=float, default=1.0, help="effective modulus E* [Pa]")
-    sim.add_argument("--dgamma", type=float, default=1.0, help="work of adhesion [J/m^2]")
-    sim.add_argument("--h", type=float, default=1.0, help="element size [m]")
+                     help=f"minimum gap between random pillars [elements of the "
+                          f"{RANDOM_GAP_GRID} x {RANDOM_GAP_GRID} grid, L/{RANDOM_GAP_GRID}, on "
+                          f"every grid], in [1, {RANDOM_GAP_GRID})")
+    units = f", in [{UNIT_RANGE[0]:g}, {UNIT_RANGE[1]:g}]"
+    sim.add_argument("--e-star", type=float, default=1.0, help="effective modulus E* [Pa]" + units)
+    sim.add_argument("--dgamma", type=float, default=1.0,
+                     help="work of adhesion [J/m^2]" + units)
+    sim.add_argument("--h", type=float, default=1.0, help="element size [m]" + units)
     sim.add_argument("--allow-coarse", action="store_true",
                      help="run even if the pillars are under 2 elements in radius or phi "
                           "is realised more than 5 %% off")
@@ -177,15 +184,17 @@ def build_parser() -> argparse.ArgumentParser:
         "one value per pillar in label order (regular: row-major, first axis slowest; the "
         "curve file lists every pillar's centre), text ('#' comments) or .npy.")
     rough.add_argument("--roughness", type=float, default=0.0,
-                       help="standard deviation of Gaussian pillar heights [d_K], drawn "
-                            "from --seed")
+                       help=f"standard deviation of Gaussian pillar heights [d_K], in "
+                            f"[0, {MAX_ROUGH:g}], drawn from --seed")
     rough.add_argument("--preload", type=float, default=0.0,
-                       help="compressive force the approach stops at [F_K]")
+                       help=f"compressive force the approach stops at [F_K], in "
+                            f"[0, {MAX_ROUGH:g}]")
     rough.add_argument("--kbar-spread", type=float, default=0.0,
-                       help="coefficient of variation of a lognormal per-pillar kbar "
-                            "(mean --kbar), drawn from --seed")
+                       help=f"coefficient of variation of a lognormal per-pillar kbar "
+                            f"(mean --kbar), in [0, {MAX_KBAR_SPREAD:g}], drawn from --seed")
     rough.add_argument("--heights", type=_path, default=None, metavar="FILE",
-                       help="pillar heights [d_K], one per pillar")
+                       help=f"pillar heights [d_K] in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}], one per "
+                            "pillar")
     rough.add_argument("--kbar-file", type=_path, default=None, metavar="FILE",
                        help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar")
     rough.add_argument("--gap-map", type=_path, default=None, metavar="FILE",
@@ -194,10 +203,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help="loading-unloading cycles in place of --preload: "
                             + PROTOCOL_SYNTAX + "; the file then holds every retraction's "
                             "F_ad and W (pull_*); F_ad and W of the last")
-    sim.add_argument("--rtol", type=float, default=SolverOptions.rtol, help="CG tolerance")
+    sim.add_argument("--rtol", type=float, default=SolverOptions.rtol,
+                     help=f"CG tolerance, in [{SolverOptions.MIN_RTOL:g}, 1e-3]")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
                      help="approximate: detach (rough brushes: also attach) within this relative "
-                          "window of the next event (0 = exact)")
+                          "window of the next event, in [0, 0.1] (0 = exact)")
     sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
                      help="local: per-pillar cascades where a rigorous bound shows they "
                           "do not change the result; global: re-solve after every round "
@@ -223,7 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="stop CG at the tolerance even where an element lies within its "
                           "error of sigma_c or of the next event's cut")
     sim.add_argument("--threads", type=int, default=1,
-                     help="threads of the FFTs, BLAS and the preconditioners' stacked inverses")
+                     help="threads of the FFTs, BLAS and the preconditioners' stacked "
+                          f"inverses, in [1, {MAX_THREADS}]")
     sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
                           "pip install 'brushcore[gpu]' and a CUDA 12 card; whole grid, "
