@@ -181,9 +181,16 @@ def test_version_and_defaults_in_help():
     text = _cli("simulate", "--help").stdout
     assert "(default: 0.12)" in text and "(default: local)" in text
     # zero defaults are defaults too (0 == False once hid them) ...
-    assert re.search(r"--seed SEED\s+seed of the random layout .*\(--kbar-spread\)\s+"
-                     r"\(default: 0\)", text, flags=re.DOTALL), text
+    assert re.search(r"--seed SEED\s+seed of the random layout .*\(--kbar-spread\), in\s+"
+                     r"\[0,\s+9223372036854775807\]\s+\(default: 0\)", text, flags=re.DOTALL), text
     assert re.search(r"--preload PRELOAD\s+[^-]*\(default: 0\.0\)", text), text
+    # every numeric flag says its range, as the checks have it
+    for flag, interval in (("--kbar KBAR", "[1e-09, inf]"), ("--grid GRID", "[4, 8192]"),
+                           ("--roughness ROUGHNESS", "[0, 1000]"),
+                           ("--threads THREADS", "[1, 256]"), ("--rtol RTOL", "[1e-12, 1e-3]")):
+        entry = re.search(rf"^  {flag}\s+(.*?)(?=\n  -|\Z)", text,
+                          flags=re.DOTALL | re.MULTILINE).group(1)
+        assert interval in " ".join(entry.split()), (flag, entry)
     # ... while an on/off switch has no value to show
     assert "(default: True)" not in text and "(default: False)" not in text
 
