@@ -263,9 +263,10 @@ def canonical_solver(config, schema_path):
 def _case_params(config, key, kbar, grid):
     """The parameters of a case (layout, n, seed, grid, phi, rough, shape) on ``grid``."""
     layout, n, seed, _, phi, rough, shape = key
-    if layout in file_brushes(config):
+    path = layout_file(config, layout)
+    if path:
         return file_params(
-            file_brushes(config)[layout][0],
+            path,
             kbar,
             grid=grid,
             seed=seed,
@@ -515,6 +516,14 @@ def _file_geometry(path):
     return params.n_pillars, params.grid, params.phi
 
 
+def _deterministic_seeds(config, rough):
+    """The seeds a brush of a fixed layout (lattice, file) runs: every seed where
+    heights or stiffnesses are drawn from it (`rough`), else seed 0 only."""
+    fields = parse_rough_tag(rough)
+    drawn = fields.get("roughness", 0.0) + fields.get("kbar_spread", 0.0) > 0
+    return config["seeds"] if drawn else [0]
+
+
 def sweep_cases(config):
     """Every (layout, n_pillars, kbar, seed, grid, phi, rough, shape) the config asks for, once.
 
@@ -530,9 +539,7 @@ def sweep_cases(config):
 
     def lattice(layout, n, kbar, shape):
         for rough in _rough_tags(config, kbar):
-            fields = parse_rough_tag(rough)
-            drawn = fields.get("roughness", 0.0) + fields.get("kbar_spread", 0.0) > 0
-            for seed in (config["seeds"] if drawn else [0]):
+            for seed in _deterministic_seeds(config, rough):
                 cases.add((layout, n, kbar_tag(kbar), seed, rough, shape))
 
     for layout in LATTICES:
@@ -556,11 +563,7 @@ def sweep_cases(config):
     for layout, (_, n, grid, file_phi) in file_brushes(config).items():
         for kbar in config["kbar"]:
             for rough in _rough_tags(config, kbar):
-                fields = parse_rough_tag(rough)
-                drawn = (
-                    fields.get("roughness", 0.0) + fields.get("kbar_spread", 0.0) > 0
-                )
-                for seed in config["seeds"] if drawn else [0]:
+                for seed in _deterministic_seeds(config, rough):
                     files.add(
                         (layout, n, kbar_tag(kbar), seed, grid, file_phi, rough, "")
                     )
