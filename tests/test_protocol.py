@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -428,13 +429,17 @@ def test_retraction_split_by_waypoints_is_one_branch():
         ds = simulate(params, EXACT, protocol=protocol)
         return float(ds.adhesive_force_normalized), float(ds.work_of_separation_normalized), ds
 
-    f, w, _ = pulled(load, Waypoint("separation"))
-    for stop in (Waypoint("displacement", 24.0), Waypoint("displacement", 24.6),
-                 Waypoint("force", 0.2)):
-        f_split, w_split, _ = pulled(load, stop, Waypoint("separation"))
-        # one more recorded point on a straight segment: round-off only
-        assert f_split == pytest.approx(f, rel=1e-12) and w_split == pytest.approx(w, rel=1e-12)
-    f_back, w_back, ds = pulled(load, Waypoint("displacement", 1.5), Waypoint("force", -0.5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # pulled off: nothing to warn of
+        f, w, _ = pulled(load, Waypoint("separation"))
+        for stop in (Waypoint("displacement", 24.0), Waypoint("displacement", 24.6),
+                     Waypoint("force", 0.2)):
+            f_split, w_split, _ = pulled(load, stop, Waypoint("separation"))
+            # one more recorded point on a straight segment: round-off only
+            assert f_split == pytest.approx(f, rel=1e-12) and \
+                w_split == pytest.approx(w, rel=1e-12)
+    with pytest.warns(UserWarning, match="last retraction ends in contact"):
+        f_back, w_back, ds = pulled(load, Waypoint("displacement", 1.5), Waypoint("force", -0.5))
     branch = ds.retraction.values.astype(bool)
     legs = ds.branch.values[branch]
     assert set(legs) == {0, 1} and legs[0] == 0, legs  # the turning point, then leg 1
