@@ -166,7 +166,7 @@ def test_a_brush_of_ones_own_runs_through_the_workflow(tmp_path: Path) -> None:
     3e-7 that single- against double-precision transforms leave)."""
     import shutil
 
-    from brushcore import BrushParams, SolverOptions, file_params, simulate
+    from brushcore import BrushParams, file_params, simulate
     from test_workflow import IGNORE, REPO
 
     work = tmp_path / "repo"
