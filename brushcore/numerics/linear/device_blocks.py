@@ -209,9 +209,7 @@ class DeviceBlocks(BlockInverse):
         if stress is None:
             return None
         if respond:
-            sources = self._neighbour_response(touched, live_before, before)
-            if self._far:
-                self._far_response(sources)
+            self._respond(touched, live_before, before)
         work = self._work
         out = work[attached_pos]
         work[...] = 0.0

@@ -477,12 +477,18 @@ class BlockInverse:
         if w is None:
             return None
         if respond:
-            sources = self._neighbour_response(touched, live_before, before)
-            if self._far:
-                self._far_response(sources)
+            self._respond(touched, live_before, before)
         out = w.take(attached_pos)
         w.fill(0.0)
         return out
+
+    def _respond(self, touched: np.ndarray, live_before: np.ndarray, before: list) -> None:
+        """The answer of the other pillars to a detachment, in the stacked
+        stresses: the near neighbours' first-order responses, then (where on)
+        the far field's warm start of every other pillar."""
+        sources = self._neighbour_response(touched, live_before, before)
+        if self._far:
+            self._far_response(sources)
 
     def _neighbour_response(self, touched: np.ndarray, live_before: np.ndarray,
                             before: list) -> list[tuple]:
