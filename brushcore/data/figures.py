@@ -28,6 +28,7 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
@@ -84,7 +85,7 @@ def _no_data(ax, message: str) -> None:
 def _phi(sweep: xr.Dataset, layout: str | None = None) -> float:
     """The filling factor a layout's theory lines take: the sweep's, or for a
     brush read from a file (layout "file_..."), the file's own."""
-    if layout is not None and layout.startswith("file_") and "phi_actual" in sweep:
+    if layout is not None and layout.startswith(FILE_LAYOUT_PREFIX) and "phi_actual" in sweep:
         return float(sweep["phi_actual"].sel(layout=layout).mean(skipna=True))
     return float(sweep.attrs.get("phi", math.nan))
 

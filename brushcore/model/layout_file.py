@@ -215,10 +215,14 @@ def describe(labels: np.ndarray, h: float = 1.0) -> dict[str, float | int]:
             "equivalent_radius": float(np.sqrt(area / n_pillars / np.pi)) * h}
 
 
+#: What a file brush's layout name starts with (`file_layout`).
+FILE_LAYOUT_PREFIX = "file_"
+
+
 def file_layout(path: str | Path) -> str:
     """A file brush's name in sweep.nc and the workflow's curve names: "file_" +
     the file's name without its suffix ("file_my_array" for arrays/my_array.npy)."""
-    return "file_" + Path(path).stem
+    return FILE_LAYOUT_PREFIX + Path(path).stem
 
 
 def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
