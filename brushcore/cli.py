@@ -46,6 +46,7 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
          "heights": "--heights", "kbar_values": "--kbar-file", "gap_map": "--gap-map",
+         "kbar_factors": "--kbar-factors",
          "backend": "--backend", "protocol": "--protocol"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 
@@ -197,6 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "pillar")
     rough.add_argument("--kbar-file", type=_path, default=None, metavar="FILE",
                        help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar")
+    rough.add_argument("--kbar-factors", type=_path, default=None, metavar="FILE",
+                       help="pillar stiffness relative to --kbar (finite, > 0), one per "
+                            "pillar: pillar p runs kbar * f_p")
     rough.add_argument("--gap-map", type=_path, default=None, metavar="FILE",
                        help="extra gap of every element [d_K], grid x grid (rows y)")
     rough.add_argument("--protocol", default=None, metavar="WAYPOINTS",
@@ -322,7 +326,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.curve import simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
-    from brushcore.model.inputs import parse_protocol, read_gap_map, read_pillar_values
+    from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
     from brushcore.numerics.platform.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
@@ -333,22 +337,7 @@ def _simulate(args: argparse.Namespace) -> int:
                                    preload=args.preload, kbar_spread=args.kbar_spread,
                                    backend=args.backend)
         backend = resolve_backend(base.backend)  # CuPy and a card, before any work
-        arrays = {}
-        if args.heights is not None:
-            arrays["heights"] = read_pillar_values(args.heights, base.n_pillars, "heights")
-        if args.kbar_file is not None:
-            arrays["kbar_values"] = read_pillar_values(args.kbar_file, base.n_pillars,
-                                                       "kbar_values", positive=True)
-        if args.gap_map is not None:
-            arrays["gap_map"] = read_gap_map(args.gap_map, base.grid)
-        try:
-            params = dataclasses.replace(base, **arrays) if arrays else base
-        except ParameterError as exc:  # a value out of range: name the file it came from
-            if exc.name not in arrays:
-                raise
-            source = {"heights": args.heights, "kbar_values": args.kbar_file,
-                      "gap_map": args.gap_map}[exc.name]
-            raise ParameterError(exc.name, str(source), exc.allowed, exc.reason) from None
+        params = with_input_files(base, {name: getattr(args, name) for name in INPUT_FILES})
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,
                                 early_decisions=args.early_decisions,

@@ -190,6 +190,119 @@ def test_a_brush_of_ones_own_runs_through_the_workflow(tmp_path: Path) -> None:
     assert (work / "results/figures/fig6.png").exists()
 
 
+# -- brushes as made: a layout file's heights, stiffness factors and gap map ------------
+
+def _made_inputs(workdir: Path) -> dict:
+    """Heights [d_K] and stiffness factors of the 16 pillars of `_own_array`."""
+    heights = np.linspace(-0.4, 0.4, 16)[np.random.default_rng(7).permutation(16)]
+    np.savetxt(workdir / "arrays" / "heights.txt", heights)
+    np.save(workdir / "arrays" / "factors.npy", np.geomspace(0.5, 2.0, 16))
+    return {"heights": heights, "factors": np.geomspace(0.5, 2.0, 16)}
+
+
+def test_a_brush_as_made_runs_the_cases_that_draw_nothing_it_was_given(
+        repo_copy: Path, tmp_path: Path) -> None:  # noqa: F811
+    """Given heights and factors, the file brush runs roughness 0 and kbar_spread
+    0 only (they are exclusive), at every preload; the plain map runs them all."""
+    _own_array(repo_copy)
+    _own_array(repo_copy, "plain.npy")
+    _made_inputs(repo_copy)
+    names = planned_curves(repo_copy, tmp_path, {
+        "regular": [], "random": [], "kbar": [0.01], "roughness": [0.0, 0.3],
+        "preload": [0.0, 1.0], "kbar_spread": [0.0, 0.2],
+        "layout_files": [{"layout": "arrays/my_array.npy", "heights": "arrays/heights.txt",
+                          "kbar_factors": "arrays/factors.npy"}, "arrays/plain.npy"],
+        "fig5": {"n_pillars": 16, "kbar": [0.01]}})
+    stem = "N16_kbar0.01_seed0_grid64_phi0.1201171875"
+    made = {n for n in names if "/file_my_array/" in n}
+    assert made == {f"results/curves/file_my_array/{stem}{tag}.nc"
+                    for tag in ("", "_S0.0_P1.0_C0.0")}, made
+    plain = {n for n in names if "/file_plain/" in n}
+    assert len(plain) == 2 * 2 * 2 - 1 + 1, plain  # S x P x C, seed 0 flat; seed 0 drawn
+
+
+@pytest.mark.parametrize(
+    ("entry", "extra", "message"),
+    [
+        ({"heights": "arrays/h15.txt"}, {},
+         r"config key 'layout_files\.0\.heights': 'arrays/h15\.txt' is invalid \(it holds 15\): "
+         r"allowed 16 values, one per pillar"),
+        ({"kbar_factors": "arrays/zero.txt"}, {},
+         r"config key 'layout_files\.0\.kbar_factors': 'arrays/zero\.txt' is invalid "
+         r"\(line 16 holds 0\.0\): allowed finite factors > 0"),
+        ({"kbar_factors": "arrays/tiny.txt"}, {"kbar": [1.0e-6, 1.0]},
+         r"'layout_files\.0\.kbar_factors': 'arrays/tiny\.txt' is invalid \(pillar 15: "
+         r"factor 0\.0001 makes it 1e-10\): allowed factors whose products with kbar = 1e-06 "
+         r"lie in \[1e-09, inf\]"),
+        ({"gap_map": "arrays/h15.txt"}, {},
+         r"'layout_files\.0\.gap_map': 'arrays/h15\.txt' is invalid \(line 1 holds 1 numbers\): "
+         r"allowed 64 lines of 64 numbers"),
+        ({"heights": "arrays/h16.txt"}, {"roughness": [0.3]},
+         r"config key 'roughness': \[0\.3\] has no 0\.0, which the brush of "
+         r"'layout_files\.0\.heights' needs"),
+        ({"height": "arrays/h16.txt"}, {},
+         r"config key 'layout_files\.0\.height' is unknown; did you mean 'heights'\?"),
+    ],
+)
+def test_bad_inputs_of_a_brush_as_made_stop_before_any_job(
+        repo_copy: Path, tmp_path: Path, entry: dict, extra: dict,  # noqa: F811
+        message: str) -> None:
+    _own_array(repo_copy)
+    arrays = repo_copy / "arrays"
+    np.savetxt(arrays / "h15.txt", np.zeros(15))
+    np.savetxt(arrays / "h16.txt", np.zeros(16))
+    np.savetxt(arrays / "zero.txt", np.r_[np.ones(15), 0.0])
+    np.savetxt(arrays / "tiny.txt", np.r_[np.ones(15), 1e-4])
+    assert_refused_at_plan_time(repo_copy, tmp_path, {
+        "layout_files": [{"layout": "arrays/my_array.npy", **entry}], **extra}, message)
+
+
+def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
+    """End to end: heights, stiffness factors and a preload of one's own reach
+    sweep.nc (layout file_my_array, `given_inputs`) with the numbers of
+    `simulate` given the same arrays (to round-off), and the rough figures
+    show that brush; editing the heights reruns its curves."""
+    import shutil
+
+    from brushcore import file_params, simulate
+    from test_workflow import IGNORE, REPO
+
+    work = tmp_path / "repo"
+    shutil.copytree(REPO, work, ignore=IGNORE)
+    path = _own_array(work)
+    made = _made_inputs(work)
+    config = tmp_path / "made.yaml"
+    config.write_text(yaml.safe_dump({
+        "regular": [], "random": [], "kbar": [0.01, math.inf], "preload": [1.0],
+        "layout_files": [{"layout": "arrays/my_array.npy", "heights": "arrays/heights.txt",
+                          "kbar_factors": "arrays/factors.npy"}],
+        "fig5": {"n_pillars": 4, "kbar": [0.01]}}))
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/test.yaml", str(config))
+    assert proc.returncode == 0, output(proc)[-4000:]
+    with xr.open_dataset(work / "results/sweep.nc") as sweep:
+        own = sweep.sel(layout="file_my_array", n_pillars=16, preload=1.0).squeeze()
+        for kbar in (0.01, math.inf):
+            case = own.sel(kbar=kbar)
+            given = "heights kbar_values" if kbar < math.inf else "heights"
+            assert str(case.given_inputs.values) == given
+            kbar_values = None if kbar == math.inf else kbar * made["factors"]
+            direct = simulate(file_params(path, kbar, heights=made["heights"],
+                                          kbar_values=kbar_values, preload=1.0))
+            for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+                assert float(case[name]) == pytest.approx(float(direct[name]), rel=1e-12)
+        # the stiffness factors matter: the brush differs from its uniform one
+        uniform = simulate(file_params(path, 0.01, heights=made["heights"], preload=1.0))
+        assert abs(float(own.adhesive_force_normalized.sel(kbar=0.01))
+                   / float(uniform.adhesive_force_normalized) - 1) > 1e-3
+    for name in ("rough_preload", "rough_loop", "fig6"):
+        assert (work / f"results/figures/{name}.png").exists(), name
+    np.savetxt(work / "arrays" / "heights.txt", made["heights"] * 0.5)
+    proc = snakemake(work, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config))
+    assert proc.returncode == 0, output(proc)
+    assert len(re.findall(r"results/curves/file_my_array/[^\s,]+\.nc", output(proc))) >= 2
+
+
 # -- sweep.nc with a shape dimension, and the figures ------------------------------------
 
 #: (layout, kbar, shape) of the tiny sweep; hexagonal squares at kbar 1 are left out.

@@ -819,6 +819,12 @@ def test_spread_draws_are_reproducible_and_have_the_asked_moments():
     ("0.1\n" * 15 + "0\n", "--kbar-file", "line 16 holds 0.0"),
     ("0.1\n" * 15 + "1e-11\n", "--kbar-file", "line 16 holds 1e-11"),  # under MIN_KBAR
     ("0.1\n" * 3 + "abc\n", "--kbar-file", "line 4: 'abc' is not a number"),
+    ("1\n" * 15 + "0\n", "--kbar-factors", "(line 16 holds 0.0): allowed finite factors > 0"),
+    ("1\n" * 15 + "inf\n", "--kbar-factors", "line 16 holds inf"),
+    # 0.1 x 1e-9 falls under MIN_KBAR: the product is refused, named by the factors' file
+    ("1\n" * 15 + "1e-9\n", "--kbar-factors", "(pillar 15: factor 1e-09 makes it 1e-10): "
+                                              "allowed factors whose products with --kbar = 0.1 "
+                                              "lie in [1e-09, inf]"),
     # a value out of range, caught by BrushParams: named by its file too
     ("0.1\n" * 15 + "1e4\n", "--heights", "(pillar 15 is 10000.0): allowed one value per"),
 ])
@@ -833,6 +839,32 @@ def test_cli_refuses_bad_files_before_any_work(tmp_path, capsys, content, flag, 
     err = capsys.readouterr().err
     assert rc == 2 and flag in err and str(bad) in err and message in err, err
     assert not out.exists() and list(tmp_path.iterdir()) == [bad]
+
+
+def test_stiffness_factors_scale_kbar_and_leave_rigid_brushes_rigid(tmp_path, capsys):
+    """--kbar-factors f is --kbar-file kbar * f, bit for bit in the curve; at
+    kbar = inf the brush stays rigid (the factors are read, and ignored); with
+    --kbar-file or --kbar-spread beside it the run is refused."""
+    from brushcore.cli import main
+    from brushcore.model.inputs import with_input_files
+
+    factors = np.geomspace(0.25, 4.0, 16)
+    np.savetxt(tmp_path / "f.txt", factors)
+    np.save(tmp_path / "k.npy", 0.02 * factors)
+    base = BrushParams("regular", 16, 0.02, 64, preload=1.0)
+    scaled = with_input_files(base, {"kbar_factors": tmp_path / "f.txt"})
+    given = with_input_files(base, {"kbar_file": tmp_path / "k.npy"})
+    assert np.array_equal(scaled.kbar_values, given.kbar_values)
+    assert scaled.given_inputs == "kbar_values" and scaled.kbar == 0.02
+    rigid = with_input_files(replace(base, kbar=math.inf), {"kbar_factors": tmp_path / "f.txt"})
+    assert rigid.kbar_values is None and rigid == replace(base, kbar=math.inf)
+    args = ["simulate", "--layout", "regular", "--pillars", "16", "--kbar", "0.02", "--grid",
+            "64", "--quiet", "--kbar-factors", str(tmp_path / "f.txt")]
+    for extra, flag in ((["--kbar-file", str(tmp_path / "k.npy")], "--kbar-factors"),
+                        (["--kbar-spread", "0.3"], "--kbar-spread")):
+        assert main([*args, *extra, "--out", str(tmp_path / "no.nc")]) == 2
+        assert flag in capsys.readouterr().err
+    assert not (tmp_path / "no.nc").exists()
 
 
 def test_value_files_are_read_as_data(tmp_path):

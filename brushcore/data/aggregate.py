@@ -403,7 +403,25 @@ def build_sweep(
         if values:
             sweep.attrs[name] = (next(iter(values.values())) if len(values) == 1
                                  else "; ".join(sorted(values)))
-    return sweep.assign(_varying_settings(curves, coords, dims))
+    return sweep.assign(_varying_settings(curves, coords, dims),
+                        **_given_inputs(curves, coords, dims))
+
+
+def _given_inputs(curves: dict, coords: dict[str, np.ndarray],
+                  dims: Sequence[str]) -> dict[str, xr.DataArray]:
+    """``given_inputs`` per case where some curve's brush was given per-pillar
+    or per-element arrays (`BrushParams.given_inputs`): its roughness and
+    kbar_spread coordinates are 0 (nothing drawn), yet it is not flat.
+    Nothing where no curve was given any."""
+    if not any(c.attrs.get("given_inputs") for _, c in curves.values()):
+        return {}
+    values = np.full(tuple(len(coords[d]) for d in dims), "", dtype=object)
+    for key, (_, curve) in curves.items():
+        values[_index(coords, key, dims)] = str(curve.attrs.get("given_inputs", ""))
+    return {"given_inputs": xr.DataArray(
+        values.astype(str), dims=dims,
+        attrs={"long_name": "arrays the brush was given (heights, kbar_values, gap_map; "
+                            "space-separated, '' for none)"})}
 
 
 def _varying_settings(curves: dict, coords: dict[str, np.ndarray],

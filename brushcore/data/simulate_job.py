@@ -24,7 +24,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     from brushcore import BrushParams, SolverOptions, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
-    from brushcore.model.inputs import parse_protocol
+    from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
     from brushcore.model.layout_file import file_params
     from brushcore.numerics.platform.threads import pin_threads
 
@@ -50,6 +50,9 @@ def _simulate(smk, clock: CurveClock) -> None:
     )
     if smk.params.layout_file:  # a brush of one's own: the file's N, grid and phi checked
         params = file_params(smk.params.layout_file, float(w.kbar), **fields)
+        # its heights, stiffness factors and gap map, as the rule's named inputs
+        params = with_input_files(params, {name: path for name, path in smk.input.items()
+                                           if name in INPUT_FILES})
     else:
         params = BrushParams(layout=w.layout, kbar=float(w.kbar), **fields)
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)

@@ -150,6 +150,7 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
     backend = resolve_backend(params.backend)
     return {
         **params.as_attrs(),
+        **({"given_inputs": params.given_inputs} if params.given_inputs else {}),
         # netCDF has no boolean attributes
         **{k: int(v) if isinstance(v, bool) else v for k, v in asdict(options).items()},
         "symmetry_fold": symmetry_fold,

@@ -9,13 +9,15 @@ the line (or the entry of a ``.npy`` array), before any computation.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from brushcore.model.params import MAX_ROUGH, MIN_KBAR
+from brushcore.model.params import MAX_ROUGH, MIN_KBAR, BrushParams
 from brushcore.numerics.events.protocol import KINDS, Waypoint
 from brushcore.validation import ParameterError
 
@@ -62,19 +64,26 @@ def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
     return rows, hint
 
 
-def _check_values(path: Path, name: str, where: str, values, positive: bool) -> None:
-    """Refuse NaN and inf, and for stiffness anything below `MIN_KBAR` (inf: rigid)."""
-    stiffness = f"stiffness values in [{MIN_KBAR:g}, inf]"
+#: What each kind of per-pillar value may be (`read_pillar_values`'s ``kind``).
+VALUE_RANGES = {"finite": "finite numbers",
+                "stiffness": f"stiffness values in [{MIN_KBAR:g}, inf]",
+                "factor": "finite factors > 0"}
+
+
+def _check_values(path: Path, name: str, where: str, values, kind: str) -> None:
+    """Refuse NaN and inf (stiffness: inf is rigid), stiffness below
+    `MIN_KBAR` and factors <= 0."""
+    allowed = VALUE_RANGES[kind]
     for value in values:
-        if math.isnan(value) or (math.isinf(value) and not (positive and value > 0)):
-            raise ParameterError(name, str(path), stiffness if positive else "finite numbers",
-                                 f"{where} holds {value!r}")
-        if positive and value < MIN_KBAR:
-            raise ParameterError(name, str(path), stiffness, f"{where} holds {value!r}")
+        rigid = kind == "stiffness" and value == math.inf
+        if math.isnan(value) or (math.isinf(value) and not rigid) \
+                or (kind == "stiffness" and value < MIN_KBAR) \
+                or (kind == "factor" and value <= 0):
+            raise ParameterError(name, str(path), allowed, f"{where} holds {value!r}")
 
 
 def read_pillar_values(path: str | Path, n_pillars: int, name: str,
-                       positive: bool = False) -> np.ndarray:
+                       kind: str = "finite") -> np.ndarray:
     """One value per pillar (label order) from a text or .npy file.
 
     Parameters
@@ -82,7 +91,8 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
     path : the file
     n_pillars : the count expected
     name : the parameter it sets (for messages: "heights", "kbar_values")
-    positive : values must lie in [MIN_KBAR, inf] (stiffness); otherwise finite
+    kind : what the values may be (`VALUE_RANGES`): "finite", "stiffness"
+        ([MIN_KBAR, inf]) or "factor" (finite, > 0)
     """
     path = Path(path)
     if _is_npy(path):
@@ -91,12 +101,12 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
             raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
                                  f"it holds an array of shape {arr.shape}")
         for i, value in enumerate(arr):
-            _check_values(path, name, f"entry {i}", [float(value)], positive)
+            _check_values(path, name, f"entry {i}", [float(value)], kind)
         return arr.astype(float)
     rows, comma_hint = _rows(path, name)
     values, lines = [], []
     for number, row in rows:
-        _check_values(path, name, f"line {number}", row, positive)
+        _check_values(path, name, f"line {number}", row, kind)
         values.extend(row)
         lines.extend([number] * len(row))
     if len(values) != n_pillars:
@@ -127,11 +137,84 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
             raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
                                  f"line {number} holds {len(row)} numbers{comma_hint}")
         for column, value in enumerate(row, start=1):
-            _check_values(path, name, f"line {number}, column {column},", [value], False)
+            _check_values(path, name, f"line {number}, column {column},", [value],
+                          "finite")
     if len(rows) != grid:
         raise ParameterError(name, str(path), f"{grid} lines of {grid} numbers",
                              f"it holds {len(rows)} lines of numbers")
     return np.array([row for _, row in rows])
+
+
+#: Per-pillar and per-element input files, by the name a caller gives them
+#: (the CLI's flags, the workflow's `layout_files` keys), and the
+#: `BrushParams` field each sets; a refusal is named by that field, but for
+#: factors, which are not the field's values.
+INPUT_FILES = {"heights": "heights", "kbar_file": "kbar_values",
+               "kbar_factors": "kbar_values", "gap_map": "gap_map"}
+
+
+def with_input_files(base: BrushParams,
+                     files: Mapping[str, str | Path | None]) -> BrushParams:
+    """``base`` with the arrays that per-pillar and per-element files hold.
+
+    Parameters
+    ----------
+    base : the brush without them; its N and grid are what the files must fit
+    files : path by name (`INPUT_FILES`; None or absent: not given):
+
+        heights : pillar heights [d_K], one per pillar (label order)
+        kbar_file : each pillar's kbar, in [MIN_KBAR, inf]
+        kbar_factors : each pillar's stiffness relative to ``base.kbar``
+            (finite, > 0): pillar p runs kbar * f_p, so that a sweep over kbar
+            keeps the brush's proportions; rigid brushes (kbar = inf) stay rigid
+        gap_map : extra gap of every element [d_K], grid x grid (rows y)
+
+    Raises
+    ------
+    ParameterError
+        Named as `INPUT_FILES` names the file, with its path as the value,
+        where a file does not fit or a value it gives falls out of range.
+    """
+    given = {name: path for name, path in files.items() if path is not None}
+    unknown = sorted(set(given) - set(INPUT_FILES))
+    if unknown:
+        raise ValueError(f"unknown input files {unknown}; known: {sorted(INPUT_FILES)}")
+    if "kbar_file" in given and "kbar_factors" in given:
+        raise ParameterError("kbar_factors", str(given["kbar_factors"]),
+                             "no kbar file beside it (they are exclusive)")
+    n = base.n_pillars
+    arrays = {}
+    if "heights" in given:
+        arrays["heights"] = read_pillar_values(given["heights"], n, "heights")
+    if "kbar_file" in given:
+        arrays["kbar_values"] = read_pillar_values(given["kbar_file"], n, "kbar_values",
+                                                   "stiffness")
+    if "kbar_factors" in given:
+        factors = read_pillar_values(given["kbar_factors"], n, "kbar_factors", "factor")
+        if math.isfinite(base.kbar):
+            arrays["kbar_values"] = base.kbar * factors
+            low = np.flatnonzero(arrays["kbar_values"] < MIN_KBAR)
+            if low.size:
+                i = int(low[0])
+                raise ParameterError(
+                    "kbar_factors", str(given["kbar_factors"]),
+                    f"factors whose products with kbar = {base.kbar:g} lie in "
+                    f"[{MIN_KBAR:g}, inf]",
+                    f"pillar {i}: factor {factors[i]:g} makes it {arrays['kbar_values'][i]:.3g}")
+    if "gap_map" in given:
+        arrays["gap_map"] = read_gap_map(given["gap_map"], base.grid)
+    source = {INPUT_FILES[name]: (name, path) for name, path in given.items()}
+    try:
+        return dataclasses.replace(base, **arrays) if arrays else base
+    except ParameterError as exc:  # a value out of range: name the file it came from
+        if exc.name == "kbar_spread" and "kbar_factors" in given:
+            raise ParameterError(exc.name, exc.value, "0 when kbar_factors are given (they "
+                                 "are exclusive)") from None
+        if exc.name not in source:
+            raise
+        name, path = source[exc.name]
+        raise ParameterError(exc.name if name != "kbar_factors" else name, str(path),
+                             exc.allowed, exc.reason) from None
 
 
 def npy_problem(exc: Exception) -> str:

@@ -395,6 +395,13 @@ class BrushParams:
         return self.side * math.sqrt(self.phi / (math.pi * self.n_pillars))
 
     @property
+    def given_inputs(self) -> str:
+        """The arrays this brush was given (`ARRAY_FIELDS`, space-separated;
+        "" for none): a curve's attribute of that name, which `sweep.nc`
+        keeps per case, so that a brush of given heights is not read as flat."""
+        return " ".join(name for name in ARRAY_FIELDS if getattr(self, name) is not None)
+
+    @property
     def pillar_radius_elements(self) -> float:
         """Pillar radius in elements."""
         return self.pillar_radius / self.h

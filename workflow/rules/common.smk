@@ -6,12 +6,18 @@ import hashlib
 import math
 import re
 from pathlib import Path
+from typing import NamedTuple
 
 import jsonschema
 import yaml
 from snakemake.logging import logger
 
-from brushcore.model.inputs import parse_protocol, protocol_text
+from brushcore.model.inputs import (
+    INPUT_FILES,
+    parse_protocol,
+    protocol_text,
+    with_input_files,
+)
 from brushcore.model.layout_file import file_layout, file_params
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint, hinted_params
@@ -263,16 +269,17 @@ def canonical_solver(config, schema_path):
 def _case_params(config, key, kbar, grid):
     """The parameters of a case (layout, n, seed, grid, phi, rough, shape) on ``grid``."""
     layout, n, seed, _, phi, rough, shape = key
-    path = layout_file(config, layout)
-    if path:
-        return file_params(
-            path,
+    brush = file_brushes(config).get(layout)
+    if brush:
+        params = file_params(
+            brush.path,
             kbar,
             grid=grid,
             seed=seed,
             allow_coarse=config["allow_coarse"],
             **parse_rough_tag(rough),
         )
+        return with_input_files(params, brush.inputs)
     return BrushParams(
         layout,
         n,
@@ -479,14 +486,45 @@ def parse_shape_tag(tag):
 _FILE_NAME = re.compile(r"[A-Za-z0-9._-]+")
 
 
+class FileBrush(NamedTuple):
+    """A `layout_files` entry: its map, what the map holds, the brush as made."""
+
+    path: str  # the label map or image
+    n_pillars: int
+    grid: int
+    phi: float  # realised by the map
+    # per-pillar and per-element files by key (heights, kbar_factors, gap_map)
+    inputs: dict
+
+
+def _entry_files(entry):
+    """(map path, {input key: path}) of a `layout_files` entry (text or mapping)."""
+    if isinstance(entry, str):
+        return entry, {}
+    return entry["layout"], {k: v for k, v in entry.items() if k != "layout"}
+
+
+def _refused_file(key, path, exc):
+    """A ConfigError naming the key for a file's own problem, told as the file's."""
+    reason = f" ({exc.reason})" if exc.reason else ""
+    return ConfigError(f"{key}: {path!r} is invalid{reason}: allowed {exc.allowed}")
+
+
 def file_brushes(config):
-    """{layout: (path, N, grid, phi)} of the config's `layout_files`, the
-    layout `file_layout` of the path ("file_" + its name); refused at
-    plan time, naming the key, where a file cannot be read as a layout, its
-    name does not fit a file name, or two files share one."""
+    """{layout: `FileBrush`} of the config's `layout_files`, the layout
+    `file_layout` of the map's path ("file_" + its name); refused at plan
+    time, naming the key, where a map cannot be read as a layout, its name
+    does not fit a file name, two maps share one, or a per-pillar or
+    per-element file does not fit the map (count, shape, range: checked at
+    the sweep's smallest kbar, where factors matter most)."""
     brushes = {}
-    for i, path in enumerate(config.get("layout_files", [])):
-        key = f"config key 'layout_files.{i}'"
+    finite = [float(k) for k in config["kbar"] if math.isfinite(float(k))]
+    kbar = min(finite) if finite else math.inf
+    for i, entry in enumerate(config.get("layout_files", [])):
+        path, inputs = _entry_files(entry)
+        key = f"config key 'layout_files.{i}" + (
+            "'" if isinstance(entry, str) else ".layout'"
+        )
         stem = Path(path).stem
         if not _FILE_NAME.fullmatch(stem):
             raise ConfigError(
@@ -497,16 +535,35 @@ def file_brushes(config):
         if layout in brushes:
             raise ConfigError(
                 f"{key}: {path!r} is invalid: its name {stem!r} is that of "
-                f"{brushes[layout][0]!r}; allowed one file per name (it names the brush)"
+                f"{brushes[layout].path!r}; allowed one file per name (it names the brush)"
             )
         try:
-            brushes[layout] = (path, *_file_geometry(path))
-        except ParameterError as exc:  # the file's own problem, told as the file's
-            reason = f" ({exc.reason})" if exc.reason else ""
-            raise ConfigError(
-                f"{key}: {path!r} is invalid{reason}: allowed {exc.allowed}"
+            geometry = _file_geometry(path)
+        except ParameterError as exc:
+            raise _refused_file(key, path, exc) from None
+        try:
+            _check_inputs(path, tuple(sorted(inputs.items())), kbar)
+        except ParameterError as exc:
+            name = next(k for k in inputs if exc.name in (k, INPUT_FILES[k]))
+            raise _refused_file(
+                f"config key 'layout_files.{i}.{name}'", inputs[name], exc
             ) from None
+        for name, drawn in _REPLACES.items():
+            if name in inputs and 0.0 not in [float(v) for v in config[drawn]]:
+                raise ConfigError(
+                    f"config key '{drawn}': {config[drawn]} has no 0.0, which the "
+                    f"brush of 'layout_files.{i}.{name}' needs (its {name} are given, "
+                    f"so it draws no {drawn}); allowed a list holding 0.0"
+                )
+        brushes[layout] = FileBrush(path, *geometry, inputs)
     return brushes
+
+
+@functools.lru_cache(maxsize=None)
+def _check_inputs(path, inputs, kbar):
+    """Read a file brush's per-pillar and per-element files ((key, path)
+    pairs) at ``kbar`` once; a `ParameterError` where one does not fit."""
+    with_input_files(file_params(path, kbar, allow_coarse=True), dict(inputs))
 
 
 @functools.lru_cache(maxsize=None)
@@ -514,6 +571,22 @@ def _file_geometry(path):
     """(N, grid, phi) a layout file holds, read once (its checks come with each case)."""
     params = file_params(path, 1.0, allow_coarse=True)
     return params.n_pillars, params.grid, params.phi
+
+
+#: The drawn quantity that a given per-pillar file replaces (exclusive with it).
+_REPLACES = {"heights": "roughness", "kbar_factors": "kbar_spread"}
+
+
+def _file_rough_tags(config, kbar, brush):
+    """`_rough_tags` of a file brush: where its heights or stiffness factors
+    are given, only the cases that draw none of them (roughness 0,
+    kbar_spread 0; `file_brushes` made sure the config lists them)."""
+    drawn = [d for name, d in _REPLACES.items() if name in brush.inputs]
+    return [
+        t
+        for t in _rough_tags(config, kbar)
+        if all(parse_rough_tag(t).get(d, 0.0) == 0.0 for d in drawn)
+    ]
 
 
 def _deterministic_seeds(config, rough):
@@ -560,12 +633,21 @@ def sweep_cases(config):
                         cases.add(("random", n, kbar_tag(kbar), seed, rough, shape))
     ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[5], c[4]))
     files = set()  # on the file's own grid, with its own N and phi; discs of any shape
-    for layout, (_, n, grid, file_phi) in file_brushes(config).items():
+    for layout, brush in file_brushes(config).items():
         for kbar in config["kbar"]:
-            for rough in _rough_tags(config, kbar):
+            for rough in _file_rough_tags(config, kbar, brush):
                 for seed in _deterministic_seeds(config, rough):
                     files.add(
-                        (layout, n, kbar_tag(kbar), seed, grid, file_phi, rough, "")
+                        (
+                            layout,
+                            brush.n_pillars,
+                            kbar_tag(kbar),
+                            seed,
+                            brush.grid,
+                            brush.phi,
+                            rough,
+                            "",
+                        )
                     )
     return [
         (*case[:4], grid, phi, case[4], case[5])
@@ -628,7 +710,19 @@ def curve_file(layout, n_pillars, kbar, seed, grid, phi, rough, shape=""):
 def layout_file(config, layout):
     """The file a `file_brushes` layout is read from; "" for generated layouts."""
     brush = file_brushes(config).get(layout)
-    return brush[0] if brush else ""
+    return brush.path if brush else ""
+
+
+def simulate_inputs(config):
+    """The rule's input function: a file brush's map and its per-pillar and
+    per-element files by name (`layout`, `heights`, ...), so that editing one
+    reruns its curves; nothing for generated layouts."""
+
+    def inputs(wildcards):
+        brush = file_brushes(config).get(wildcards.layout)
+        return {"layout": brush.path, **brush.inputs} if brush else {}
+
+    return inputs
 
 
 def curve_files(config):
@@ -849,10 +943,13 @@ ROUGH_FIGURES = ("rough_roughness", "rough_preload")
 
 def rough_brush(config):
     """(layout, N) the rough figures show: the first regular brush, else the first
-    hexagonal, else the first random."""
+    hexagonal, else the first random, else the first brush of `layout_files`
+    (a brush as made: its heights given, pressed to each preload)."""
     for layout in (*LATTICES, "random"):
         if config[layout]:
             return layout, int(config[layout][0])
+    for layout, brush in file_brushes(config).items():
+        return layout, brush.n_pillars
     return config["fig5"]["layout"], int(config["fig5"]["n_pillars"])
 
 

@@ -1,5 +1,7 @@
 rule simulate:
     """One pull-off simulation: one (layout, N, kbar, seed, grid, phi, shape, rough) -> one curve file."""
+    input:
+        unpack(simulate_inputs(config)),
     output:
         f"results/curves/{CURVE_NAME}.nc",
     log:
