@@ -65,7 +65,7 @@ rule all:
         "results/sweep.nc",
         "results/summary.csv",
         "results/summary.md",
-        expand("results/figures/fig{n}.{ext}", n=[5, 6, 7, 8], ext=["png", "pdf"]),
+        paper_figure_files(config),
         rough_figure_files(config),
         lattice_figure_files(config),
         # the refinement study only where some brush runs on three or more grids

@@ -323,7 +323,7 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from brushcore.model.curve import simulate
+    from brushcore.model.curve import preload_contact, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
     from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
@@ -396,13 +396,9 @@ def _simulate(args: argparse.Namespace) -> int:
           f"events = {ds.attrs['events']}  operator applications = "
           f"{ds.attrs['operator_applications']}  time = {ds.attrs['wall_time_s']:.1f} s  "
           f"-> {args.out}")
-    if "pillars_in_contact_at_preload" in ds:  # an approach ran: say how far it pressed
-        touching = int(ds.pillars_in_contact_at_preload)
-        print(f"{touching} of {params.n_pillars} pillars in contact at the "
-              + ("first waypoint" if protocol else "preload")
-              + (" (--preload 0 stops the approach at first touch; give --preload P to press "
-                 "the brush on)" if touching < params.n_pillars and not params.preload
-                 and protocol is None else ""))
+    pressed = preload_contact(ds, "--preload", "give --preload P to press the brush on")
+    if pressed:  # an approach ran: say how far it pressed
+        print(pressed)
     if ds.sizes.get("pull", 0) > 1:  # cycles: every retraction's own pull-off
         area = float(ds.attrs["real_contact_area"])
         for k in range(ds.sizes["pull"]):

@@ -194,7 +194,7 @@ def test_a_brush_of_ones_own_runs_through_the_workflow(tmp_path: Path) -> None:
 
 def _made_inputs(workdir: Path) -> dict:
     """Heights [d_K] and stiffness factors of the 16 pillars of `_own_array`."""
-    heights = np.linspace(-0.4, 0.4, 16)[np.random.default_rng(7).permutation(16)]
+    heights = np.linspace(0.1, 0.9, 16)[np.random.default_rng(7).permutation(16)]
     np.savetxt(workdir / "arrays" / "heights.txt", heights)
     np.save(workdir / "arrays" / "factors.npy", np.geomspace(0.5, 2.0, 16))
     return {"heights": heights, "factors": np.geomspace(0.5, 2.0, 16)}
@@ -219,13 +219,18 @@ def test_a_brush_as_made_runs_the_cases_that_draw_nothing_it_was_given(
                     for tag in ("", "_S0.0_P1.0_C0.0")}, made
     plain = {n for n in names if "/file_plain/" in n}
     assert len(plain) == 2 * 2 * 2 - 1 + 1, plain  # S x P x C, seed 0 flat; seed 0 drawn
+    # preload 0 pulls a brush of uneven heights off from first touch: planning says so
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(tmp_path / "extra.yaml"))
+    assert re.search(r"the brush of layout_files\.0 is given heights or a gap map, and "
+                     r"'preload' holds 0\.0: that approach stops at first touch", output(proc))
 
 
 @pytest.mark.parametrize(
     ("entry", "extra", "message"),
     [
         ({"heights": "arrays/h15.txt"}, {},
-         r"config key 'layout_files\.0\.heights': 'arrays/h15\.txt' is invalid \(it holds 15\): "
+         r"config key 'layout_files\.0\.heights': 'arrays/h15\.txt' is invalid \(it holds 15 values\): "
          r"allowed 16 values, one per pillar"),
         ({"kbar_factors": "arrays/zero.txt"}, {},
          r"config key 'layout_files\.0\.kbar_factors': 'arrays/zero\.txt' is invalid "
@@ -257,11 +262,46 @@ def test_bad_inputs_of_a_brush_as_made_stop_before_any_job(
         "layout_files": [{"layout": "arrays/my_array.npy", **entry}], **extra}, message)
 
 
+def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) -> None:
+    """sweep.nc gives a brush as made the rough dimensions and `given_inputs`
+    even at preload 0; `flat_slice` (the paper's figures and summary) leaves
+    it out and keeps the plain map; the rough figures title it "as made"; two
+    files get two styles in Fig. 7."""
+    from brushcore import file_params, simulate
+    from brushcore.data import figures
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import write_curve
+    from brushcore.data.views import flat_slice, made_layouts
+
+    made = _made_inputs(_own_array(tmp_path).parent.parent)
+    plain = _own_array(tmp_path, "plain.npy")
+    paths = []
+    for kbar in (0.01, math.inf):
+        for name, params in (("made", file_params(tmp_path / "arrays" / "my_array.npy", kbar,
+                                                  heights=made["heights"])),
+                             ("plain", file_params(plain, kbar))):
+            paths.append(write_curve(simulate(params), tmp_path / f"{name}_{kbar}.nc"))
+    sweep = build_sweep(paths)
+    assert {"roughness", "preload", "kbar_spread"} <= set(sweep.dims)
+    assert made_layouts(sweep) == ["file_my_array"]
+    assert set(sweep.given_inputs.sel(layout="file_plain").values.ravel()) == {""}
+    flat = flat_slice(sweep)
+    assert flat.layout.values.tolist() == ["file_plain"] and "given_inputs" not in flat
+    assert float(flat.adhesive_force_normalized.sel(kbar=0.01).squeeze()) == pytest.approx(
+        float(simulate(file_params(plain, 0.01)).adhesive_force_normalized), rel=1e-12)
+    fig = figures.rough_preload(sweep, "file_my_array", 16)
+    assert "as made (heights given)" in fig.get_suptitle().replace("\n", " ")
+    styles = figures._layout_styles(["regular", "file_a", "file_b"])
+    assert len(set(styles.values())) == 3
+
+
 def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
-    """End to end: heights, stiffness factors and a preload of one's own reach
-    sweep.nc (layout file_my_array, `given_inputs`) with the numbers of
-    `simulate` given the same arrays (to round-off), and the rough figures
-    show that brush; editing the heights reruns its curves."""
+    """End to end, a sweep of one's own brush alone (no generated brush, no
+    Fig. 5): heights, stiffness factors and a preload reach sweep.nc (layout
+    file_my_array with the rough dimensions and `given_inputs`) with the
+    numbers of `simulate` given the same arrays (to round-off); the rough
+    figures show it, the paper's figures and summary leave it out; editing
+    the heights, or swapping which file gives which input, reruns it."""
     import shutil
 
     from brushcore import file_params, simulate
@@ -271,15 +311,16 @@ def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
     shutil.copytree(REPO, work, ignore=IGNORE)
     path = _own_array(work)
     made = _made_inputs(work)
+    entry = {"layout": "arrays/my_array.npy", "heights": "arrays/heights.txt",
+             "kbar_factors": "arrays/factors.npy"}
     config = tmp_path / "made.yaml"
     config.write_text(yaml.safe_dump({
         "regular": [], "random": [], "kbar": [0.01, math.inf], "preload": [1.0],
-        "layout_files": [{"layout": "arrays/my_array.npy", "heights": "arrays/heights.txt",
-                          "kbar_factors": "arrays/factors.npy"}],
-        "fig5": {"n_pillars": 4, "kbar": [0.01]}}))
+        "layout_files": [entry], "fig5": {"kbar": []}}))
     proc = snakemake(work, "--cores", "2", "--configfile", "config/test.yaml", str(config))
     assert proc.returncode == 0, output(proc)[-4000:]
     with xr.open_dataset(work / "results/sweep.nc") as sweep:
+        assert sweep.layout.values.tolist() == ["file_my_array"]
         own = sweep.sel(layout="file_my_array", n_pillars=16, preload=1.0).squeeze()
         for kbar in (0.01, math.inf):
             case = own.sel(kbar=kbar)
@@ -288,19 +329,35 @@ def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
             kbar_values = None if kbar == math.inf else kbar * made["factors"]
             direct = simulate(file_params(path, kbar, heights=made["heights"],
                                           kbar_values=kbar_values, preload=1.0))
-            for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+            for name in ("adhesive_force_normalized", "work_of_separation_normalized",
+                         "pillars_in_contact_at_preload"):
                 assert float(case[name]) == pytest.approx(float(direct[name]), rel=1e-12)
         # the stiffness factors matter: the brush differs from its uniform one
         uniform = simulate(file_params(path, 0.01, heights=made["heights"], preload=1.0))
         assert abs(float(own.adhesive_force_normalized.sel(kbar=0.01))
                    / float(uniform.adhesive_force_normalized) - 1) > 1e-3
-    for name in ("rough_preload", "rough_loop", "fig6"):
-        assert (work / f"results/figures/{name}.png").exists(), name
-    np.savetxt(work / "arrays" / "heights.txt", made["heights"] * 0.5)
-    proc = snakemake(work, "-n", "--cores", "2", "--configfile", "config/test.yaml",
-                     str(config))
-    assert proc.returncode == 0, output(proc)
-    assert len(re.findall(r"results/curves/file_my_array/[^\s,]+\.nc", output(proc))) >= 2
+    figures = work / "results/figures"
+    for name in ("rough_preload", "rough_roughness", "rough_loop", "load_sharing", "fig6"):
+        assert (figures / f"{name}.png").exists(), name
+    assert not (figures / "fig5.png").exists()
+    summary = (work / "results/summary.md").read_text()
+    assert "Fig. 5a" not in summary and "file_my_array" not in summary, summary
+
+    def rerun(change) -> int:
+        change()
+        dry = snakemake(work, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                        str(config))
+        assert dry.returncode == 0, output(dry)
+        return len(re.findall(r"results/curves/file_my_array/[^\s,]+\.nc", output(dry)))
+
+    swapped = {**entry, "heights": "arrays/factors.npy", "kbar_factors": "arrays/heights.txt"}
+    assert rerun(lambda: config.write_text(config.read_text().replace(
+        yaml.safe_dump([entry]).strip(), yaml.safe_dump([swapped]).strip()))) >= 2
+    config.write_text(config.read_text().replace(yaml.safe_dump([swapped]).strip(),
+                                                 yaml.safe_dump([entry]).strip()))
+    assert rerun(lambda: None) == 0
+    assert rerun(lambda: np.savetxt(work / "arrays" / "heights.txt",
+                                    made["heights"] * 0.5)) >= 2
 
 
 # -- sweep.nc with a shape dimension, and the figures ------------------------------------

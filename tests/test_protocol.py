@@ -814,7 +814,7 @@ def test_spread_draws_are_reproducible_and_have_the_asked_moments():
 
 
 @pytest.mark.parametrize("content,flag,message", [
-    ("0.1\n" * 15, "--heights", "it holds 15"),
+    ("0.1\n" * 15, "--heights", "it holds 15 values"),
     ("0.1\n" * 5 + "nan\n" + "0.1\n" * 10, "--heights", "line 6 holds nan"),
     ("0.1\n" * 15 + "0\n", "--kbar-file", "line 16 holds 0.0"),
     ("0.1\n" * 15 + "1e-11\n", "--kbar-file", "line 16 holds 1e-11"),  # under MIN_KBAR
@@ -891,7 +891,7 @@ def test_value_files_are_read_as_data(tmp_path):
     with pytest.raises(ParameterError, match=r"archive, not one array"):
         read("archive.npy", (tmp_path / "archive.npz").read_bytes())
     # A decimal comma is two values: the count is off, and the message says why.
-    with pytest.raises(ParameterError, match=r"it holds 8;.*write decimals with a point"):
+    with pytest.raises(ParameterError, match=r"it holds 8 values;.*write decimals with a point"):
         read("comma.txt", b"0,5\n1,5\n2,5\n3,5\n")
     assert read("csv.txt", b"0.5, 1.5,2.5 ,3.5\n").tolist() == [0.5, 1.5, 2.5, 3.5]
 

@@ -46,7 +46,8 @@ SHAPE_DIM = "shape"
 #: Extra case dimensions of rough, preloaded or graded brushes.  A
 #: sweep of flat brushes only keeps the four base dimensions.
 ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
-#: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are.
+#: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are
+#: (some case is rough or a brush as made) or a protocol ran.
 ROUGH_SCALARS = ("dissipated_energy_normalized", "pillars_in_contact_at_preload")
 #: The resolution dimension (elements per side n of the L x L square).
 GRID_DIM = "grid"
@@ -334,7 +335,9 @@ def build_sweep(
     generated = {k: pc for k, pc in curves.items() if pc[1].attrs.get("layout") != "file"}
     phi = _common_attr(generated, "phi") if generated else None
     coords = _case_coords(curves)
-    dims = case_dims(curves)
+    # A brush as made is not flat whatever its coordinates: the rough dims say so.
+    given = any(c.attrs.get("given_inputs") for _, c in curves.values())
+    dims = tuple(dict.fromkeys(case_dims(curves) + (ROUGH_DIMS if given else ())))
     shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
     # Descriptions from a protocol's curve where there is one: its meanings

@@ -28,7 +28,7 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
-from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, file_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
@@ -44,6 +44,23 @@ RESOLUTION_TEXT = {"under_resolved": "under-resolved",
                    "coarsest_under_resolved": "coarsest under-resolved"}
 #: Colours of the layouts and markers of the pillar shapes in the lattice figure.
 LAYOUT_COLORS = {"regular": "C0", "hexagonal": "C1", "random": "C2"}
+#: Fig. 7's marker of each generated layout; others (files) take OTHER_MARKERS in turn.
+LAYOUT_MARKERS = {"regular": "s", "random": "o", "hexagonal": "h"}
+OTHER_MARKERS = ("^", "v", "D", "P", "X", "<", ">", "p", "*")
+
+
+def _layout_styles(layouts: Sequence[str]) -> dict[str, tuple[str, str]]:
+    """(colour, marker) of each layout: its own for the generated ones, and
+    for the others (brushes of one's own) one each in turn, so that two
+    files are told apart."""
+    styles, other = {}, 0
+    for layout in layouts:
+        if layout in LAYOUT_COLORS:
+            styles[layout] = (LAYOUT_COLORS[layout], LAYOUT_MARKERS[layout])
+        else:
+            styles[layout] = (f"C{3 + other % 7}", OTHER_MARKERS[other % len(OTHER_MARKERS)])
+            other += 1
+    return styles
 SHAPE_MARKERS = {"disc": ("o", "-"), "square": ("s", "--"), "ellipse": ("D", ":")}
 #: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
 SOFT_WORK_FLOOR = 0.3
@@ -316,7 +333,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     ax = fig.add_subplot()
     ax.set_title("Soft plateau of the adhesive force")
     fitted: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # layout -> plateau (N, F)
-    markers = {"regular": "s", "random": "o", "hexagonal": "h"}
+    styles = _layout_styles(_layouts(sweep))
     off = []  # (N, F) of brushes whose softest kbar is not on the plateau
     for layout in _layouts(sweep):
         points = [(int(n), *soft_plateau(sweep, layout, int(n)),
@@ -328,12 +345,12 @@ def fig7(sweep: xr.Dataset) -> Figure:
             continue
         n, k, f = map(np.asarray, zip(*points))
         fitted[layout] = (n, f)
-        ax.plot(n, f, markers.get(layout, "^"), ms=6, mfc="none",
-                color=LAYOUT_COLORS.get(layout, "C3"), label=f"{layout} (min " + r"$\bar k$"
+        ax.plot(n, f, styles[layout][1], ms=6, mfc="none",
+                color=styles[layout][0], label=f"{layout} (min " + r"$\bar k$"
                 + f" = {k.min():g})")
     for layout in dict.fromkeys(lay for lay, _, _ in off):  # grey, the layout's marker
         n_off, f_off = zip(*[(n, f) for lay, n, f in off if lay == layout])
-        ax.plot(n_off, f_off, markers.get(layout, "^"), ms=6, color="0.55",
+        ax.plot(n_off, f_off, styles[layout][1], ms=6, color="0.55",
                 label=f"{layout}: not on a plateau (not fitted)")
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -361,7 +378,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     for layout, (n, f) in fitted.items():
         fit = fit_soft_prefactor(n, f)
         ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "--", lw=1,
-                color=LAYOUT_COLORS.get(layout, "C3"),
+                color=styles[layout][0],
                 label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
         line = f"{layout} {fit['ratio']:.2f}"
         if math.isfinite(fit["exponent"]):
@@ -501,6 +518,30 @@ def _rough_ready(sweep: xr.Dataset, fig: Figure) -> bool:
     return False
 
 
+def _given(sweep: xr.Dataset, layout: str) -> str:
+    """What a brush as made was given ("heights kbar_values"; ``given_inputs``),
+    "" for a brush of drawn or no heights."""
+    if "given_inputs" not in sweep or layout not in sweep.layout.values:
+        return ""
+    values = np.ravel(sweep["given_inputs"].sel(layout=layout).values)
+    return " ".join(sorted({name for v in values for name in str(v).split()}))
+
+
+def _rough_brush_title(what: str, layout: str, n_pillars: int, given: str,
+                       width: float) -> str:
+    """A rough figure's title, wrapped to its ``width`` [in]: a rough brush,
+    or a brush as made with what it was given."""
+    brush = (f"the {layout} brush as made ({given.replace(' ', ', ')} given)" if given
+             else f"a rough {layout} brush")
+    return textwrap.fill(f"{what} {brush}, N = {n_pillars}", max(30, int(11 * width)))
+
+
+def _heights_text(roughness: float, given: str) -> str:
+    """A panel's heights: "roughness S d_K", or "heights given"."""
+    return "heights given" if "heights" in given.split() else (
+        f"roughness {roughness:g} " + r"$d_K$")
+
+
 def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
                     ) -> Figure:
     """Adhesive force against roughness per kbar, one panel per preload.
@@ -539,9 +580,11 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                      "last retraction of\n" + textwrap.fill(protocol, 36), fontsize=8)
         ax.set_xlabel(r"roughness $S$ [$d_K$]")
         ax.set_ylabel(FAD_LABEL)
-    axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
+    if any(line.get_linestyle() == "--" for ax in axes for line in ax.get_lines()):
+        axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
     _side_legend(fig, axes)
-    fig.suptitle(f"Adhesive force of a rough {layout} brush, N = {n_pillars}")
+    fig.suptitle(_rough_brush_title("Adhesive force of", layout, n_pillars,
+                                    _given(sweep, layout), fig.get_figwidth()))
     return fig
 
 
@@ -577,6 +620,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
     if not _rough_ready(sweep, fig):
         return fig
     roughs = [float(r) for r in sweep.roughness.values]
+    given = _given(sweep, layout)
     axes = fig.subplots(1, len(roughs), squeeze=False)[0]
     kbars = [float(k) for k in sweep.kbar.values]
     p_axis = np.asarray(sweep.preload.values, dtype=float)
@@ -588,12 +632,13 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
                 continue
             ax.errorbar(p_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
                         capsize=2, color=f"C{i}", label=rf"$\bar k$ = {_kbar_text(kbar)}")
-        ax.set_title(f"roughness {rough:g} " + r"$d_K$", fontsize=9)
+        ax.set_title(_heights_text(rough, given), fontsize=9)
         ax.set_xlabel(r"preload [$F_K$]")
         ax.set_ylabel(FAD_LABEL)
         _no_false_zoom(ax)
     _side_legend(fig, axes)
-    fig.suptitle(f"Adhesive force against preload: rough {layout} brush, N = {n_pillars}")
+    fig.suptitle(_rough_brush_title("Adhesive force against preload of", layout, n_pillars,
+                                    given, fig.get_figwidth()))
     return fig
 
 
@@ -655,9 +700,12 @@ def rough_loop(curve: xr.Dataset) -> Figure:
         title = {"preload": "the preload", "maximum force": r"$F_{ad}$"}.get(stage, stage)
         axm.set_title("contact at " + title, fontsize=9)
     a = curve.attrs
-    fig.suptitle(f"{a.get('layout')} brush, N = {a.get('n_pillars')}, "
-                 rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, roughness "
-                 f"{float(a.get('roughness', 0.0)):g} $d_K$, seed {a.get('seed')}")
+    layout = (file_layout(str(a.get("layout_file", ""))) if a.get("layout") == "file"
+              else a.get("layout"))  # a file's brush by its name, as sweep.nc names it
+    fig.suptitle(f"{layout} brush, N = {a.get('n_pillars')}, "
+                 rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, "
+                 + _heights_text(float(a.get('roughness', 0.0)), str(a.get("given_inputs", "")))
+                 + f", seed {a.get('seed')}")
     return fig
 
 
@@ -693,7 +741,8 @@ def load_sharing(curve: xr.Dataset) -> Figure:
     ax.legend(fontsize=7)
     a = curve.attrs
     ax.set_title(f"N = {a.get('n_pillars')}, " + rf"$\bar k$ = {float(a.get('kbar')):g}, "
-                 f"roughness {float(a.get('roughness', 0.0)):g} $d_K$", fontsize=9)
+                 + _heights_text(float(a.get('roughness', 0.0)), str(a.get("given_inputs", ""))),
+                 fontsize=9)
     return fig
 
 

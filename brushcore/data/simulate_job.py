@@ -7,6 +7,8 @@ when a module it imports does, so the job's logic lives here.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm
 
 
@@ -22,9 +24,10 @@ def run_job(smk) -> None:
 def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
     from brushcore import BrushParams, SolverOptions, simulate
+    from brushcore.model.curve import preload_contact
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
-    from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
+    from brushcore.model.inputs import parse_protocol, with_input_files
     from brushcore.model.layout_file import file_params
     from brushcore.numerics.platform.threads import pin_threads
 
@@ -48,11 +51,11 @@ def _simulate(smk, clock: CurveClock) -> None:
         **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
         **smk.params.shape,  # shape, aspect, orientation; {} for discs
     )
-    if smk.params.layout_file:  # a brush of one's own: the file's N, grid and phi checked
-        params = file_params(smk.params.layout_file, float(w.kbar), **fields)
-        # its heights, stiffness factors and gap map, as the rule's named inputs
-        params = with_input_files(params, {name: path for name, path in smk.input.items()
-                                           if name in INPUT_FILES})
+    files = smk.params.layout_file  # "", a map's path, or {"layout": map, "heights": ...}
+    if files:  # a brush of one's own: the file's N, grid and phi checked
+        inputs = dict(files) if isinstance(files, Mapping) else {"layout": files}
+        params = file_params(inputs.pop("layout"), float(w.kbar), **fields)
+        params = with_input_files(params, inputs)  # heights, stiffness factors, gap map
     else:
         params = BrushParams(layout=w.layout, kbar=float(w.kbar), **fields)
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
@@ -69,3 +72,7 @@ def _simulate(smk, clock: CurveClock) -> None:
         f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements, "
         f"phi realised {curve.attrs['phi_actual']:.4g}"
     )
+    pressed = preload_contact(curve, "preload", "add a load to the config's 'preload' list "
+                                                "to press the brush on")
+    if pressed:
+        print(pressed)

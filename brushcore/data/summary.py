@@ -197,6 +197,7 @@ def headline_rows(
     fig5_layout, fig5_n_pillars, fig5_kbar, fig5_shape : the config's Fig. 5
         brush at its first kbar (a `shape_label` for the shape); the
         paper's, quoted in its text, is regular 16 x 16 discs at 0.455.
+        A NaN kbar (a config without a Fig. 5 brush) leaves its row out.
     """
     phi = float(sweep.attrs.get("phi", math.nan))
     scalars = [v for v in sweep.data_vars if "step" not in sweep[v].dims and "case" not in
@@ -206,16 +207,17 @@ def headline_rows(
     rigid_theory = theory.rigid_limit(phi) if math.isfinite(phi) else math.nan
     papers = (fig5_layout == "regular" and fig5_shape == "disc" and fig5_n_pillars == 256
               and math.isclose(fig5_kbar, 0.455, rel_tol=1e-9))
-    rows = [
-        Row("F_ad (normalised), Fig. 5a", fig5_layout, str(fig5_n_pillars), _fmt(fig5_kbar),
+    rows = []
+    if math.isfinite(fig5_kbar):  # else fig5.kbar [] ran no Fig. 5 brush
+        rows.append(Row(
+            "F_ad (normalised), Fig. 5a", fig5_layout, str(fig5_n_pillars), _fmt(fig5_kbar),
             _fmt(value_at(fig5, "adhesive_force_normalized", fig5_layout, fig5_n_pillars,
                           fig5_kbar)), "~1.8" if papers else "",
             "close to the rigid limit" if papers else
             f"the config's Fig. 5 brush ({fig5_shape} pillars); the paper's ~1.8 is regular "
-            "16 x 16 discs at kbar 0.455"),
-        Row("rigid limit phi^-1/4 (eq. 5)", "", "", "", _fmt(rigid_theory), "1.7",
-            f"phi = {_fmt(phi)} requested"),
-    ]
+            "16 x 16 discs at kbar 0.455"))
+    rows.append(Row("rigid limit phi^-1/4 (eq. 5)", "", "", "", _fmt(rigid_theory), "1.7",
+                    f"phi = {_fmt(phi)} requested"))
     brushes = _brushes(sweep)
     for layout, n in brushes:
         kbar, force = rigid_end(sweep, layout, n)

@@ -24,9 +24,11 @@ def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
     Where no run was at preload 0 the smallest preload stands for it: a flat
     brush pulls off as from full contact whatever the preload (within CG's
     tolerance), so a rough study that always presses on still has its flat
-    brushes.
+    brushes.  Cases given heights, stiffness or a gap map (``given_inputs``:
+    brushes as made) are left out (`without_brushes_as_made`): they are not
+    flat, whatever their roughness coordinate says.
     """
-    sweep = shape_slice(sweep, shape)
+    sweep = shape_slice(without_brushes_as_made(sweep), shape)
     if not set(ROUGH_DIMS) & set(sweep.dims):
         return sweep
     at = {d: 0.0 for d in ROUGH_DIMS}
@@ -39,6 +41,39 @@ def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
         keep = np.logical_and.reduce([flat[f"case_{d}"].values == at[d] for d in case_vars])
         flat = flat.isel(case=np.flatnonzero(keep)).drop_vars([f"case_{d}" for d in case_vars])
     return flat
+
+
+def made_layouts(sweep: xr.Dataset) -> list[str]:
+    """Layouts given heights, stiffness or a gap map in any case (``given_inputs``)."""
+    if "given_inputs" not in sweep:
+        return []
+    given = sweep["given_inputs"] != ""
+    given = given.any(dim=[d for d in given.dims if d != "layout"])
+    return [str(v) for v in sweep.layout.values[given.values]]
+
+
+def without_brushes_as_made(sweep: xr.Dataset) -> xr.Dataset:
+    """The sweep with every case given heights, stiffness or a gap map
+    (``given_inputs``) set to NaN, the layouts left with no case dropped (and
+    their snapshots), and without ``given_inputs``: the brushes a flat
+    theory speaks of.  (A brush given only stiffness factors is flat where
+    it is rigid: there it ran no array, and stays.)"""
+    if "given_inputs" not in sweep:
+        return sweep
+    given = sweep["given_inputs"] != ""
+    out = sweep.drop_vars("given_inputs")
+    if not bool(given.any()):
+        return out
+    masked = [name for name, var in out.data_vars.items()
+              if set(given.dims) <= set(var.dims) and np.issubdtype(var.dtype, np.floating)]
+    out = out.assign({name: out[name].where(~given) for name in masked})
+    ran = out["n_steps"].notnull().any(dim=[d for d in given.dims if d != "layout"])
+    kept = [str(v) for v in out.layout.values[ran.values]]
+    out = out.sel(layout=kept)
+    if "case_layout" in out.variables:
+        keep = np.isin(out["case_layout"].values.astype(str), kept)
+        out = out.isel(case=np.flatnonzero(keep))
+    return out
 
 
 def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:

@@ -239,6 +239,25 @@ def check_arguments(params: object, options: object, protocol: object,
         raise ParameterError("protocol", _shown(protocol), PROTOCOL_LOADS, beyond)
 
 
+def preload_contact(ds: xr.Dataset, preload: str, press_hint: str) -> str | None:
+    """How far an approach pressed the brush, as one line: "12 of 16 pillars in
+    contact at the preload", and where a preload of 0 stopped it at first
+    touch with pillars left out, why and ``press_hint`` (``preload``, the
+    preload's name, and the hint in the caller's terms: flag or config key);
+    None where no approach ran (a pull-off from full contact)."""
+    if "pillars_in_contact_at_preload" not in ds:
+        return None
+    touching = int(ds.pillars_in_contact_at_preload)
+    n_pillars = int(ds.attrs["n_pillars"])
+    protocol = "protocol_normalized" in ds.attrs
+    at_first_touch = (touching < n_pillars and not float(ds.attrs.get("preload", 0.0))
+                      and not protocol)
+    return (f"{touching} of {n_pillars} pillars in contact at the "
+            + ("first waypoint" if protocol else "preload")
+            + (f" ({preload} 0 stops the approach at first touch; {press_hint})"
+               if at_first_touch else ""))
+
+
 def _shown(value: object) -> object:
     """A value for a refusal: itself if short, else its type."""
     text = repr(value)

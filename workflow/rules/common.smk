@@ -310,7 +310,14 @@ def check_cases(config, main=True):
         keys = {k: f"solver.{k}" for k in config["solver"]}
         raise ConfigError(f"config: {exc.in_terms_of(keys, sep=' = ')}") from None
     config_protocol(config)
-    file_brushes(config)  # every layout file read once, and refused here
+    brushes = file_brushes(config)  # every layout file read once, and refused here
+    if not sweep_cases(config):
+        raise ConfigError(
+            "config: the sweep has no brush; allowed a config that lists one under "
+            "'regular', 'hexagonal', 'random', 'layout_files' or 'fig5.kbar'"
+        )
+    if main:
+        _warn_first_touch(config, brushes)
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -371,6 +378,26 @@ def check_cases(config, main=True):
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
             ) from None
+
+
+def _warn_first_touch(config, brushes):
+    """Warn where a brush as made, given heights or a gap map, runs preload 0:
+    its approach stops at first touch, so only the pillars that touched pull
+    off (the CLI says so after the run; a sweep should before it)."""
+    if config.get("protocol") is not None or 0.0 not in map(float, config["preload"]):
+        return
+    uneven = [
+        f"layout_files.{i}"
+        for i, brush in enumerate(brushes.values())
+        if {"heights", "gap_map"} & set(brush.inputs)
+    ]
+    if uneven:
+        logger.warning(
+            f"config: the brush of {', '.join(uneven)} is given heights or a gap map, "
+            "and 'preload' holds 0.0: that approach stops at first touch, so its "
+            "pull-off is that of the pillars that touched; add a load to 'preload' "
+            "to press it on"
+        )
 
 
 def check_cluster_threads(config, cores, jobs, main):
@@ -535,7 +562,8 @@ def file_brushes(config):
         if layout in brushes:
             raise ConfigError(
                 f"{key}: {path!r} is invalid: its name {stem!r} is that of "
-                f"{brushes[layout].path!r}; allowed one file per name (it names the brush)"
+                f"{brushes[layout].path!r}; allowed one file per name (it names the brush: "
+                "copy a map under another name to run it twice)"
             )
         try:
             geometry = _file_geometry(path)
@@ -676,11 +704,12 @@ def wants_convergence(config):
 
 def sweep_brushes(config):
     """Every pillar number N of the sweep (every layout and the Fig. 5 brush)."""
+    fig5 = config["fig5"]
     return {
         *config["regular"],
         *config["hexagonal"],
         *config["random"],
-        config["fig5"]["n_pillars"],
+        *([fig5["n_pillars"]] if fig5["kbar"] else []),
     }
 
 
@@ -713,14 +742,25 @@ def layout_file(config, layout):
     return brush.path if brush else ""
 
 
+def brush_files(config, layout):
+    """The rule's `layout_file` param: "" for generated layouts, the map's path
+    for a bare map, and for a brush as made {"layout": map, key: file, ...},
+    so that swapping which file gives which input reruns its curves (the
+    inputs alone see the same set of unchanged files)."""
+    brush = file_brushes(config).get(layout)
+    if not brush or not brush.inputs:
+        return brush.path if brush else ""
+    return {"layout": brush.path, **dict(sorted(brush.inputs.items()))}
+
+
 def simulate_inputs(config):
     """The rule's input function: a file brush's map and its per-pillar and
-    per-element files by name (`layout`, `heights`, ...), so that editing one
-    reruns its curves; nothing for generated layouts."""
+    per-element files, so that editing one reruns its curves; nothing for
+    generated layouts."""
 
     def inputs(wildcards):
         brush = file_brushes(config).get(wildcards.layout)
-        return {"layout": brush.path, **brush.inputs} if brush else {}
+        return [brush.path, *brush.inputs.values()] if brush else []
 
     return inputs
 
@@ -942,15 +982,25 @@ ROUGH_FIGURES = ("rough_roughness", "rough_preload")
 
 
 def rough_brush(config):
-    """(layout, N) the rough figures show: the first regular brush, else the first
-    hexagonal, else the first random, else the first brush of `layout_files`
-    (a brush as made: its heights given, pressed to each preload)."""
+    """(layout, N) the rough figures show: the first brush as made (a
+    `layout_files` entry given heights, stiffness or a gap map: the paper's
+    figures leave it out, so these show it), else the first regular brush,
+    else the first hexagonal, else the first random, else the first file."""
+    files = file_brushes(config)
+    for layout, brush in files.items():
+        if brush.inputs:
+            return layout, brush.n_pillars
     for layout in (*LATTICES, "random"):
         if config[layout]:
             return layout, int(config[layout][0])
-    for layout, brush in file_brushes(config).items():
+    for layout, brush in files.items():
         return layout, brush.n_pillars
     return config["fig5"]["layout"], int(config["fig5"]["n_pillars"])
+
+
+def made_brush(config):
+    """True when some `layout_files` brush is given heights, stiffness or a gap map."""
+    return any(brush.inputs for brush in file_brushes(config).values())
 
 
 CURVE_FIGURES = ("rough_loop", "load_sharing")
@@ -960,14 +1010,17 @@ def rough_example_curve(config):
     """The curve file the one-curve rough figures show, or None for a flat sweep.
 
     The brush of `rough_brush`, seed 0, the largest roughness and preload
-    asked for, and the finite kbar closest to 0.01 on a log scale (soft
-    enough that pillars share load, stiff enough that they interact).
+    asked for (a brush as made: any, preload 0 too), and the finite kbar
+    closest to 0.01 on a log scale (soft enough that pillars share load,
+    stiff enough that they interact).
     """
     brush = rough_brush(config)
+    entry = file_brushes(config).get(brush[0])
+    made = bool(entry and entry.inputs)
     rough = [
         c
         for c in sweep_cases(config)
-        if c[6]
+        if (c[6] or made)
         and not c[7]
         and (c[0], c[1]) == brush
         and c[3] == 0
@@ -977,11 +1030,11 @@ def rough_example_curve(config):
         return None
 
     def rank(case):
-        tag = parse_rough_tag(case[6])
+        tag = parse_rough_tag(case[6])  # {} for a brush as made at preload 0
         return (
-            -tag["roughness"],
-            -tag["preload"],
-            tag["kbar_spread"],
+            -tag.get("roughness", 0.0),
+            -tag.get("preload", 0.0),
+            tag.get("kbar_spread", 0.0),
             abs(math.log10(float(case[2])) + 2.0),
         )
 
@@ -995,7 +1048,7 @@ def rough_figure_files(config):
         for key in ("roughness", "preload", "kbar_spread")
         for v in config[key]
     )
-    if flat and config.get("protocol") is None:
+    if flat and config.get("protocol") is None and not made_brush(config):
         return []
     names = ROUGH_FIGURES + (CURVE_FIGURES if rough_example_curve(config) else ())
     return [f"results/figures/{name}.{ext}" for name in names for ext in ("png", "pdf")]
@@ -1011,6 +1064,12 @@ def lattice_figure_files(config):
     if not wants_lattice_figure(config):
         return []
     return [f"results/figures/lattices.{ext}" for ext in ("png", "pdf")]
+
+
+def paper_figure_files(config):
+    """Figs. 5-8 (PNG and PDF); Fig. 5 only where `fig5.kbar` lists a stiffness."""
+    numbers = ([5] if config["fig5"]["kbar"] else []) + [6, 7, 8]
+    return [f"results/figures/fig{n}.{ext}" for n in numbers for ext in ("png", "pdf")]
 
 
 def fig5_shape(config):

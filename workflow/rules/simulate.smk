@@ -1,7 +1,7 @@
 rule simulate:
     """One pull-off simulation: one (layout, N, kbar, seed, grid, phi, shape, rough) -> one curve file."""
     input:
-        unpack(simulate_inputs(config)),
+        simulate_inputs(config),
     output:
         f"results/curves/{CURVE_NAME}.nc",
     log:
@@ -27,7 +27,7 @@ rule simulate:
         solver=config["solver"],
         rough=lambda wildcards: parse_rough_tag(wildcards.rough),
         shape=lambda wildcards: parse_shape_tag(wildcards.shape),
-        layout_file=lambda wildcards: layout_file(config, wildcards.layout),
+        layout_file=lambda wildcards: brush_files(config, wildcards.layout),
     # allow_coarse and backend are read from the config by the script, not
     # passed as params: they change no curve (a coarse case runs the same
     # once allowed; a GPU curve is a CPU one within CG's tolerance), so a

@@ -11,7 +11,8 @@ def main(smk) -> None:
     with xr.open_dataset(smk.input[0]) as sweep:
         rows = headline_rows(
             sweep, fig5_layout=fig5["layout"], fig5_n_pillars=int(fig5["n_pillars"]),
-            fig5_kbar=float(fig5["kbar"][0]), fig5_shape=fig5["shape"],
+            fig5_kbar=float(fig5["kbar"][0]) if fig5["kbar"] else float("nan"),
+            fig5_shape=fig5["shape"],
         )
     write_summary(rows, smk.output.csv, smk.output.md)
     print(open(smk.output.md).read())
