@@ -46,7 +46,7 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "aspect": "--aspect", "orientation": "--orientation", "layout_file": "--layout-file",
          "roughness": "--roughness", "preload": "--preload", "kbar_spread": "--kbar-spread",
          "heights": "--heights", "kbar_values": "--kbar-file", "gap_map": "--gap-map",
-         "kbar_factors": "--kbar-factors",
+         "kbar_factors": "--kbar-factors", "kbar_file": "--kbar-file",
          "backend": "--backend", "protocol": "--protocol"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 

@@ -267,10 +267,11 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
     even at preload 0; `flat_slice` (the paper's figures and summary) leaves
     it out and keeps the plain map; the rough figures title it "as made"; two
     files get two styles in Fig. 7."""
-    from brushcore import file_params, simulate
+    from brushcore import SolverOptions, file_params, read_curve, simulate
     from brushcore.data import figures
-    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.aggregate import build_sweep, given_inputs
     from brushcore.data.io import write_curve
+    from brushcore.data.summary import headline_rows
     from brushcore.data.views import flat_slice, made_layouts
 
     made = _made_inputs(_own_array(tmp_path).parent.parent)
@@ -280,9 +281,15 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
         for name, params in (("made", file_params(tmp_path / "arrays" / "my_array.npy", kbar,
                                                   heights=made["heights"])),
                              ("plain", file_params(plain, kbar))):
-            paths.append(write_curve(simulate(params), tmp_path / f"{name}_{kbar}.nc"))
+            # another rtol for one curve: sweep.nc then says where (run_rtol) too
+            options = SolverOptions(rtol=1e-6 if name == "plain" and kbar == math.inf else 1e-4)
+            paths.append(write_curve(simulate(params, options), tmp_path / f"{name}_{kbar}.nc"))
     sweep = build_sweep(paths)
-    assert {"roughness", "preload", "kbar_spread"} <= set(sweep.dims)
+    assert {"roughness", "preload", "kbar_spread"} <= set(sweep.dims) and "run_rtol" in sweep
+    # a curve written before the attribute: its variables say what it was given
+    older = read_curve(paths[0]).copy()
+    del older.attrs["given_inputs"]
+    assert given_inputs(older) == "heights" and given_inputs(read_curve(paths[1])) == ""
     assert made_layouts(sweep) == ["file_my_array"]
     assert set(sweep.given_inputs.sel(layout="file_plain").values.ravel()) == {""}
     flat = flat_slice(sweep)
@@ -293,6 +300,13 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
     assert "as made (heights given)" in fig.get_suptitle().replace("\n", " ")
     styles = figures._layout_styles(["regular", "file_a", "file_b"])
     assert len(set(styles.values())) == 3
+    # a rigid Fig. 5 brush keeps its row; NaN (fig5.kbar []) leaves it out
+    rows = headline_rows(sweep, fig5_layout="file_plain", fig5_n_pillars=16,
+                         fig5_kbar=math.inf)
+    assert rows[0].quantity.startswith("F_ad (normalised), Fig. 5a"), rows[0]
+    rows = headline_rows(sweep, fig5_layout="file_plain", fig5_n_pillars=16,
+                         fig5_kbar=math.nan)
+    assert not any("Fig. 5a" in row.quantity for row in rows)
 
 
 def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
@@ -324,9 +338,8 @@ def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
         own = sweep.sel(layout="file_my_array", n_pillars=16, preload=1.0).squeeze()
         for kbar in (0.01, math.inf):
             case = own.sel(kbar=kbar)
-            given = "heights kbar_values" if kbar < math.inf else "heights"
-            assert str(case.given_inputs.values) == given
-            kbar_values = None if kbar == math.inf else kbar * made["factors"]
+            assert str(case.given_inputs.values) == "heights kbar_values"
+            kbar_values = kbar * made["factors"]  # inf at kbar inf: rigid
             direct = simulate(file_params(path, kbar, heights=made["heights"],
                                           kbar_values=kbar_values, preload=1.0))
             for name in ("adhesive_force_normalized", "work_of_separation_normalized",

@@ -842,9 +842,10 @@ def test_cli_refuses_bad_files_before_any_work(tmp_path, capsys, content, flag, 
 
 
 def test_stiffness_factors_scale_kbar_and_leave_rigid_brushes_rigid(tmp_path, capsys):
-    """--kbar-factors f is --kbar-file kbar * f, bit for bit in the curve; at
-    kbar = inf the brush stays rigid (the factors are read, and ignored); with
-    --kbar-file or --kbar-spread beside it the run is refused."""
+    """--kbar-factors f is --kbar-file kbar * f; at kbar = inf every pillar
+    is rigid (a brush given stiffnesses all the same, which pulls off as
+    the flat rigid brush); with --kbar-file or --kbar-spread beside it the
+    run is refused."""
     from brushcore.cli import main
     from brushcore.model.inputs import with_input_files
 
@@ -857,7 +858,11 @@ def test_stiffness_factors_scale_kbar_and_leave_rigid_brushes_rigid(tmp_path, ca
     assert np.array_equal(scaled.kbar_values, given.kbar_values)
     assert scaled.given_inputs == "kbar_values" and scaled.kbar == 0.02
     rigid = with_input_files(replace(base, kbar=math.inf), {"kbar_factors": tmp_path / "f.txt"})
-    assert rigid.kbar_values is None and rigid == replace(base, kbar=math.inf)
+    assert np.all(rigid.kbar_values == math.inf) and rigid.given_inputs == "kbar_values"
+    flat_rigid = simulate(replace(base, kbar=math.inf, preload=0.0))
+    graded_rigid = simulate(replace(rigid, preload=0.0))  # the approach engine: same brush
+    for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+        assert float(graded_rigid[name]) == pytest.approx(float(flat_rigid[name]), rel=1e-6)
     args = ["simulate", "--layout", "regular", "--pillars", "16", "--kbar", "0.02", "--grid",
             "64", "--quiet", "--kbar-factors", str(tmp_path / "f.txt")]
     for extra, flag in ((["--kbar-file", str(tmp_path / "k.npy")], "--kbar-factors"),

@@ -336,7 +336,7 @@ def build_sweep(
     phi = _common_attr(generated, "phi") if generated else None
     coords = _case_coords(curves)
     # A brush as made is not flat whatever its coordinates: the rough dims say so.
-    given = any(c.attrs.get("given_inputs") for _, c in curves.values())
+    given = any(given_inputs(c) for _, c in curves.values())
     dims = tuple(dict.fromkeys(case_dims(curves) + (ROUGH_DIMS if given else ())))
     shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
@@ -406,8 +406,28 @@ def build_sweep(
         if values:
             sweep.attrs[name] = (next(iter(values.values())) if len(values) == 1
                                  else "; ".join(sorted(values)))
-    return sweep.assign(_varying_settings(curves, coords, dims),
-                        **_given_inputs(curves, coords, dims))
+    return sweep.assign({**_varying_settings(curves, coords, dims),
+                         **_given_inputs(curves, coords, dims)})
+
+
+def given_inputs(curve: xr.Dataset) -> str:
+    """The arrays a curve's brush was given (`BrushParams.given_inputs`), from
+    its attribute; a file written before the attribute, whose ``inputs_digest``
+    says arrays were given, from its variables: a gap map, heights where none
+    were drawn, stiffnesses that differ from kbar where none were drawn."""
+    a = curve.attrs
+    if "given_inputs" in a or not a.get("inputs_digest"):
+        return str(a.get("given_inputs", ""))
+    names = []
+    if "pillar_height_normalized" in curve and not float(a.get("roughness", 0.0)):
+        if np.any(curve["pillar_height_normalized"].values != 0):
+            names.append("heights")
+    if "pillar_kbar" in curve and not float(a.get("kbar_spread", 0.0)):
+        if np.any(curve["pillar_kbar"].values != float(a["kbar"])):
+            names.append("kbar_values")
+    if "gap_map_normalized" in curve:
+        names.append("gap_map")
+    return " ".join(names)
 
 
 def _given_inputs(curves: dict, coords: dict[str, np.ndarray],
@@ -416,11 +436,12 @@ def _given_inputs(curves: dict, coords: dict[str, np.ndarray],
     or per-element arrays (`BrushParams.given_inputs`): its roughness and
     kbar_spread coordinates are 0 (nothing drawn), yet it is not flat.
     Nothing where no curve was given any."""
-    if not any(c.attrs.get("given_inputs") for _, c in curves.values()):
+    given = {key: given_inputs(curve) for key, (_, curve) in curves.items()}
+    if not any(given.values()):
         return {}
     values = np.full(tuple(len(coords[d]) for d in dims), "", dtype=object)
-    for key, (_, curve) in curves.items():
-        values[_index(coords, key, dims)] = str(curve.attrs.get("given_inputs", ""))
+    for key, text in given.items():
+        values[_index(coords, key, dims)] = text
     return {"given_inputs": xr.DataArray(
         values.astype(str), dims=dims,
         attrs={"long_name": "arrays the brush was given (heights, kbar_values, gap_map; "

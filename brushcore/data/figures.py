@@ -561,6 +561,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     kbars = [float(k) for k in sweep.kbar.values]
     colors = {k: f"C{i}" for i, k in enumerate(kbars)}
     s_axis = np.asarray(sweep.roughness.values, dtype=float)
+    given = _given(sweep, layout)  # heights given, not drawn: no Gaussian soft limit
     protocol = sweep.attrs.get("protocol_normalized")  # its loads stand for the preload
     for ax, preload in zip(axes, preloads):
         for kbar in kbars:
@@ -570,7 +571,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                 continue
             ax.errorbar(s_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
                         capsize=2, color=colors[kbar], label=rf"$\bar k$ = {_kbar_text(kbar)}")
-            if np.isfinite(kbar) and kbar <= 0.01 and s_axis.max() > 0:
+            if np.isfinite(kbar) and kbar <= 0.01 and s_axis.max() > 0 and not given:
                 span = np.linspace(0.0, s_axis.max(), 60)
                 lam = float(theory.foundation_stretch(n_pillars, phi, kbar))
                 soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
@@ -583,8 +584,8 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     if any(line.get_linestyle() == "--" for ax in axes for line in ax.get_lines()):
         axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
     _side_legend(fig, axes)
-    fig.suptitle(_rough_brush_title("Adhesive force of", layout, n_pillars,
-                                    _given(sweep, layout), fig.get_figwidth()))
+    fig.suptitle(_rough_brush_title("Adhesive force of", layout, n_pillars, given,
+                                    fig.get_figwidth()))
     return fig
 
 
@@ -619,8 +620,12 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
     fig = _new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
     if not _rough_ready(sweep, fig):
         return fig
-    roughs = [float(r) for r in sweep.roughness.values]
     given = _given(sweep, layout)
+    # a panel per roughness this brush ran (a brush given heights: S = 0 alone)
+    ran = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n_pillars,
+                                                 kbar_spread=0.0)
+    roughs = [float(r) for r in sweep.roughness.values
+              if np.isfinite(ran.sel(roughness=r).values).any()] or [0.0]
     axes = fig.subplots(1, len(roughs), squeeze=False)[0]
     kbars = [float(k) for k in sweep.kbar.values]
     p_axis = np.asarray(sweep.preload.values, dtype=float)

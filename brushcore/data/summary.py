@@ -208,7 +208,7 @@ def headline_rows(
     papers = (fig5_layout == "regular" and fig5_shape == "disc" and fig5_n_pillars == 256
               and math.isclose(fig5_kbar, 0.455, rel_tol=1e-9))
     rows = []
-    if math.isfinite(fig5_kbar):  # else fig5.kbar [] ran no Fig. 5 brush
+    if not math.isnan(fig5_kbar):  # NaN: fig5.kbar [] ran no Fig. 5 brush
         rows.append(Row(
             "F_ad (normalised), Fig. 5a", fig5_layout, str(fig5_n_pillars), _fmt(fig5_kbar),
             _fmt(value_at(fig5, "adhesive_force_normalized", fig5_layout, fig5_n_pillars,

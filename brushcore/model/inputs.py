@@ -167,6 +167,7 @@ def with_input_files(base: BrushParams,
         kbar_factors : each pillar's stiffness relative to ``base.kbar``
             (finite, > 0): pillar p runs kbar * f_p, so that a sweep over kbar
             keeps the brush's proportions; rigid brushes (kbar = inf) stay rigid
+            (every pillar's kbar inf: still a brush given stiffnesses)
         gap_map : extra gap of every element [d_K], grid x grid (rows y)
 
     Raises
@@ -181,7 +182,7 @@ def with_input_files(base: BrushParams,
         raise ValueError(f"unknown input files {unknown}; known: {sorted(INPUT_FILES)}")
     if "kbar_file" in given and "kbar_factors" in given:
         raise ParameterError("kbar_factors", str(given["kbar_factors"]),
-                             "no kbar file beside it (they are exclusive)")
+                             "no kbar_file beside it (the two are exclusive)")
     n = base.n_pillars
     arrays = {}
     if "heights" in given:
@@ -191,8 +192,8 @@ def with_input_files(base: BrushParams,
                                                    "stiffness")
     if "kbar_factors" in given:
         factors = read_pillar_values(given["kbar_factors"], n, "kbar_factors", "factor")
+        arrays["kbar_values"] = base.kbar * factors  # rigid (kbar inf) stays rigid: inf
         if math.isfinite(base.kbar):
-            arrays["kbar_values"] = base.kbar * factors
             low = np.flatnonzero(arrays["kbar_values"] < MIN_KBAR)
             if low.size:
                 i = int(low[0])

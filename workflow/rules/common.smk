@@ -754,13 +754,14 @@ def brush_files(config, layout):
 
 
 def simulate_inputs(config):
-    """The rule's input function: a file brush's map and its per-pillar and
+    """The rule's input function: a brush as made's map and its per-pillar and
     per-element files, so that editing one reruns its curves; nothing for
-    generated layouts."""
+    generated layouts and bare maps (whose curves, made before brushes as
+    made, would otherwise all rerun: Snakemake sees a new set of inputs)."""
 
     def inputs(wildcards):
         brush = file_brushes(config).get(wildcards.layout)
-        return [brush.path, *brush.inputs.values()] if brush else []
+        return [brush.path, *brush.inputs.values()] if brush and brush.inputs else []
 
     return inputs
 
