@@ -899,6 +899,10 @@ def test_value_files_are_read_as_data(tmp_path):
     with pytest.raises(ParameterError, match=r"it holds 8 values;.*write decimals with a point"):
         read("comma.txt", b"0,5\n1,5\n2,5\n3,5\n")
     assert read("csv.txt", b"0.5, 1.5,2.5 ,3.5\n").tolist() == [0.5, 1.5, 2.5, 3.5]
+    # A count that fits does not make decimal commas right: said, where no value has a point.
+    with pytest.warns(UserWarning, match=r"line 1 '0,5 1,5' is read as values that commas "
+                                         r"separate, and the file has no decimal point"):
+        assert read("pairs.txt", b"0,5 1,5\n").tolist() == [0, 5, 1, 5]
 
 
 @pytest.mark.parametrize("flag,value", [("--preload", "-1"), ("--roughness", "-0.5"),

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -46,11 +47,12 @@ def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(name, str(path), "a readable text or .npy file",
                              type(exc).__name__ + ": " + str(exc).split(":")[0]) from None
-    rows, hint = [], ""
+    rows, hint, points = [], "", False
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.split("#", 1)[0]
-        if re.search(r"\d,\d", line):
-            hint = _COMMA_HINT
+        points = points or "." in line
+        if re.search(r"\d,\d", line) and not hint:
+            hint, first = _COMMA_HINT, (number, line.strip())
         line = line.replace(",", " ").strip()
         if not line:
             continue
@@ -61,6 +63,10 @@ def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
                                      f"line {number}: {token!r} is not a number")
             values.append(float(token))
         rows.append((number, values))
+    if hint and not points:  # "0,5" and not one decimal point: decimal commas, likely
+        warnings.warn(f"{name} {path}: line {first[0]} {first[1]!r} is read as values "
+                      "that commas separate, and the file has no decimal point; if those "
+                      "are decimal commas, write decimals with a point")
     return rows, hint
 
 
