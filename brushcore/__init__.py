@@ -20,6 +20,7 @@ The package is layered; imports point down only:
 from brushcore.data.io import read_curve, write_curve
 from brushcore.model import theory
 from brushcore.model.curve import simulate
+from brushcore.model.inputs import with_input_files
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
@@ -27,4 +28,4 @@ from brushcore.numerics.events.protocol import Waypoint
 from brushcore.validation import ParameterError
 
 __all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "file_params",
-           "read_curve", "simulate", "theory", "write_curve"]
+           "read_curve", "simulate", "theory", "with_input_files", "write_curve"]
