@@ -99,6 +99,7 @@ class _Parser(argparse.ArgumentParser):
         args = list(sys.argv[1:] if args is None else args)
         if self._subparsers is None:  # a sub-command's parser judges its own flags
             known = set(self._option_string_actions)
+            seen: dict[str, list[str]] = {}
             for token in args:
                 if token == "--":
                     break
@@ -107,6 +108,11 @@ class _Parser(argparse.ArgumentParser):
                     close = difflib.get_close_matches(flag, sorted(known), n=1)
                     hint = f" (did you mean {close[0]}?)" if close else ""
                     self.error(f"unknown argument {flag}{hint}")
+                if flag in known:
+                    seen.setdefault(self._option_string_actions[flag].dest, []).append(flag)
+            for flags in seen.values():
+                if len(flags) > 1:  # argparse keeps the last: say so, a typo may hide there
+                    warnings.warn(f"{flags[0]} is given {len(flags)} times: the last one counts")
         return super().parse_known_args(args, namespace)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import math
 import os
 import re
 import signal
@@ -143,14 +144,23 @@ SMALL = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01", 
 def test_bad_output_path_is_refused_before_computing(tmp_path, out, reason):
     (tmp_path / "a.nc").write_text("not a folder")
     os.mkfifo(tmp_path / "pipe")
-    res = _cli(*SMALL, "--grid", "256", "--pillars", "256", "--kbar", "0.455", "--out", out,
-               cwd=tmp_path)
+    big = ["simulate", "--layout", "regular", "--pillars", "256", "--kbar", "0.455", "--grid",
+           "256"]  # long enough that a late refusal would show
+    res = _cli(*big, "--out", out, cwd=tmp_path)
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
     assert res.stderr.startswith("brushcore: error: --out ") and reason in res.stderr, res.stderr
     # one line: the discretisation line, printed just before the pull-off, never came
     assert len(res.stderr.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.nc", "pipe"]  # nothing made
     assert not (tmp_path / "pipe").is_file()
+
+
+def test_a_flag_given_twice_warns_that_the_last_counts(tmp_path):
+    """argparse keeps a repeated flag's last value: said, since a typo may hide there."""
+    res = _cli(*SMALL, "--kbar", "inf", "--quiet", "--out", str(tmp_path / "c.nc"))
+    assert res.returncode == 0, res.stderr
+    assert "brushcore: warning: --kbar is given 2 times: the last one counts" in res.stderr
+    assert read_curve(tmp_path / "c.nc").attrs["kbar"] == math.inf
 
 
 def test_files_respect_the_umask(tmp_path):
