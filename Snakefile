@@ -15,6 +15,7 @@ configfile: "config/config.yaml"
 
 
 include: "workflow/rules/common.smk"
+include: "workflow/rules/layout_files.smk"
 
 
 check_config_files(workflow.configfiles)

@@ -630,10 +630,12 @@ def test_time_requests_follow_the_solver_settings() -> None:
 
 
 def _common_rules() -> dict:
-    """The functions of workflow/rules/common.smk (plain Python), as the Snakefile sees them."""
+    """The functions of workflow/rules/common.smk and layout_files.smk (plain
+    Python), as the Snakefile sees them (one scope, in the Snakefile's order)."""
     scope: dict = {}
-    path = REPO / "workflow/rules/common.smk"
-    exec(compile(path.read_text(), str(path), "exec"), scope)  # noqa: S102 - our own rules
+    for name in ("common.smk", "layout_files.smk"):
+        path = REPO / "workflow/rules" / name
+        exec(compile(path.read_text(), str(path), "exec"), scope)  # noqa: S102 - our own rules
     return scope
 
 

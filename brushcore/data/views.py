@@ -56,8 +56,7 @@ def without_brushes_as_made(sweep: xr.Dataset) -> xr.Dataset:
     """The sweep with every case given heights, stiffness or a gap map
     (``given_inputs``) set to NaN, the layouts left with no case dropped (and
     their snapshots), and without ``given_inputs``: the brushes a flat
-    theory speaks of.  (A brush given only stiffness factors is flat where
-    it is rigid: there it ran no array, and stays.)"""
+    theory speaks of."""
     if "given_inputs" not in sweep:
         return sweep
     given = sweep["given_inputs"] != ""
