@@ -887,6 +887,12 @@ def test_value_files_are_read_as_data(tmp_path):
     with open(tmp_path / "upper.NPY", "wb") as fh:  # np.save would append ".npy"
         np.save(fh, np.arange(4.0))
     assert read_pillar_values(tmp_path / "upper.NPY", 4, "heights").tolist() == [0, 1, 2, 3]
+    for shape in ((4, 1), (1, 4)):  # a column or a row is one value a pillar too
+        np.save(tmp_path / "column.npy", np.arange(4.0).reshape(shape))
+        assert read_pillar_values(tmp_path / "column.npy", 4, "heights").tolist() == [0, 1, 2, 3]
+    np.save(tmp_path / "square.npy", np.zeros((2, 2)))
+    with pytest.raises(ParameterError, match=r"shape \(2, 2\)\): allowed 4 values, one per"):
+        read_pillar_values(tmp_path / "square.npy", 4, "heights")
     for token in ("1_0", "\u0661", "0x10"):
         with pytest.raises(ParameterError, match=rf"line 1: '{token}' is not a number"):
             read("odd.txt", f"{token}\n1\n2\n3\n".encode())

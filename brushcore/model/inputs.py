@@ -103,6 +103,8 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
     path = Path(path)
     if _is_npy(path):
         arr = _load_npy(path, name)
+        if arr.ndim == 2 and 1 in arr.shape:  # a column or a row: one value a pillar all the same
+            arr = arr.ravel()
         if arr.ndim != 1 or arr.size != n_pillars:
             raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
                                  f"it holds an array of shape {arr.shape}")
