@@ -31,7 +31,7 @@ import xarray as xr
 
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID
-from brushcore.model.layout_file import file_layout
+from brushcore.model.layout_file import curve_layout
 from brushcore.model.shapes import shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
 from brushcore.validation import brief
@@ -139,9 +139,7 @@ class CaseKey:
 def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
     a = curve.attrs
-    layout = str(a["layout"])
-    if layout == "file":  # a brush of one's own, named by its file as the workflow names it
-        layout = file_layout(str(a.get("layout_file", "")))
+    layout = curve_layout(a)  # a brush of one's own by its file, as the workflow names it
     shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
                         float(a.get("orientation", 0.0)))  # files without a shape: discs
     return CaseKey(layout, int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
@@ -336,8 +334,8 @@ def build_sweep(
     phi = _common_attr(generated, "phi") if generated else None
     coords = _case_coords(curves)
     # A brush as made is not flat whatever its coordinates: the rough dims say so.
-    given = any(given_inputs(c) for _, c in curves.values())
-    dims = tuple(dict.fromkeys(case_dims(curves) + (ROUGH_DIMS if given else ())))
+    given = {key: given_inputs(curve) for key, (_, curve) in curves.items()}
+    dims = tuple(dict.fromkeys(case_dims(curves) + (ROUGH_DIMS if any(given.values()) else ())))
     shape = tuple(len(coords[d]) for d in dims)
     n_steps = max(curve.sizes["step"] for _, curve in curves.values())
     # Descriptions from a protocol's curve where there is one: its meanings
@@ -407,7 +405,7 @@ def build_sweep(
             sweep.attrs[name] = (next(iter(values.values())) if len(values) == 1
                                  else "; ".join(sorted(values)))
     return sweep.assign({**_varying_settings(curves, coords, dims),
-                         **_given_inputs(curves, coords, dims)})
+                         **_given_inputs(given, coords, dims)})
 
 
 def given_inputs(curve: xr.Dataset) -> str:
@@ -430,13 +428,12 @@ def given_inputs(curve: xr.Dataset) -> str:
     return " ".join(names)
 
 
-def _given_inputs(curves: dict, coords: dict[str, np.ndarray],
+def _given_inputs(given: dict[CaseKey, str], coords: dict[str, np.ndarray],
                   dims: Sequence[str]) -> dict[str, xr.DataArray]:
-    """``given_inputs`` per case where some curve's brush was given per-pillar
-    or per-element arrays (`BrushParams.given_inputs`): its roughness and
-    kbar_spread coordinates are 0 (nothing drawn), yet it is not flat.
-    Nothing where no curve was given any."""
-    given = {key: given_inputs(curve) for key, (_, curve) in curves.items()}
+    """``given_inputs`` per case (``given``: `given_inputs` of each case's
+    curve) where some curve's brush was given per-pillar or per-element
+    arrays: its roughness and kbar_spread coordinates are 0 (nothing drawn),
+    yet it is not flat.  Nothing where no curve was given any."""
     if not any(given.values()):
         return {}
     values = np.full(tuple(len(coords[d]) for d in dims), "", dtype=object)

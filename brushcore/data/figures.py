@@ -28,7 +28,7 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
-from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, file_layout
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, curve_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
@@ -44,9 +44,14 @@ RESOLUTION_TEXT = {"under_resolved": "under-resolved",
                    "coarsest_under_resolved": "coarsest under-resolved"}
 #: Colours of the layouts and markers of the pillar shapes in the lattice figure.
 LAYOUT_COLORS = {"regular": "C0", "hexagonal": "C1", "random": "C2"}
+SHAPE_MARKERS = {"disc": ("o", "-"), "square": ("s", "--"), "ellipse": ("D", ":")}
 #: Fig. 7's marker of each generated layout; others (files) take OTHER_MARKERS in turn.
 LAYOUT_MARKERS = {"regular": "s", "random": "o", "hexagonal": "h"}
 OTHER_MARKERS = ("^", "v", "D", "P", "X", "<", ">", "p", "*")
+#: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
+SOFT_WORK_FLOOR = 0.3
+# detached / attached pillar element on a white background (no pillar)
+SNAPSHOT_CMAP = ListedColormap(["white", "0.8", "tab:red"])
 
 
 def _layout_styles(layouts: Sequence[str]) -> dict[str, tuple[str, str]]:
@@ -61,11 +66,6 @@ def _layout_styles(layouts: Sequence[str]) -> dict[str, tuple[str, str]]:
             styles[layout] = (f"C{3 + other % 7}", OTHER_MARKERS[other % len(OTHER_MARKERS)])
             other += 1
     return styles
-SHAPE_MARKERS = {"disc": ("o", "-"), "square": ("s", "--"), "ellipse": ("D", ":")}
-#: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
-SOFT_WORK_FLOOR = 0.3
-# detached / attached pillar element on a white background (no pillar)
-SNAPSHOT_CMAP = ListedColormap(["white", "0.8", "tab:red"])
 
 
 def _new_figure(width: float, height: float) -> Figure:
@@ -562,6 +562,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     colors = {k: f"C{i}" for i, k in enumerate(kbars)}
     s_axis = np.asarray(sweep.roughness.values, dtype=float)
     given = _given(sweep, layout)  # heights given, not drawn: no Gaussian soft limit
+    soft_drawn = False
     protocol = sweep.attrs.get("protocol_normalized")  # its loads stand for the preload
     for ax, preload in zip(axes, preloads):
         for kbar in kbars:
@@ -577,11 +578,12 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                 soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
                 ax.plot(span, n_pillars**0.25 * np.asarray(soft), "--", lw=1,
                         color=colors[kbar])
+                soft_drawn = True
         ax.set_title(f"preload {preload:g} " + r"$F_K$" if protocol is None else
                      "last retraction of\n" + textwrap.fill(protocol, 36), fontsize=8)
         ax.set_xlabel(r"roughness $S$ [$d_K$]")
         ax.set_ylabel(FAD_LABEL)
-    if any(line.get_linestyle() == "--" for ax in axes for line in ax.get_lines()):
+    if soft_drawn:
         axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
     _side_legend(fig, axes)
     fig.suptitle(_rough_brush_title("Adhesive force of", layout, n_pillars, given,
@@ -705,9 +707,7 @@ def rough_loop(curve: xr.Dataset) -> Figure:
         title = {"preload": "the preload", "maximum force": r"$F_{ad}$"}.get(stage, stage)
         axm.set_title("contact at " + title, fontsize=9)
     a = curve.attrs
-    layout = (file_layout(str(a.get("layout_file", ""))) if a.get("layout") == "file"
-              else a.get("layout"))  # a file's brush by its name, as sweep.nc names it
-    fig.suptitle(f"{layout} brush, N = {a.get('n_pillars')}, "
+    fig.suptitle(f"{curve_layout(a)} brush, N = {a.get('n_pillars')}, "
                  rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, "
                  + _heights_text(float(a.get('roughness', 0.0)), str(a.get("given_inputs", "")))
                  + f", seed {a.get('seed')}")

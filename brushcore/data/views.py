@@ -43,15 +43,6 @@ def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
     return flat
 
 
-def made_layouts(sweep: xr.Dataset) -> list[str]:
-    """Layouts given heights, stiffness or a gap map in any case (``given_inputs``)."""
-    if "given_inputs" not in sweep:
-        return []
-    given = sweep["given_inputs"] != ""
-    given = given.any(dim=[d for d in given.dims if d != "layout"])
-    return [str(v) for v in sweep.layout.values[given.values]]
-
-
 def without_brushes_as_made(sweep: xr.Dataset) -> xr.Dataset:
     """The sweep with every case given heights, stiffness or a gap map
     (``given_inputs``) set to NaN, the layouts left with no case dropped (and

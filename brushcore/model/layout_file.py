@@ -30,6 +30,7 @@ have corner contacts: saved as an image, random 64 on 256^2 reads back as
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -223,6 +224,13 @@ def file_layout(path: str | Path) -> str:
     """A file brush's name in sweep.nc and the workflow's curve names: "file_" +
     the file's name without its suffix ("file_my_array" for arrays/my_array.npy)."""
     return FILE_LAYOUT_PREFIX + Path(path).stem
+
+
+def curve_layout(attrs: Mapping[str, object]) -> str:
+    """The layout a curve's attributes name, a file's brush by its file
+    (`file_layout`), as sweep.nc and the workflow name it."""
+    layout = str(attrs["layout"])
+    return file_layout(str(attrs.get("layout_file", ""))) if layout == "file" else layout
 
 
 def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:

@@ -309,7 +309,8 @@ def check_cases(config, main=True):
         raise ConfigError(f"config: {exc.in_terms_of(keys, sep=' = ')}") from None
     config_protocol(config)
     brushes = file_brushes(config)  # every layout file read once, and refused here
-    if not sweep_cases(config):
+    cases = sweep_cases(config)
+    if not cases:
         raise ConfigError(
             "config: the sweep has no brush; allowed a config that lists one under "
             "'regular', 'hexagonal', 'random', 'layout_files' or 'fig5.kbar'"
@@ -324,7 +325,7 @@ def check_cases(config, main=True):
     # One brush per geometry, at its smallest kbar: the layout does not
     # depend on kbar, and a stiffness spread's draws are smallest there.
     softest = {}
-    for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config):
+    for layout, n, kbar, seed, grid, phi, rough, shape in cases:
         key = (layout, n, seed, grid, phi, rough, shape)
         softest[key] = min(float(kbar), softest.get(key, math.inf))
     # A mistyped N would leave its brush on `grid` without a word; an entry

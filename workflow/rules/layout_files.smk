@@ -124,12 +124,6 @@ def _file_rough_tags(config, kbar, brush):
     ]
 
 
-def layout_file(config, layout):
-    """The file a `file_brushes` layout is read from; "" for generated layouts."""
-    brush = file_brushes(config).get(layout)
-    return brush.path if brush else ""
-
-
 def brush_files(config, layout):
     """The rule's `layout_file` param: "" for generated layouts, the map's path
     for a bare map, and for a brush as made {"layout": map, key: file, ...},
