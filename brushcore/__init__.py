@@ -21,11 +21,14 @@ from brushcore.data.io import read_curve, write_curve
 from brushcore.model import theory
 from brushcore.model.curve import simulate
 from brushcore.model.inputs import with_input_files
+from brushcore.model.layout import generated_table
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams
+from brushcore.model.pillar_table import read_pillar_table, save_pillar_table
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import Waypoint
 from brushcore.validation import ParameterError
 
 __all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "file_params",
-           "read_curve", "simulate", "theory", "with_input_files", "write_curve"]
+           "generated_table", "read_curve", "read_pillar_table", "save_pillar_table",
+           "simulate", "theory", "with_input_files", "write_curve"]

@@ -182,7 +182,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "x axis [degrees]")
     sim.add_argument("--layout-file", type=_path,
                      help="label map (.npy: -1 no pillar, 0..N-1 pillar) or image (.png: "
-                          "dark pillars on white) for --layout file")
+                          "dark pillars on white), of the grid's size, or a pillar table "
+                          "(.csv: columns x, y, radius in units of L, one disc a line; "
+                          "with --grid) for --layout file")
     rough = sim.add_argument_group(
         "rough, graded and preloaded brushes",
         "Heights in units of d_K = sqrt(2 pi dgamma a0 / E*), forces in F_K = sqrt(8 pi E* "
@@ -303,9 +305,13 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
                   shape=args.shape, aspect=args.aspect, orientation=args.orientation)
     if args.layout == "file":
         from brushcore.model.layout_file import file_params
+        from brushcore.model.pillar_table import is_table
 
         if args.layout_file is None:
             raise _Missing("--layout-file is required for --layout file")
+        if is_table(args.layout_file) and "grid" not in given:
+            raise _Missing("--grid is required for a pillar table (.csv): it is drawn on "
+                           "any grid")
         fixed = {"n_pillars": args.pillars, "grid": args.grid, "phi": args.phi}
         fixed = {k: v for k, v in fixed.items() if {"n_pillars": "pillars"}.get(k, k) in given}
         return file_params(args.layout_file, args.kbar, **common, **fixed)

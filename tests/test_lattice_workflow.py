@@ -383,6 +383,82 @@ CASES = [("regular", 1.0, "disc"), ("regular", 1.0, "square"), ("regular", 1e-3,
          ("random", 1.0, "square")]
 
 
+def _own_table(workdir: Path, name: str = "my_table") -> Path:
+    """A pillar table of one's own in `workdir`/arrays: the 2 x 2 lattice at phi 0.12."""
+    from brushcore import BrushParams, generated_table, save_pillar_table
+
+    (workdir / "arrays").mkdir(exist_ok=True)
+    return save_pillar_table(generated_table(BrushParams("regular", 4, 0.01, 64)),
+                             workdir / "arrays" / name)
+
+
+def test_a_pillar_table_runs_on_every_grid_into_the_convergence_study(tmp_path: Path) -> None:
+    """A table runs on the sweep's grids (its N's grid_by_n or grid) at the
+    discs' phi: sweep.nc holds it at each grid with the numbers of `simulate`
+    (to round-off), the convergence study extrapolates it, and editing the
+    table reruns its curves."""
+    import shutil
+
+    from brushcore import file_params, simulate
+    from test_workflow import IGNORE, REPO
+
+    work = tmp_path / "repo"
+    shutil.copytree(REPO, work, ignore=IGNORE)
+    path = _own_table(work)
+    config = tmp_path / "table.yaml"
+    config.write_text(yaml.safe_dump({
+        "regular": [], "random": [], "kbar": [0.01, math.inf], "grid": [48, 64],
+        "grid_by_n": [{"n_pillars": 4, "grid": [48, 64, 96]}],
+        "layout_files": ["arrays/my_table.csv"], "fig5": {"kbar": []}}))
+    proc = snakemake(work, "--cores", "2", "--configfile", "config/test.yaml", str(config))
+    assert proc.returncode == 0, output(proc)[-4000:]
+    with xr.open_dataset(work / "results/sweep.nc") as sweep:
+        assert sweep.layout.values.tolist() == ["file_my_table"]
+        assert sweep.grid.values.tolist() == [48, 64, 96]
+        for kbar in (0.01, math.inf):
+            for grid in (48, 64, 96):
+                case = sweep.sel(layout="file_my_table", n_pillars=4, kbar=kbar,
+                                 grid=grid).squeeze()
+                direct = simulate(file_params(path, kbar, grid=grid))
+                for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+                    assert float(case[name]) == pytest.approx(float(direct[name]),
+                                                              rel=1e-12)
+    with xr.open_dataset(work / "results/convergence.nc") as study:
+        fits = study.sel(layout="file_my_table", n_pillars=4).squeeze()
+        assert np.isfinite(fits.adhesive_force_normalized.values).all()
+        assert fits.sizes["grid"] == 3
+    assert "file_my_table" in (work / "results/convergence.md").read_text()
+
+    def planned() -> int:
+        dry = snakemake(work, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                        str(config))
+        assert dry.returncode == 0, output(dry)
+        return len(set(re.findall(r"results/curves/file_my_table/[^\s,]+\.nc",
+                                  output(dry))))
+
+    assert planned() == 0
+    path.write_text(path.read_text().replace("0.25, 0.25,", "0.26, 0.25,"))
+    assert planned() == 6
+
+
+@pytest.mark.parametrize("entry, message", [
+    ({"layout": "arrays/my_table.csv", "gap_map": "arrays/gap.npy"},
+     r"layout_files.0.gap_map': 'arrays/gap.npy' is invalid \(the table "
+     r"'arrays/my_table.csv' runs on grids \[32, 64\], and a gap map fits one\)"),
+    ("arrays/near.csv", r"grid = 32 is invalid \(pillars 0 and 1 at element .*\): "
+     r"allowed grid \d+, the next"),
+], ids=["gap map on two grids", "discs too close for a grid"])
+def test_a_pillar_table_that_a_grid_cannot_run_is_refused_at_plan_time(
+        repo_copy: Path, tmp_path: Path, entry, message: str) -> None:  # noqa: F811
+    _own_table(repo_copy)
+    np.save(repo_copy / "arrays" / "gap.npy", np.zeros((32, 32)))
+    (repo_copy / "arrays" / "near.csv").write_text(  # 0.005 L apart: they touch on 32^2
+        "x, y, radius\n0.3, 0.3, 0.1\n0.505, 0.3, 0.1\n")
+    assert_refused_at_plan_time(repo_copy, tmp_path, {
+        "regular": [], "random": [], "grid": [32, 64], "layout_files": [entry],
+        "fig5": {"kbar": []}}, message)
+
+
 @pytest.fixture(scope="module")
 def shape_curves(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     from brushcore import BrushParams, simulate

@@ -42,22 +42,40 @@ _COMMA_HINT = "; commas separate values: write decimals with a point"
 def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
     """(line number, values) of every non-empty line of a text file, and
     `_COMMA_HINT` where a comma stands between digits ("" otherwise)."""
+    _, rows, hint = table_rows(path, name, header=False)
+    return rows, hint
+
+
+def table_rows(path: Path, name: str, header: bool = True
+               ) -> tuple[tuple[int, list[str]] | None, list[tuple[int, list[float]]], str]:
+    """A text file's lines as `_rows` reads them, after a header line.
+
+    Returns
+    -------
+    ((line number, column names) of the first non-empty line, or None where
+    it holds numbers only or ``header`` is False; the rows of numbers after
+    it; `_COMMA_HINT` or "").
+    """
     try:
         text = path.read_text(encoding="utf-8-sig")  # a BOM is no character of line 1
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(name, str(path), "a readable text or .npy file",
                              type(exc).__name__ + ": " + str(exc).split(":")[0]) from None
-    rows, hint, points = [], "", False
+    names, rows, hint, points = None, [], "", False
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.split("#", 1)[0]
         points = points or "." in line
         if re.search(r"\d,\d", line) and not hint:
             hint, first = _COMMA_HINT, (number, line.strip())
-        line = line.replace(",", " ").strip()
-        if not line:
+        tokens = line.replace(",", " ").split()
+        if not tokens:
+            continue
+        if header and not rows and names is None \
+                and not all(_NUMBER.fullmatch(token) for token in tokens):
+            names = (number, tokens)
             continue
         values = []
-        for token in line.split():
+        for token in tokens:
             if not _NUMBER.fullmatch(token):
                 raise ParameterError(name, str(path), "numbers only",
                                      f"line {number}: {token!r} is not a number")
@@ -67,7 +85,7 @@ def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
         warnings.warn(f"{name} {path}: line {first[0]} {first[1]!r} is read as values "
                       "that commas separate, and the file has no decimal point; if those "
                       "are decimal commas, write decimals with a point")
-    return rows, hint
+    return names, rows, hint
 
 
 #: What each kind of per-pillar value may be (`read_pillar_values`'s ``kind``).

@@ -8,7 +8,8 @@ downstream (springs, snapshots, counts) works from it, so any layout
 
 Layouts: "regular" (square lattice), "random" (random sequential
 addition), "hexagonal" (triangular lattice, see `hexagonal_centres`) and
-"file" (a label map or an image, see `layout_file`).  Pillars of one map
+"file" (a label map or an image, see `layout_file`, or a table of disc
+pillars drawn on any grid, see `pillar_table`).  Pillars of one map
 never touch: no two different pillars share an element edge (4-neighbour
 adjacency); a shared corner is allowed.  (Random discs on a grid coarser
 than 512 are the exception: their gap is a fixed length, `random_gap`,
@@ -26,9 +27,10 @@ import numpy as np
 from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
 from brushcore.model.labelmap import check_not_touching
 from brushcore.model.layout_file import read_label_map
+from brushcore.model.pillar_table import PillarTable, is_table, read_pillar_table
 from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_GRID, MAX_PHI_ERROR, MIN_GRID,
                                     RANDOM_GAP_GRID, BrushParams)
-from brushcore.validation import ParameterError, is_integer
+from brushcore.validation import ParameterError, is_integer, require
 from brushcore.model.shapes import PillarShape
 
 
@@ -151,24 +153,29 @@ def hexagonal_centres(n_pillars: int, side: float) -> np.ndarray:
     return np.column_stack([y, x])
 
 
-def label_map(centres: np.ndarray, radius: float, n: int, h: float) -> np.ndarray:
-    """Pillar index of each element (-1 outside all pillars), shape (n, n).
+def label_map(centres: np.ndarray, radius: float | np.ndarray, n: int, h: float
+              ) -> np.ndarray:
+    """Pillar index of each element (-1 outside all pillars), shape (n, n):
+    discs of ``radius`` (one for all, or one a pillar) [length] at
+    ``centres`` (y, x) [length] on n x n elements of size ``h``.
 
     Each disc only touches the elements in its bounding box, so the cost is
     O(N a^2), not O(N n^2).
     """
     labels = np.full((n, n), -1, dtype=np.int32)
-    r_el = radius / h
+    radii = np.broadcast_to(np.asarray(radius, dtype=float), (len(centres),))
     for p, (cy, cx) in enumerate(centres / h):
+        r_el = radii[p] / h
         i0, i1 = max(0, int(math.floor(cy - r_el)) - 1), min(n, int(math.ceil(cy + r_el)) + 1)
         j0, j1 = max(0, int(math.floor(cx - r_el)) - 1), min(n, int(math.ceil(cx + r_el)) + 1)
         yy = np.arange(i0, i1)[:, None] + 0.5 - cy
         xx = np.arange(j0, j1)[None, :] + 0.5 - cx
         inside = yy**2 + xx**2 <= r_el**2
         block = labels[i0:i1, j0:j1]
-        if np.any(block[inside] >= 0):
-            raise ParameterError(f"pillar {p} overlaps another on the grid: allowed layouts "
-                                 "whose pillars do not share elements")
+        if np.any(block[inside] >= 0):  # discs that touch where an element centre lies
+            q = int(block[inside & (block >= 0)][0])
+            raise ParameterError("grid", n, "a grid whose element centres no two pillars "
+                                 "share", f"pillars {q} and {p} share an element")
         block[inside] = p
     return labels
 
@@ -367,8 +374,8 @@ def build_labels(params: BrushParams) -> np.ndarray:
     try:
         return _checked_labels(params)
     except ParameterError as exc:
-        if params.layout == "file":
-            raise
+        if params.layout == "file" and not is_table(params.layout_file):
+            raise  # a map or image fits its own grid only
         # a gap map fits one grid only, and the label map does not depend on it
         raise grid_hint(exc, lambda grid: replace(params, grid=grid, gap_map=None),
                         params.grid) from None
@@ -376,6 +383,13 @@ def build_labels(params: BrushParams) -> np.ndarray:
 
 def _checked_labels(params: BrushParams) -> np.ndarray:
     """`build_labels` without the search for a grid to suggest."""
+    if params.layout == "file" and is_table(params.layout_file):
+        labels = table_labels(read_pillar_table(params.layout_file), params.grid)
+        _check_table_matches(params)
+        check_not_touching(labels, "grid", params.grid,
+                           "a finer grid, on which no two pillars share an element edge")
+        check_discretisation(params, labels)
+        return labels
     if params.layout == "file":
         labels = read_label_map(params.layout_file, params.grid)
         _check_file_matches(params, labels)
@@ -406,6 +420,43 @@ def _check_file_matches(params: BrushParams, labels: np.ndarray) -> None:
     if abs(phi_file / params.phi - 1.0) > 1e-9:
         raise ParameterError("phi", params.phi,
                              f"{phi_file!r}, the filling factor of {params.layout_file}")
+
+
+def table_labels(table: PillarTable, grid: int) -> np.ndarray:
+    """A pillar table's label map on ``grid`` x ``grid`` elements (the table
+    is in units of L, so the element size is 1 / grid), drawn as
+    generated discs are (`label_map`)."""
+    return label_map(table.centres, table.radii, grid, 1.0 / grid)
+
+
+def generated_table(params: BrushParams) -> PillarTable:
+    """A generated layout of discs as a pillar table (units of L), to run it
+    on other grids or give it measured heights (`save_pillar_table`).
+
+    Raises
+    ------
+    ParameterError
+        For ``shape`` other than discs (a table holds discs) and for file
+        layouts.
+    """
+    require(params.layout != "file", "layout", params.layout,
+            "a generated layout (regular, hexagonal, random): a file brush is its file")
+    require(params.shape == "disc", "shape", params.shape, "disc: a pillar table holds discs")
+    centres = generated_centres(params) / params.side
+    radii = np.full(params.n_pillars, params.pillar_radius / params.side)
+    return PillarTable(centres, radii)
+
+
+def _check_table_matches(params: BrushParams) -> None:
+    """The table's pillar count and filling factor (pi sum r^2) must be the
+    parameters' own (`brushcore.file_params` sets them)."""
+    table = read_pillar_table(params.layout_file)
+    if table.n_pillars != params.n_pillars:
+        raise ParameterError("n_pillars", params.n_pillars,
+                             f"{table.n_pillars}, the count of {params.layout_file}")
+    if abs(table.phi / params.phi - 1.0) > 1e-9:
+        raise ParameterError("phi", params.phi,
+                             f"{table.phi!r}, the filling factor of {params.layout_file}")
 
 
 def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:

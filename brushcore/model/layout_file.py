@@ -1,4 +1,6 @@
-"""Layouts read from a file: an integer label map (.npy) or an image (.png).
+"""Layouts read from a file: an integer label map (.npy) or an image (.png),
+which fit one grid, or a table of disc pillars (.csv, `pillar_table`), drawn
+on any grid.
 
 Files come from other people's tools, so they are read as data, never as
 code, and refused with the file named when they do not fit:
@@ -39,6 +41,7 @@ from brushcore.model.params import BrushParams
 
 from brushcore.model.labelmap import check_not_touching
 from brushcore.model.inputs import npy_problem
+from brushcore.model.pillar_table import is_table, read_pillar_table
 from brushcore.validation import ParameterError
 
 #: Largest image accepted (the largest grid, 8192^2), checked before decoding.
@@ -238,17 +241,22 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
 
     Parameters
     ----------
-    path : the ``.npy`` label map or ``.png`` image
+    path : the ``.npy`` label map or ``.png`` image, or a ``.csv`` pillar
+        table (`brushcore.model.pillar_table`), which needs ``grid``
     kbar : normalised spring stiffness k / (E* L)
     **kwargs : any other `BrushParams` field (e_star, dgamma, h, ...);
-        n_pillars, grid or phi, if given, must equal the file's
+        n_pillars, grid or phi, if given, must equal the file's (a table
+        fits every grid; its phi is pi sum r^2)
 
     Raises
     ------
     ParameterError
-        If the file is refused (see `read_label_map`) or a given n_pillars,
-        grid or phi differs from the file's.
+        If the file is refused (see `read_label_map`, `read_pillar_table`),
+        a given n_pillars, grid or phi differs from the file's, or a table
+        comes without a grid.
     """
+    if is_table(path):
+        return _table_params(path, kbar, kwargs)
     labels = read_label_map(path, kwargs.get("grid"))
     found = describe(labels)
     for name in ("n_pillars", "grid"):
@@ -275,3 +283,19 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
                    else "a filling factor in (0, 0.5]" if exc.name == "phi" else exc.allowed)
         raise _refuse(path, allowed, found_as + (f": {exc.reason}" if exc.reason else ""),
                       image_rule=exc.name == "phi") from None
+
+
+def _table_params(path: str | Path, kbar: float, kwargs: dict) -> BrushParams:
+    """`file_params` of a pillar table: N and phi from the table, the grid given."""
+    table = read_pillar_table(path)
+    if kwargs.get("grid") is None:
+        raise ParameterError("grid", None, "the grid to draw the table on (elements per "
+                             "side: a pillar table fits any grid)", f"{path} is a pillar table")
+    if "n_pillars" in kwargs and kwargs["n_pillars"] != table.n_pillars:
+        raise ParameterError("n_pillars", kwargs["n_pillars"],
+                             f"{table.n_pillars}, the value of {path}")
+    if "phi" in kwargs and abs(kwargs["phi"] / table.phi - 1.0) > 1e-9:
+        raise ParameterError("phi", kwargs["phi"], f"{table.phi!r}, the value of {path} "
+                             "(pi sum r^2)")
+    kwargs.update(n_pillars=table.n_pillars, phi=table.phi)
+    return BrushParams(layout="file", kbar=kbar, layout_file=str(path), **kwargs)

@@ -551,28 +551,32 @@ def sweep_cases(config):
                     for shape in shapes:
                         cases.add(("random", n, kbar_tag(kbar), seed, rough, shape))
     ordered = sorted(cases, key=lambda c: (c[0], c[1], float(c[2]), c[3], c[5], c[4]))
-    files = set()  # on the file's own grid, with its own N and phi; discs of any shape
+    # A map on its own grid, a table on the sweep's, with the file's N and
+    # phi; discs of any shape.
+    files = set()
     for layout, brush in file_brushes(config).items():
+        grids = [brush.grid] if brush.grid else case_grids(config, brush.n_pillars)
         for kbar in config["kbar"]:
             for rough in _file_rough_tags(config, kbar, brush):
                 for seed in _deterministic_seeds(config, rough):
-                    files.add(
-                        (
-                            layout,
-                            brush.n_pillars,
-                            kbar_tag(kbar),
-                            seed,
-                            brush.grid,
-                            brush.phi,
-                            rough,
-                            "",
+                    for grid in grids:
+                        files.add(
+                            (
+                                layout,
+                                brush.n_pillars,
+                                kbar_tag(kbar),
+                                seed,
+                                grid,
+                                brush.phi,
+                                rough,
+                                "",
+                            )
                         )
-                    )
     return [
         (*case[:4], grid, phi, case[4], case[5])
         for case in ordered
         for grid in case_grids(config, case[1])
-    ] + sorted(files, key=lambda c: (c[0], float(c[2]), c[3], c[6]))
+    ] + sorted(files, key=lambda c: (c[0], float(c[2]), c[3], c[6], c[4]))
 
 
 def grid_list(value):
@@ -594,13 +598,16 @@ def wants_convergence(config):
 
 
 def sweep_brushes(config):
-    """Every pillar number N of the sweep (every layout and the Fig. 5 brush)."""
+    """Every pillar number N run on the sweep's grids (every layout, the Fig. 5
+    brush and pillar tables)."""
     fig5 = config["fig5"]
+    tables = [b.n_pillars for b in file_brushes(config).values() if b.grid is None]
     return {
         *config["regular"],
         *config["hexagonal"],
         *config["random"],
         *([fig5["n_pillars"]] if fig5["kbar"] else []),
+        *tables,
     }
 
 

@@ -15,6 +15,7 @@ from typing import NamedTuple
 from brushcore.model.inputs import INPUT_FILES, with_input_files
 from brushcore.model.layout_file import file_layout, file_params
 from brushcore.model.params import ParameterError
+from brushcore.model.pillar_table import is_table, read_pillar_table
 
 #: What a layout file's name (without suffix) may hold: it names curve files.
 _FILE_NAME = re.compile(r"[A-Za-z0-9._-]+")
@@ -23,10 +24,10 @@ _FILE_NAME = re.compile(r"[A-Za-z0-9._-]+")
 class FileBrush(NamedTuple):
     """A `layout_files` entry: its map, what the map holds, the brush as made."""
 
-    path: str  # the label map or image
+    path: str  # the label map or image, or a pillar table
     n_pillars: int
-    grid: int
-    phi: float  # realised by the map
+    grid: int | None  # the map's; None for a table, drawn on the sweep's grids
+    phi: float  # realised by the map; a table's pi sum r^2
     # per-pillar and per-element files by key (heights, kbar_factors, gap_map)
     inputs: dict
 
@@ -76,13 +77,23 @@ def file_brushes(config):
             geometry = _file_geometry(path)
         except ParameterError as exc:
             raise _refused_file(key, path, exc) from None
-        try:
-            _check_inputs(path, tuple(sorted(inputs.items())), kbar)
-        except ParameterError as exc:
-            name = next(k for k in inputs if exc.name in (k, INPUT_FILES[k]))
-            raise _refused_file(
-                f"config key 'layout_files.{i}.{name}'", inputs[name], exc
-            ) from None
+        grids = case_grids(config, geometry[0]) if geometry[1] is None else [None]
+        if "gap_map" in inputs and len(grids) > 1:
+            raise ConfigError(
+                f"config key 'layout_files.{i}.gap_map': {inputs['gap_map']!r} is "
+                f"invalid (the table {path!r} runs on grids {grids}, and a gap map "
+                "fits one): allowed a sweep of one grid for a table with a gap map"
+            )
+        for grid in grids if inputs else []:
+            try:
+                _check_inputs(path, tuple(sorted(inputs.items())), kbar, grid)
+            except ParameterError as exc:
+                name = next((k for k in inputs if exc.name in (k, INPUT_FILES[k])), None)
+                if name is None:  # a table too coarse for a grid: check_cases says so
+                    continue
+                raise _refused_file(
+                    f"config key 'layout_files.{i}.{name}'", inputs[name], exc
+                ) from None
         for name, drawn in _REPLACES.items():
             if name in inputs and 0.0 not in [float(v) for v in config[drawn]]:
                 raise ConfigError(
@@ -95,15 +106,21 @@ def file_brushes(config):
 
 
 @functools.lru_cache(maxsize=None)
-def _check_inputs(path, inputs, kbar):
+def _check_inputs(path, inputs, kbar, grid):
     """Read a file brush's per-pillar and per-element files ((key, path)
-    pairs) at ``kbar`` once; a `ParameterError` where one does not fit."""
-    with_input_files(file_params(path, kbar, allow_coarse=True), dict(inputs))
+    pairs) at ``kbar`` once, on ``grid`` (a table's; None: the map's); a
+    `ParameterError` where one does not fit."""
+    drawn_on = {} if grid is None else {"grid": grid}
+    with_input_files(file_params(path, kbar, allow_coarse=True, **drawn_on), dict(inputs))
 
 
 @functools.lru_cache(maxsize=None)
 def _file_geometry(path):
-    """(N, grid, phi) a layout file holds, read once (its checks come with each case)."""
+    """(N, grid, phi) a layout file holds, read once (its checks come with each
+    case); grid None for a pillar table, which runs on the sweep's grids."""
+    if is_table(path):
+        table = read_pillar_table(path)
+        return table.n_pillars, None, table.phi
     params = file_params(path, 1.0, allow_coarse=True)
     return params.n_pillars, params.grid, params.phi
 
@@ -136,14 +153,17 @@ def brush_files(config, layout):
 
 
 def simulate_inputs(config):
-    """The rule's input function: a brush as made's map and its per-pillar and
-    per-element files, so that editing one reruns its curves; nothing for
-    generated layouts and bare maps (whose curves, made before brushes as
-    made, would otherwise all rerun: Snakemake sees a new set of inputs)."""
+    """The rule's input function: a pillar table, and a brush as made's map and
+    its per-pillar and per-element files, so that editing one reruns its
+    curves; nothing for generated layouts and bare maps (whose curves, made
+    before brushes as made, would otherwise all rerun: Snakemake sees a new
+    set of inputs)."""
 
     def inputs(wildcards):
         brush = file_brushes(config).get(wildcards.layout)
-        return [brush.path, *brush.inputs.values()] if brush and brush.inputs else []
+        if brush and (brush.inputs or brush.grid is None):  # a table is new: no old curves
+            return [brush.path, *brush.inputs.values()]
+        return []
 
     return inputs
 

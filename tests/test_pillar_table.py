@@ -1,0 +1,173 @@
+"""Pillar tables: a layout as a list of discs in units of L, drawn on any grid.
+
+A table written from a generated layout must draw that layout's label map
+and pull off as it does; discs of unequal radius (which no generated layout
+has) must let go as independent pillars where they stand far apart; what
+does not fit is refused, naming the file and the line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from brushcore import (BrushParams, ParameterError, file_params, generated_table,
+                       read_pillar_table, save_pillar_table, simulate, theory)
+from brushcore.model.layout import build_labels
+from brushcore.model.pillar_table import PillarTable
+
+F_AD, W = "adhesive_force_normalized", "work_of_separation_normalized"
+
+
+def _table(tmp_path: Path, text: str, name: str = "t.csv") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("layout, n, grid", [("regular", 256, 256), ("random", 64, 256),
+                                             ("hexagonal", 64, 256), ("random", 220, 1024)])
+def test_a_table_of_a_generated_layout_draws_its_label_map(tmp_path: Path, layout: str,
+                                                           n: int, grid: int) -> None:
+    params = BrushParams(layout, n, 0.01, grid)
+    path = save_pillar_table(generated_table(params), tmp_path / layout)
+    assert path.suffix == ".csv"
+    table = read_pillar_table(path)
+    assert table.n_pillars == n and table.phi == pytest.approx(params.phi, rel=1e-12)
+    assert np.array_equal(build_labels(file_params(path, 0.01, grid=grid)),
+                          build_labels(params))
+
+
+@pytest.mark.parametrize("kbar", [0.01, math.inf])
+def test_a_table_of_a_lattice_pulls_off_as_the_lattice(tmp_path: Path, kbar: float) -> None:
+    """The same elements, the same mirror symmetry and precision: the same numbers."""
+    params = BrushParams("regular", 16, kbar, 64)
+    path = save_pillar_table(generated_table(params), tmp_path / "lattice")
+    own, generated = simulate(file_params(path, kbar, grid=64)), simulate(params)
+    assert own.attrs["symmetry_fold"] == generated.attrs["symmetry_fold"] == 4
+    for name in (F_AD, W):
+        assert float(own[name]) == pytest.approx(float(generated[name]), rel=1e-12)
+
+
+def test_one_table_runs_on_every_grid_with_the_discs_phi(tmp_path: Path) -> None:
+    path = _table(tmp_path, "# two discs\ny, radius, x\n0.3, 0.1, 0.25\n0.7, 0.05, 0.75\n")
+    table = read_pillar_table(path)  # columns in any order
+    assert table.centres.tolist() == [[0.3, 0.25], [0.7, 0.75]]
+    assert table.phi == pytest.approx(math.pi * (0.01 + 0.0025), rel=1e-12)
+    for grid in (64, 100, 256):
+        params = file_params(path, 0.01, grid=grid)
+        assert (params.n_pillars, params.grid, params.phi) == (2, grid, table.phi)
+        labels = build_labels(params)
+        counts = np.bincount(labels[labels >= 0])
+        # each disc's elements: pi r^2 n^2 to within its perimeter's elements
+        assert counts == pytest.approx(math.pi * (table.radii * grid) ** 2,
+                                       abs=2 * math.pi * 0.1 * grid)
+        # the larger disc is pillar 0, centred at (y, x) = (0.3, 0.25) L: its
+        # elements' centroid within half an element (the staircase's offset)
+        iy, ix = np.nonzero(labels == 0)
+        assert (iy.mean() + 0.5) / grid == pytest.approx(0.3, abs=0.5 / grid)
+        assert (ix.mean() + 0.5) / grid == pytest.approx(0.25, abs=0.5 / grid)
+
+
+def test_soft_discs_of_unequal_radius_let_go_as_independent_pillars(tmp_path: Path) -> None:
+    """Two soft pillars (radii 0.08 and 0.06 L, 0.6 L apart): the elastic
+    foundation lets the small one go at its own force f_b, when both springs
+    hold k lambda_b, so F_ad = 2 f_b > f_a (`theory.foundation_pull_off`, with
+    each pillar's f_c from a run of that disc alone on the same grid).  What
+    the model adds is the neighbour's field: its gradient f / (pi E* r^2)
+    across the face of the pillar, whose tip cannot tilt, shifts the edge
+    stress by 4 E* a^2 theta / f of itself (a flat punch's tilt, Johnson
+    §5.2), i.e. by (4 / pi) (a / r)^2 = 1.3 %: the tolerance."""
+    kbar, grid = 1e-6, 128
+    discs = {"a": (0.2, 0.5, 0.08), "b": (0.8, 0.5, 0.06)}
+
+    def force(name: str, *rows: tuple[float, float, float]) -> tuple[float, float]:
+        table = PillarTable(np.array([[y, x] for x, y, _ in rows]),
+                            np.array([r for *_, r in rows]))
+        curve = simulate(file_params(save_pillar_table(table, tmp_path / name), kbar,
+                                     grid=grid))
+        return float(curve.adhesive_force), float(curve.attrs["side_length"])
+
+    f_a, side = force("a", discs["a"])
+    f_b, _ = force("b", discs["b"])
+    pair, _ = force("pair", discs["a"], discs["b"])
+    k = theory.stiffness_from_kbar(kbar, 1.0, side)
+    target = theory.foundation_pull_off(np.zeros(2), np.full(2, k), np.array([f_a, f_b]))
+    assert target == pytest.approx(2 * f_b, rel=1e-12) and target > f_a
+    assert abs(pair / target - 1) < 4 / math.pi * (0.06 / 0.6) ** 2, (pair, target)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("0.3, 0.3, 0.1\n", r"first line holds numbers\): allowed a header line"),
+    ("x, y, r\n0.3, 0.3, 0.1\n", r"line 1: unknown column 'r'\): allowed a header"),
+    ("x, y, radius, height\n0.3, 0.3, 0.1, 2\n",
+     r"unknown column 'height' \(heights and stiffness go in their own files"),
+    ("x, y, radius, x\n", r"column 'x' given twice"),
+    ("x, radius\n", r"no column 'y'"),
+    ("x, y, radius\n", r"holds no pillar"),
+    ("x, y, radius\n0.3, 0.3\n", r"line 2 holds 2 values"),
+    ("x y radius\n0,3 0,3 0,1\n", r"line 2 holds 6 values; commas separate values"),
+    ("x, y, radius\n0.3, nan, 0.1\n", r"line 2: y = nan\): allowed finite numbers"),
+    ("x, y, radius\n0.3, 0.3, 0\n", r"line 2: radius = 0.0\): allowed radii > 0"),
+    ("x, y, radius\n# a comment\n0.3, 0.3, 0.1\n0.95, 0.5, 0.1\n",
+     r"line 4: x = 0.95, y = 0.5, radius = 0.1\): allowed discs inside the square"),
+    ("x, y, radius\n0.3, 0.3, 0.1\n0.7, 0.7, 0.1\n0.45, 0.3, 0.1\n",
+     r"lines 2 and 4 \(pillars 0 and 2\) are 0.15 apart, radii 0.1 \+ 0.1\): allowed "
+     r"discs that do not overlap"),
+    ("x, y, radius\n0.25, 0.25, 0.24\n0.75, 0.75, 0.24\n0.25, 0.75, 0.24\n",
+     r"pi sum r\^2 = 0.5429\): allowed discs covering at most half"),
+], ids=["no header", "unknown column", "heights column", "twice", "missing", "empty",
+        "short row", "decimal commas", "nan", "zero radius", "outside", "overlap", "phi"])
+def test_a_table_that_does_not_fit_is_refused_naming_the_line(
+        tmp_path: Path, text: str, message: str) -> None:
+    path = _table(tmp_path, text)
+    with pytest.warns(UserWarning) if "0,3" in text else contextlib.nullcontext():
+        with pytest.raises(ParameterError, match=message) as err:
+            file_params(path, 0.01, grid=128)
+    assert err.value.name == "layout_file" and str(path) in str(err.value)
+
+
+def test_a_grid_that_cannot_keep_two_discs_apart_names_one_that_can(tmp_path: Path) -> None:
+    """Discs 0.005 L apart share element edges on 64^2: the grid is refused,
+    with the next grid that separates them (a table runs on any grid)."""
+    path = _table(tmp_path, "x, y, radius\n0.3, 0.3, 0.1\n0.505, 0.3, 0.1\n")
+    with pytest.raises(ParameterError, match=r"grid=64 is invalid \(pillars 0 and 1 at "
+                       r"element .*allowed grid \d+, the next") as err:
+        build_labels(file_params(path, 0.01, grid=64))
+    suggested = int(str(err.value).split("allowed grid ")[1].split(",")[0])
+    assert build_labels(file_params(path, 0.01, grid=suggested)).max() == 1
+    with pytest.raises(ParameterError, match=r"grid=None is invalid .* pillar table"):
+        file_params(path, 0.01)
+    with pytest.raises(ParameterError, match=r"n_pillars=3 is invalid.*allowed 2"):
+        file_params(path, 0.01, grid=128, n_pillars=3)
+
+
+def test_non_disc_layouts_have_no_table() -> None:
+    with pytest.raises(ParameterError, match="shape='square' is invalid"):
+        generated_table(BrushParams("regular", 16, 0.01, 64, shape="square"))
+
+
+def test_the_cli_runs_a_table_on_the_grid_it_is_given(tmp_path: Path) -> None:
+    path = save_pillar_table(generated_table(BrushParams("regular", 4, 0.01, 64)),
+                             tmp_path / "four")
+    cli = [sys.executable, "-m", "brushcore", "simulate", "--layout", "file",
+           "--layout-file", str(path), "--kbar", "0.01", "--quiet"]
+    missing = subprocess.run(cli + ["--out", str(tmp_path / "a.nc")], capture_output=True,
+                             text=True)
+    assert missing.returncode == 2
+    assert "--grid is required for a pillar table" in missing.stderr
+    done = subprocess.run(cli + ["--grid", "48", "--out", str(tmp_path / "b.nc")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "b.nc") as curve:
+        assert (int(curve.attrs["grid"]), int(curve.attrs["n_pillars"])) == (48, 4)
+        direct = simulate(file_params(path, 0.01, grid=48))
+        assert float(curve[F_AD]) == pytest.approx(float(direct[F_AD]), rel=1e-12)
