@@ -88,7 +88,9 @@ def file_brushes(config):
             try:
                 _check_inputs(path, tuple(sorted(inputs.items())), kbar, grid)
             except ParameterError as exc:
-                name = next((k for k in inputs if exc.name in (k, INPUT_FILES[k])), None)
+                name = next(
+                    (k for k in inputs if exc.name in (k, INPUT_FILES[k])), None
+                )
                 if name is None:  # a table too coarse for a grid: check_cases says so
                     continue
                 raise _refused_file(
@@ -111,7 +113,9 @@ def _check_inputs(path, inputs, kbar, grid):
     pairs) at ``kbar`` once, on ``grid`` (a table's; None: the map's); a
     `ParameterError` where one does not fit."""
     drawn_on = {} if grid is None else {"grid": grid}
-    with_input_files(file_params(path, kbar, allow_coarse=True, **drawn_on), dict(inputs))
+    with_input_files(
+        file_params(path, kbar, allow_coarse=True, **drawn_on), dict(inputs)
+    )
 
 
 @functools.lru_cache(maxsize=None)
@@ -161,7 +165,9 @@ def simulate_inputs(config):
 
     def inputs(wildcards):
         brush = file_brushes(config).get(wildcards.layout)
-        if brush and (brush.inputs or brush.grid is None):  # a table is new: no old curves
+        if brush and (
+            brush.inputs or brush.grid is None
+        ):  # a table is new: no old curves
             return [brush.path, *brush.inputs.values()]
         return []
 
