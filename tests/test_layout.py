@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -114,3 +115,39 @@ def test_random_discs_touch_only_below_the_gap_grid() -> None:
     counts = {grid: count_touching_pairs(build_labels(BrushParams("random", 220, 1.0, grid)))
               for grid in (256, 512, 1024)}
     assert counts[256] > 0 and counts[512] == counts[1024] == 0, counts
+
+
+def test_a_file_layout_with_pillars_two_elements_across_needs_allow_coarse(
+        tmp_path: Path) -> None:
+    """The radius rule reads a file's mean equal-area radius (9.1 elements for
+    a disc of radius 30 and ten single elements on 128^2), so every pillar is
+    also held to having an element whose four edge neighbours are its own:
+    single elements and strips two wide are refused, strips three wide and
+    the paper's finest brush (2304 pillars on 512^2, 12-14 elements each) run."""
+    from brushcore import BrushParams, ParameterError, file_params
+    from brushcore.model.layout import build_labels
+    from brushcore.model.layout_file import save_label_map
+
+    labels = np.full((128, 128), -1)
+    yy, xx = np.mgrid[:128, :128]
+    labels[(yy - 64) ** 2 + (xx - 64) ** 2 < 30**2] = 0
+    for i in range(10):
+        labels[5 + 10 * i, 5] = i + 1
+    dots = save_label_map(labels, tmp_path / "dots")
+    with pytest.raises(ParameterError, match=r"layout_file=.*dots.npy' is invalid \(10 of 11 "
+                       r"pillars are at most two elements across.*allow_coarse"):
+        build_labels(file_params(dots, 0.01))
+    assert build_labels(file_params(dots, 0.01, allow_coarse=True)).max() == 10
+    for width, refused in ((2, True), (3, False)):
+        strips = np.full((128, 128), -1)
+        for i in range(8):
+            strips[10:118, 4 + 15 * i: 4 + 15 * i + width] = i
+        path = save_label_map(strips, tmp_path / f"strips{width}")
+        if refused:
+            with pytest.raises(ParameterError, match="8 of 8 pillars are at most two"):
+                build_labels(file_params(path, 0.01))
+        else:
+            assert build_labels(file_params(path, 0.01)).max() == 7
+    finest = save_label_map(build_labels(BrushParams("regular", 2304, 0.01, 512)),
+                            tmp_path / "finest")
+    assert build_labels(file_params(finest, 0.01)).max() == 2303
