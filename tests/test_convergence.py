@@ -579,3 +579,24 @@ def test_summary_gives_the_seed_count_and_a_t_interval():
     assert seed_note(one, "adhesive_force_normalized", "random", 64, 1e-4) == ""
     lattice = sweep.assign_coords(layout=["regular"])  # seed 0 only, by design
     assert seed_note(lattice, "adhesive_force_normalized", "regular", 64, 1e-4) == ""
+
+
+def test_a_fast_converging_fine_end_on_uneven_grids_is_not_called_diverging() -> None:
+    """128/256/384/512 whose two finest values nearly agree: the three finest
+    have an order far above the search bound (12), which is convergence, so
+    no not_asymptotic flag and the trusted safety factor (review: the order
+    search returned NaN there, read as divergence, Fs 3 and twice the error)."""
+    grids = np.array([128, 256, 384, 512])
+    e = extrapolate(1.0 / grids, [1.80, 1.75, 1.7201, 1.7200])
+    assert not e.not_asymptotic and not e.poor_fit
+    assert e.safety_factor == 1.25
+    # two finest values equal beside a third that differs converge too
+    assert not extrapolate(1.0 / grids, [1.80, 1.75, 1.72, 1.72]).not_asymptotic
+
+
+def test_not_asymptotic_is_kept_where_no_order_is_observed() -> None:
+    """Every difference growing under refinement (256-2048: 1.70, 1.71, 1.73,
+    1.77, the finest last): no fit, and the fine end is flagged as the
+    README defines the flag, by the data (it was dropped with the fit)."""
+    e = extrapolate(1.0 / np.array([256, 512, 1024, 2048]), [1.70, 1.71, 1.73, 1.77])
+    assert e.poor_fit and e.not_asymptotic and math.isnan(e.value)

@@ -53,6 +53,10 @@ def test_a_table_of_a_lattice_pulls_off_as_the_lattice(tmp_path: Path, kbar: flo
     assert own.attrs["symmetry_fold"] == generated.attrs["symmetry_fold"] == 4
     for name in (F_AD, W):
         assert float(own[name]) == pytest.approx(float(generated[name]), rel=1e-12)
+    # every pillar's area, its elements' (h = 1): the curve's contact area in all
+    labels = build_labels(params)
+    assert own.pillar_area.values.tolist() == np.bincount(labels[labels >= 0]).tolist()
+    assert float(own.pillar_area.sum()) == own.attrs["real_contact_area"]
 
 
 def test_one_table_runs_on_every_grid_with_the_discs_phi(tmp_path: Path) -> None:

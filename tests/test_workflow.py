@@ -240,6 +240,14 @@ def test_three_grids_plan_the_convergence_rule(repo_copy: Path, tmp_path: Path) 
         assert name in text, f"{name} not planned:\n{text}"
     for grid in (32, 48, 64):
         assert f"_grid{grid}_phi0.12.nc" in text
+    assert "run on two grids" not in text, text
+    # two grids: a refinement, and no study, which planning says
+    config.write_text(config.read_text().replace("- 48\n", ""))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", str(config))
+    text = output(proc)
+    assert proc.returncode == 0 and planned_simulations(text) == 2 * 2, text
+    assert "N = [4] run on two grids each; the convergence study" in text, text
+    assert "convergence.nc" not in text, text
 
 
 def test_convergence_config_plans_the_study(repo_copy: Path) -> None:

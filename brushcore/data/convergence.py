@@ -394,7 +394,7 @@ def extrapolate(
     # coarse grids while the three finest move apart ever faster (8 x 8 rigid
     # on 256-2048: p 0.41 over four, differences growing over the finest
     # three).  An oscillating fine end is already non_monotone.
-    fine_end = n > 3 and _diverging(h[:3], f[:3], flat, opts.order_bounds)
+    fine_end = n > 3 and _diverging(h[:3], f[:3], flat)
     if not monotone and n == 3:
         # Three points that oscillate admit no f0 + C h^p with p > 0.
         return result(non_monotone=True)
@@ -407,7 +407,7 @@ def extrapolate(
         # observed order (constant ratio) is still reported: it says how fast;
         # an infinite one (two equal values beside a third) is not an order.
         return result(order=p if np.isfinite(p) else _NAN, resid=resid,
-                      non_monotone=not monotone, poor_fit=True)
+                      non_monotone=not monotone, poor_fit=True, not_asymptotic=fine_end)
     lo, hi = opts.order_range
     scale = float(f.max() - f.min())
     poor = not (lo < p <= hi) or resid > opts.max_relative_residual * scale
@@ -437,14 +437,22 @@ def extrapolate(
                   non_monotone=not monotone, not_asymptotic=fine_end)
 
 
-def _diverging(h: np.ndarray, f: np.ndarray, flat: float,
-               bounds: tuple[float, float]) -> bool:
+def _diverging(h: np.ndarray, f: np.ndarray, flat: float) -> bool:
     """Whether three monotone values (finest first) move apart ever faster
-    under refinement: no positive observed order."""
+    under refinement: no positive observed order.
+
+    Decided without solving for the order, which a search bound would cut:
+    (h3^p - h2^p) / (h2^p - h1^p) grows with p from ln(h3/h2) / ln(h2/h1)
+    at p -> 0, so a positive order exists exactly when the differences'
+    ratio (f3 - f2) / (f2 - f1) lies above that (above 1 on doubling
+    grids).  Two finest values that agree beside a third converge.
+    """
     if np.all(np.abs(np.diff(f)) <= flat) or not is_monotone(f, atol=flat):
         return False
-    p = _three_grid_order(h, f, bounds)
-    return not (np.isfinite(p) and p > 0)
+    if f[1] == f[0]:
+        return False
+    ratio = (f[2] - f[1]) / (f[1] - f[0])
+    return not ratio > math.log(h[2] / h[1]) / math.log(h[1] / h[0])
 
 
 # ---------------------------------------------------------------------------
@@ -628,7 +636,9 @@ def _provenance(sweep: xr.Dataset) -> dict[str, object]:
     }
     if "source_digest_sha256" in sweep.attrs:
         out["sweep_source_digest_sha256"] = sweep.attrs["source_digest_sha256"]
-    for name in ("e_star", "dgamma", "units_convention"):
+    # Not the sweep's units_convention ("h in m"): every value here is
+    # normalised, and the coordinate h is h / L = 1/n.
+    for name in ("e_star", "dgamma"):
         if name in sweep.attrs:
             out[name] = sweep.attrs[name]
     return out

@@ -26,7 +26,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
     pandas.DataFrame
         Case columns, the quantity, one column ``n=<grid>`` per grid with the
         raw value, the finest radius in elements, extrapolated value, error,
-        order and the flags (as a comma-separated ``flags`` column; besides
+        order, the safety factor the error was built with (1.25 or 3) and the
+        flags (as a comma-separated ``flags`` column; besides
         the fit's, ``under_resolved``, ``coarsest_under_resolved`` and
         ``touching_pillars``, see `write_tables`).
     """
@@ -47,7 +48,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             for g, v in zip(grids, raw):
                 row[f"n={g}"] = float(v)
             row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
-            for s in ("extrapolated", "error", "order"):
+            for s in ("extrapolated", "error", "order", "safety_factor"):
                 row[s] = float(one[f"{q}_{s}"])
             flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
             resolution = resolution_flag(row["radius_elements_finest"],
@@ -89,10 +90,11 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
     table.to_csv(csv_path, index=False)
     header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
               "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
-              "uncertainty (>= 4 grids). "
+              "uncertainty (>= 4 grids), with the safety factor in its column (1.25 at a "
+              "trusted order on monotone values, else 3). "
               f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements; "
-              "coarsest_under_resolved: the fit's coarsest grid is (the fit rests on a "
-              "grid whose own mesh error is a few per cent); "
+              "coarsest_under_resolved: the fit's coarsest grid is under-resolved (the fit "
+              "rests on a grid whose own mesh error is a few per cent); "
               "touching_pillars: on some grid two pillars' footprints share an element "
               "edge (random discs on grids coarser than 512).\n\n")
     Path(md_path).write_text(header + to_markdown(table))

@@ -27,7 +27,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
-from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
+from brushcore.model.lattices import hexagonal_lattice
 from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, curve_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
@@ -45,6 +45,9 @@ RESOLUTION_TEXT = {"under_resolved": "under-resolved",
 #: Colours of the layouts and markers of the pillar shapes in the lattice figure.
 LAYOUT_COLORS = {"regular": "C0", "hexagonal": "C1", "random": "C2"}
 SHAPE_MARKERS = {"disc": ("o", "-"), "square": ("s", "--"), "ellipse": ("D", ":")}
+#: The hexagonal lattice's rigid limit at its local filling factor (dash-dot).
+HEX_LINE = (0, (6, 2, 1, 2))
+HEX_LABEL = r"hexagonal rigid limit $(\varphi/\mathrm{fill})^{-1/4}$ (approx.)"
 #: Fig. 7's marker of each generated layout; others (files) take OTHER_MARKERS in turn.
 LAYOUT_MARKERS = {"regular": "s", "random": "o", "hexagonal": "h"}
 OTHER_MARKERS = ("^", "v", "D", "P", "X", "<", ">", "p", "*")
@@ -284,7 +287,8 @@ def fig6(sweep: xr.Dataset) -> Figure:
     """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
 
     The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
-    punch F_ad = 1 is dotted.  With several seeds the bars span min to max.
+    punch F_ad = 1 is dotted; a hexagonal panel adds each N's lattice at its
+    local filling factor (`theory.hexagonal_rigid_limit`, dash-dot).  With several seeds the bars span min to max.
     Rigid pillars (kbar = inf) are drawn at "rigid" (`_rigid_x`), not joined
     to the finite kbar.
     """
@@ -313,6 +317,10 @@ def fig6(sweep: xr.Dataset) -> Figure:
         if math.isfinite(phi):
             ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
                        label=rf"rigid limit $\varphi^{{-1/4}}$ = {theory.rigid_limit(phi):.2f}")
+            if layout == "hexagonal":  # N that no lattice fills stand denser
+                for i, (n, _) in enumerate(brushes):
+                    ax.axhline(theory.hexagonal_rigid_limit(phi, n), color=colors[n],
+                               ls=HEX_LINE, lw=1.0, label=HEX_LABEL if i == 0 else None)
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
         ax.legend(fontsize=7)
     return fig
@@ -455,9 +463,9 @@ def lattices(sweep: xr.Dataset) -> Figure:
     (random layouts) the dots are the mean and the bars span min to max.
     Rigid pillars (kbar = inf) are drawn at "rigid" (`_rigid_x`), not joined
     to the finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, dashed) and
-    the soft limit N^(1/4) (eq. 6, dotted); grey dash-dot: the hexagonal
-    lattice's rigid limit at its local filling factor phi / fill (its cells
-    cover `lattices.hexagonal_fill` of the square).
+    the soft limit N^(1/4) of discs (eq. 6, dotted: other shapes let go below
+    Kendall's force); grey dash-dot: the hexagonal lattice's rigid limit at its
+    local filling factor phi / fill (`theory.hexagonal_rigid_limit`).
 
     Parameters
     ----------
@@ -490,10 +498,11 @@ def lattices(sweep: xr.Dataset) -> Figure:
             ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
                        label=r"rigid limit $\varphi^{-1/4}$")
             if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
-                ax.axhline(theory.rigid_limit(phi / hexagonal_fill(n)), color="0.45",
-                           ls=(0, (6, 2, 1, 2)), lw=1.0,
-                           label=r"hexagonal rigid limit $(\varphi/\mathrm{fill})^{-1/4}$")
-        ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8, label=r"soft limit $N^{1/4}$")
+                ax.axhline(theory.hexagonal_rigid_limit(phi, n), color="0.45",
+                           ls=HEX_LINE, lw=1.0, label=HEX_LABEL)
+        # Kendall's force per pillar: squares and ellipses let go below it
+        ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8,
+                   label=r"soft limit $N^{1/4}$ (discs)")
         ax.set_xscale("log")
         _rigid_ticks(ax, kbars, x_inf)
         ax.set_title(f"({chr(ord('a') + index)}) N = {n}", loc="left")

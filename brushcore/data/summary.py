@@ -183,6 +183,14 @@ def _brushes(sweep: xr.Dataset) -> list[tuple[str, int]]:
             if seed_mean(sweep, "adhesive_force_normalized", str(lay), int(n)).size]
 
 
+def _hexagonal_note(layout: str, n: int, phi: float) -> str:
+    """For a hexagonal brush, its rigid limit at its local filling factor."""
+    if layout != "hexagonal" or not math.isfinite(phi):
+        return ""
+    return (f"; its lattice's (phi/fill)^-1/4 = {_fmt(theory.hexagonal_rigid_limit(phi, n))} "
+            "(approximate)")
+
+
 def headline_rows(
     sweep: xr.Dataset, *, fig5_layout: str = "regular", fig5_n_pillars: int = 256,
     fig5_kbar: float = 0.455, fig5_shape: str = "disc"
@@ -227,6 +235,7 @@ def headline_rows(
                         ("Fig. 6, kbar > 1" if rigid else
                          f"NOT RIGID: the stiffest kbar run is {_fmt(kbar)}, the paper's rigid "
                          f"range is kbar > {PAPER_RIGID_KBAR:g}")
+                        + _hexagonal_note(layout, n, phi)
                         + seed_note(sweep, "adhesive_force_normalized", layout, n, kbar)))
     plateau: dict[str, list[tuple[int, float]]] = {}  # layout -> (N, F_ad) on the plateau
     reached_by = {(layout, n): on_plateau(sweep, layout, n) for layout, n in brushes}

@@ -401,8 +401,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         "snapshot_step": _var("snapshot", snaps, "step of the snapshot", "1"),
         "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
                                       {"long_name": "stage of the pull-off"}),
-        **_pillar_results(pillar_centroids(labels, h), curve.pillar_force_at_peak,
-                          curve.displacement[last]),
+        **_pillar_results(labels, h, curve.pillar_force_at_peak, curve.displacement[last]),
         **_result_variables(f_ad, float(curve.displacement[i_max]), work, fs, ws,
                             "adhesive force (maximum tensile force)",
                             "work of separation, integral of F dd"),
@@ -508,7 +507,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                                       {"long_name": "stage of the protocol"}),
         # Given arrays as given, bit for bit (x * d_K / d_K is not always x):
         # `BrushParams.from_curve` rebuilds them and their inputs_digest.
-        **_pillar_variables(pillar_centroids(labels, h), inputs.heights,
+        **_pillar_variables(labels, h, inputs.heights,
                             (inputs.heights / ds_ if params.heights is None
                              else np.array(params.heights)),
                             inputs.kbar, pillar_force, curve.let_go),
@@ -631,13 +630,16 @@ def _pillar_coord(n_pillars: int) -> xr.Variable:
                 "1")
 
 
-def _pillar_results(centre: np.ndarray, force_at_peak: np.ndarray,
+def _pillar_results(labels: np.ndarray, h: float, force_at_peak: np.ndarray,
                     let_go: np.ndarray) -> dict[str, xr.Variable]:
-    """Per pillar, in every curve file: centroid [m], force at F_ad [N] and the
-    displacement at which it let go [m]."""
+    """Per pillar, in every curve file: centroid [m] and area [m^2] of its
+    elements, force at F_ad [N] and the displacement at which it let go [m]."""
+    centre = pillar_centroids(labels, h)
+    area = np.bincount(labels[labels >= 0], minlength=len(centre)) * (h * h)
     return {
         "pillar_y": _var("pillar", centre[:, 0], "pillar centroid y", "m"),
         "pillar_x": _var("pillar", centre[:, 1], "pillar centroid x", "m"),
+        "pillar_area": _var("pillar", area, "pillar contact area (its elements)", "m2"),
         "pillar_force_at_adhesive_force": _var("pillar", force_at_peak,
                                               "pillar force at F_ad (tensile positive)", "N"),
         "pillar_let_go_displacement": _var("pillar", let_go,
@@ -646,13 +648,13 @@ def _pillar_results(centre: np.ndarray, force_at_peak: np.ndarray,
     }
 
 
-def _pillar_variables(centre: np.ndarray, heights: np.ndarray, normalized: np.ndarray,
-                      kbar: np.ndarray, force_at_peak: np.ndarray,
+def _pillar_variables(labels: np.ndarray, h: float, heights: np.ndarray,
+                      normalized: np.ndarray, kbar: np.ndarray, force_at_peak: np.ndarray,
                       let_go: np.ndarray) -> dict[str, xr.Variable]:
     """Per pillar in a protocol's file: `_pillar_results` with the protrusion
-    [m] and ``normalized`` [d_K], and k̄, after the centroid."""
-    results = _pillar_results(centre, force_at_peak, let_go)
-    centroid = {name: results.pop(name) for name in ("pillar_y", "pillar_x")}
+    [m] and ``normalized`` [d_K], and k̄, after the centroid and area."""
+    results = _pillar_results(labels, h, force_at_peak, let_go)
+    centroid = {name: results.pop(name) for name in ("pillar_y", "pillar_x", "pillar_area")}
     return {
         **centroid,
         "pillar_height": _var("pillar", heights, "pillar protrusion z_p "

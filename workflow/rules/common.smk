@@ -317,6 +317,7 @@ def check_cases(config, main=True):
         )
     if main:
         _warn_first_touch(config, brushes)
+        _warn_two_grids(config)
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -590,6 +591,17 @@ def case_grids(config, n_pillars):
         if int(entry["n_pillars"]) == int(n_pillars):
             return grid_list(entry["grid"])
     return grid_list(config["grid"])
+
+
+def _warn_two_grids(config):
+    """Say so where brushes run on two grids and none on three: a refinement
+    with no convergence study (it needs three grids to observe an order)."""
+    two = sorted(n for n in sweep_brushes(config) if len(case_grids(config, n)) == 2)
+    if two and not wants_convergence(config):
+        logger.warning(
+            f"config: N = {two} run on two grids each; the convergence study "
+            "(results/convergence.*) needs three or more, so none is made"
+        )
 
 
 def wants_convergence(config):
