@@ -526,6 +526,20 @@ def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
     fig6 = figures.fig6(flat_slice(shape_sweep))
     titles = [ax.get_title(loc="left") for ax in fig6.axes]
     assert titles == ["(a) regular", "(b) hexagonal", "(c) random"], titles
+    # the hexagonal panel adds its lattice's rigid limit at phi / fill, per N
+    from brushcore import theory
+
+    phi = float(shape_sweep.attrs["phi"])
+
+    def levels(ax) -> set[float]:  # horizontal lines but eq. 5's and the compact punch's
+        flat = {round(float(line.get_ydata()[0]), 12) for line in ax.get_lines()
+                if len(set(np.ravel(line.get_ydata()))) == 1}
+        return flat - {round(theory.rigid_limit(phi), 12), 1.0}
+
+    hexagonal_n = [int(n) for n in shape_sweep.n_pillars.values]
+    assert levels(fig6.axes[1]) == {round(theory.hexagonal_rigid_limit(phi, n), 12)
+                                    for n in hexagonal_n}
+    assert not levels(fig6.axes[0])
     fig = figures.lattices(flat_slice(shape_sweep, None))
     labels = fig.axes[0].get_legend_handles_labels()[1]
     for label in ("regular, disc", "regular, square", "hexagonal, square", "random, square"):
