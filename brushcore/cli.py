@@ -146,6 +146,18 @@ def build_parser() -> argparse.ArgumentParser:
                                      "(the file states SI).",
                          allow_abbrev=False,
                          formatter_class=_DefaultsShown)
+    conv = sub.add_parser(
+        "converge", help="gather curve files into a sweep and extrapolate each case run on "
+                         "three or more grids to h -> 0",
+        description="Gather curve files (brushcore simulate's, on several --grid) into "
+                    "DIR/sweep.nc and, for every case run on three or more grids, extrapolate "
+                    "F_ad and W to h -> 0 with the observed order: DIR/convergence.nc, .csv, "
+                    ".md and .png, as the workflow writes them.",
+        allow_abbrev=False, formatter_class=_DefaultsShown)
+    conv.add_argument("curves", nargs="+", type=_path, metavar="CURVE",
+                      help="curve files (.nc), one per (case, grid)")
+    conv.add_argument("--out-dir", type=_path, required=True, metavar="DIR",
+                      help="folder for sweep.nc and convergence.* (made if missing)")
     sim.add_argument("--layout", choices=LAYOUTS, required=True, help="pillar layout")
     sim.add_argument("--pillars", type=int, action=_Given,
                      help="number of pillars N (required, except for --layout file: the "
@@ -422,6 +434,40 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _converge(args: argparse.Namespace) -> int:
+    from brushcore.data.aggregate import AggregationError, build_sweep, write_sweep
+    from brushcore.data.convergence import GRID_DIM
+    from brushcore.data.convergence_report import write_study
+
+    out = args.out_dir
+    if out.exists() and not out.is_dir():
+        _error(f"--out-dir {out} is a file: allowed a folder (made if missing)")
+        return 2
+    try:
+        sweep = build_sweep(args.curves, keep_snapshots=())
+    except AggregationError as exc:
+        _error(str(exc))
+        return 2
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        write_sweep(sweep, out / "sweep.nc")
+    except OSError as exc:
+        _error(f"cannot write {out / 'sweep.nc'}: {exc.strerror or exc}")
+        return 1
+    grids = [int(g) for g in sweep[GRID_DIM].values]
+    study = ", ".join(f"{out / name}" for name in ("convergence.nc", "convergence.csv",
+                                                    "convergence.md", "convergence.png"))
+    if len(grids) < 3:
+        print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}; no "
+              "convergence study: it needs a case run on three or more grids")
+        return 0
+    write_study(sweep, out / "convergence.nc", out / "convergence.csv", out / "convergence.md",
+                (out / "convergence.png",))
+    print((out / "convergence.md").read_text(), end="")
+    print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}, {study}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``brushcore`` command."""
     # Warnings read as the errors do: one line, no source line of brushcore's.
@@ -431,6 +477,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.command == "simulate":
             return _simulate(args)
+        if args.command == "converge":
+            return _converge(args)
     except KeyboardInterrupt:  # during start-up (imports, parsing)
         _error(INTERRUPTED)
         return EXIT_INTERRUPTED

@@ -361,3 +361,40 @@ def test_a_coarse_grid_is_suggested_with_the_phi_it_realises(tmp_path, capsys):
     assert main([*base, "--grid", "8"]) == 0
     assert "phi realised 0.25 (requested 0.12, +108 %: --allow-coarse ran it)" in \
         capsys.readouterr().err
+
+
+def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsys) -> None:
+    """`brushcore converge` gathers simulate's curves into sweep.nc and the
+    convergence study, whose extrapolated F_ad is Richardson's on the three
+    values (checked with `extrapolate` on the curves' own numbers)."""
+    import xarray as xr
+
+    from brushcore.data.convergence import extrapolate
+
+    paths, values = [], []
+    for grid in (48, 64, 96):
+        path = tmp_path / f"c{grid}.nc"
+        assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                     "--grid", str(grid), "--quiet", "--out", str(path)]) == 0
+        paths.append(str(path))
+        values.append(float(read_curve(path).adhesive_force_normalized))
+    out = tmp_path / "study"
+    assert main(["converge", *paths, "--out-dir", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "3 curves on grids [48, 64, 96]" in printed and "| F_ad |" in printed
+    for name in ("sweep.nc", "convergence.nc", "convergence.csv", "convergence.md",
+                 "convergence.png"):
+        assert (out / name).is_file(), name
+    expected = extrapolate([1 / 48, 1 / 64, 1 / 96], values)
+    assert math.isfinite(expected.value)
+    with xr.open_dataset(out / "convergence.nc") as study:
+        got = study.adhesive_force_normalized_extrapolated.squeeze()
+        assert float(got) == pytest.approx(expected.value, rel=1e-12)
+    # two grids: the sweep, and no study, said; one case twice, or a file as the folder: refused
+    assert main(["converge", *paths[:2], "--out-dir", str(tmp_path / "two")]) == 0
+    assert "no convergence study: it needs a case run on three" in capsys.readouterr().out
+    assert not (tmp_path / "two" / "convergence.nc").exists()
+    assert main(["converge", paths[0], paths[0], "--out-dir", str(tmp_path / "x")]) == 2
+    assert "hold the same case" in capsys.readouterr().err
+    assert main(["converge", *paths, "--out-dir", paths[0]]) == 2
+    assert "is a file: allowed a folder" in capsys.readouterr().err

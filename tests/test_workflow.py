@@ -506,9 +506,16 @@ def test_aggregation_names_a_bad_curve_file(test_run: Path, tmp_path: Path) -> N
     bad.write_bytes(good[0].read_bytes()[:200])
     worse = tmp_path / "empty.nc"
     worse.write_bytes(b"")
-    # every bad file at once, and how to get them back
+    # every bad file at once, and how to get them back: the workflow's
+    # (it names the case of each file) reruns them, a user reruns simulate
+    from brushcore import read_curve
+    from brushcore.data.aggregate import case_key
+
+    named = [(case_key(c), float(c.attrs["phi"])) for c in map(read_curve, good)]
     with pytest.raises(AggregationError, match=r"2 curve file\(s\): .*truncated\.nc .*"
                                                r"empty\.nc .*Delete them and run snakemake"):
+        build_sweep([*good, bad, worse], expected=named + named[:2])
+    with pytest.raises(AggregationError, match=r"empty\.nc .*Run their brushcore simulate"):
         build_sweep([*good, bad, worse])
     with pytest.raises(AggregationError, match="same case"):
         build_sweep([good[0], good[0]])

@@ -199,9 +199,11 @@ def load_curves(paths: Iterable[str | Path],
     if unreadable:  # every one of them at once, and what brings them back
         shown = "; ".join(unreadable[:10]) + (f"; and {len(unreadable) - 10} more"
                                               if len(unreadable) > 10 else "")
+        # The workflow names what each file must hold; elsewhere the user ran them.
+        again = ("Delete them and run snakemake again: it recomputes the missing curves"
+                 if expected is not None else "Run their brushcore simulate again")
         raise AggregationError(
-            f"cannot aggregate {len(unreadable)} curve file(s): {shown}. Delete them and run "
-            "snakemake again: it recomputes the missing curves")
+            f"cannot aggregate {len(unreadable)} curve file(s): {shown}. {again}")
     if not curves:
         raise AggregationError("no curve files to aggregate")
     return curves

@@ -98,3 +98,25 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "touching_pillars: on some grid two pillars' footprints share an element "
               "edge (random discs on grids coarser than 512).\n\n")
     Path(md_path).write_text(header + to_markdown(table))
+
+
+def write_study(sweep: xr.Dataset, nc_path: str | Path, csv_path: str | Path,
+                md_path: str | Path, figure_paths: Sequence[str | Path]) -> xr.Dataset:
+    """The convergence study of a sweep, written: `extrapolate_sweep`'s dataset
+    (netCDF), its tables (CSV, Markdown) and `figures.convergence` (each of
+    ``figure_paths``).  The workflow's rule and ``brushcore converge`` share it.
+
+    Returns
+    -------
+    The study's dataset.
+    """
+    from brushcore.data import figures  # noqa: PLC0415 - matplotlib only when drawing
+    from brushcore.data.convergence import extrapolate_sweep, write_dataset
+
+    conv = extrapolate_sweep(sweep)
+    write_dataset(conv, nc_path)
+    write_tables(conv, csv_path, md_path)
+    fig = figures.convergence(conv)
+    for path in figure_paths:
+        figures.save(fig, path)
+    return conv
