@@ -768,3 +768,19 @@ def test_a_run_whose_cores_would_cut_threads_stops(repo_copy: Path) -> None:
 def test_unknown_backend_key_is_refused(repo_copy: Path, tmp_path: Path) -> None:
     assert_refused_at_plan_time(repo_copy, tmp_path, {"backend": "tpu"},
                                 "config key 'backend': 'tpu' is not one of")
+
+
+def test_a_refused_brush_the_user_did_not_list_says_where_it_comes_from(
+        repo_copy: Path, tmp_path: Path) -> None:
+    """A config of one's own extends config/config.yaml key by key: leaving
+    out `random` keeps the paper's random brushes, and when one of them is
+    refused (random 64 on 64^2: radius 1.56 elements) the message says so."""
+    config = tmp_path / "mine.yaml"
+    config.write_text(yaml.safe_dump({"grid": [64, 128, 256], "regular": [16],
+                                      "kbar": [math.inf]}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", str(config))
+    text = output(proc)
+    assert proc.returncode != 0, text
+    assert ("(case random N = 64, grid = 64, phi = 0.12); this brush's 'random' is "
+            "config/config.yaml's, which your config files extend: set 'random: []' to run "
+            "none") in text, text

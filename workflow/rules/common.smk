@@ -377,6 +377,7 @@ def check_cases(config, main=True):
             )
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
+                + _inherited_note(config, layout, only_fig5)
             ) from None
 
 
@@ -591,6 +592,32 @@ def case_grids(config, n_pillars):
         if int(entry["n_pillars"]) == int(n_pillars):
             return grid_list(entry["grid"])
     return grid_list(config["grid"])
+
+
+#: The config every run starts from (the Snakefile's `configfile:`), which a
+#: user's --configfile extends key by key.
+DEFAULT_CONFIG = "config/config.yaml"
+
+
+def _inherited_note(config, layout, only_fig5):
+    """Where a refused brush's list is the default config's and other config
+    files were given, say where it comes from: a config of one's own that
+    leaves out `random` still runs the paper's random brushes."""
+    if len(workflow.configfiles) < 2:
+        return ""
+    try:
+        with open(Path(workflow.basedir) / DEFAULT_CONFIG, encoding="utf-8") as fh:
+            default = yaml.safe_load(fh)
+    except (OSError, yaml.YAMLError):
+        return ""
+    key = "fig5" if only_fig5 else layout
+    if key not in default or config.get(key) != default[key]:
+        return ""
+    unset = "fig5: {kbar: []}" if only_fig5 else f"{layout}: []"
+    return (
+        f"; this brush's '{key}' is {DEFAULT_CONFIG}'s, which your config files extend: "
+        f"set '{unset}' to run none"
+    )
 
 
 def _warn_two_grids(config):
