@@ -298,6 +298,23 @@ def test_sweep_dataset_round_trip(tmp_path):
     assert csv.read_text().count("\n") == 9
 
 
+def test_table_gives_how_far_the_realised_phi_moves_over_the_grids_run():
+    """phi_spread = (max - min) / mean of phi_actual over the grids with a
+    value: the case missing 1024 leaves that grid's phi out."""
+    sweep = _sweep()
+    phi = xr.full_like(sweep["adhesive_force_normalized"], 0.12)
+    phi.loc[dict(grid=128)] = 0.125
+    phi.loc[dict(grid=1024)] = 0.09  # not run by (256, 1e-6)
+    conv = extrapolate_sweep(sweep.assign(phi_actual=phi))
+    assert conv["phi_actual"].dims[-1] == "grid"
+    table = convergence_table(conv).set_index(["n_pillars", "kbar", "quantity"])
+    assert table.loc[(64, 1e-6, "F_ad"), "phi_spread"] == pytest.approx(
+        (0.125 - 0.09) / np.mean([0.125, 0.12, 0.12, 0.09]), rel=1e-12)
+    assert table.loc[(256, 1e-6, "F_ad"), "phi_spread"] == pytest.approx(
+        0.005 / np.mean([0.125, 0.12, 0.12]), rel=1e-12)
+    assert "phi_spread" not in convergence_table(extrapolate_sweep(sweep)).columns
+
+
 def test_each_quantity_names_its_own_finest_grid():
     sweep = _sweep()
     w = "work_of_separation_normalized"

@@ -115,6 +115,8 @@ FIT_FLAGS = ("non_monotone", "poor_fit", "too_few_grids", "not_asymptotic")
 #: Sweep variable counting pillar pairs that share an element edge on a grid
 #: (`brushcore.model.labelmap.count_touching_pairs`): flagged in the table.
 TOUCHING = "touching_pillar_pairs"
+#: The filling factor each grid realises (sweep.nc's), carried beside the raw values.
+PHI_ACTUAL = "phi_actual"
 
 
 def resolution_flag(finest: float, coarsest: float) -> tuple[str, float] | None:
@@ -533,8 +535,8 @@ def extrapolate_sweep(
         `FIT_FLAGS`; the raw values ``{q}`` on (cases..., grid);
         ``finest_grid`` and ``pillar_radius_elements_finest`` of the finest
         grid run (first quantity), ``pillar_radius_elements_coarsest`` of the
-        coarsest; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs``
-        on (cases..., grid) where the sweep has it.
+        coarsest; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs`` and
+        ``phi_actual`` on (cases..., grid) where the sweep has them.
 
     Raises
     ------
@@ -596,6 +598,8 @@ def extrapolate_sweep(
             units="1", long_name=f"pillar radius a_p / h on the {end} grid run [elements]")
     if TOUCHING in sweep:  # random discs on grids coarser than 512: a mesh error to see
         out[TOUCHING] = sweep[TOUCHING].copy()
+    if PHI_ACTUAL in sweep:  # the staircase's filling factor moves F_ad from grid to grid
+        out[PHI_ACTUAL] = sweep[PHI_ACTUAL].copy()
     ds = xr.Dataset(out).assign_coords(h=h)
     ds.attrs = {
         "title": "brushcore mesh-refinement study: results extrapolated to h -> 0",

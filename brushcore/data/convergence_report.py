@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, QUANTITIES, TOUCHING,
-                                        UNDER_RESOLVED_RADIUS, resolution_flag,
+from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, PHI_ACTUAL, QUANTITIES,
+                                        TOUCHING, UNDER_RESOLVED_RADIUS, resolution_flag,
                                         touching_grids)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
@@ -25,7 +25,10 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
     -------
     pandas.DataFrame
         Case columns, the quantity, one column ``n=<grid>`` per grid with the
-        raw value, the finest radius in elements, extrapolated value, error,
+        raw value, the finest radius in elements, ``phi_spread`` (the realised
+        filling factor's range over those grids relative to its mean, where the
+        study has ``phi_actual``: phi^(-1/4) moves by a quarter of it), the
+        extrapolated value, error,
         order, the safety factor the error was built with (1.25 or 3) and the
         flags (as a comma-separated ``flags`` column; besides
         the fit's, ``under_resolved``, ``coarsest_under_resolved`` and
@@ -48,6 +51,9 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             for g, v in zip(grids, raw):
                 row[f"n={g}"] = float(v)
             row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
+            if PHI_ACTUAL in one:  # how far the staircase's phi moves between the grids
+                phi = one[PHI_ACTUAL].values[np.isfinite(raw)]
+                row["phi_spread"] = float((phi.max() - phi.min()) / phi.mean())
             for s in ("extrapolated", "error", "order", "safety_factor"):
                 row[s] = float(one[f"{q}_{s}"])
             flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
@@ -91,7 +97,9 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
     header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
               "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
               "uncertainty (>= 4 grids), with the safety factor in its column (1.25 at a "
-              "trusted order on monotone values, else 3). "
+              "trusted order on monotone values, else 3). phi_spread: the realised filling "
+              "factor's range over the grids relative to its mean (the rigid limit "
+              "phi^-1/4 moves by a quarter of it). "
               f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements; "
               "coarsest_under_resolved: the fit's coarsest grid is under-resolved (the fit "
               "rests on a grid whose own mesh error is a few per cent); "
