@@ -447,11 +447,15 @@ def test_a_pillar_table_runs_on_every_grid_into_the_convergence_study(tmp_path: 
      r"'arrays/my_table.csv' runs on grids \[32, 64\], and a gap map fits one\)"),
     ("arrays/near.csv", r"grid = 32 is invalid \(pillars 0 and 1 at element .*\): "
      r"allowed grid \d+, the next"),
-], ids=["gap map on two grids", "discs too close for a grid"])
+    ({"layout": "arrays/my_table.csv", "heights": "arrays/five.txt"},
+     r"layout_files.0.heights': 'arrays/five.txt' is invalid \(it holds 5 values; .*\): "
+     r"allowed 4 values, one per pillar"),
+], ids=["gap map on two grids", "discs too close for a grid", "heights miscounted"])
 def test_a_pillar_table_that_a_grid_cannot_run_is_refused_at_plan_time(
         repo_copy: Path, tmp_path: Path, entry, message: str) -> None:  # noqa: F811
     _own_table(repo_copy)
     np.save(repo_copy / "arrays" / "gap.npy", np.zeros((32, 32)))
+    np.savetxt(repo_copy / "arrays" / "five.txt", np.zeros(5))
     (repo_copy / "arrays" / "near.csv").write_text(  # 0.005 L apart: they touch on 32^2
         "x, y, radius\n0.3, 0.3, 0.1\n0.505, 0.3, 0.1\n")
     assert_refused_at_plan_time(repo_copy, tmp_path, {
