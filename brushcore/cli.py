@@ -217,7 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help=f"pillar heights [d_K] in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}], one per "
                             "pillar")
     rough.add_argument("--kbar-file", type=_path, default=None, metavar="FILE",
-                       help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar")
+                       help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar, in place of "
+                            "--kbar (which the file still records as its kbar attribute; "
+                            "--kbar-factors scales --kbar instead)")
     rough.add_argument("--kbar-factors", type=_path, default=None, metavar="FILE",
                        help="pillar stiffness relative to --kbar (finite, > 0), one per "
                             "pillar: pillar p runs kbar * f_p")
@@ -226,7 +228,8 @@ def build_parser() -> argparse.ArgumentParser:
     rough.add_argument("--protocol", default=None, metavar="WAYPOINTS",
                        help="loading-unloading cycles in place of --preload: "
                             + PROTOCOL_SYNTAX + "; the file then holds every retraction's "
-                            "F_ad and W (pull_*); F_ad and W of the last")
+                            "F_ad and W (pull_*), and F_ad and W of the last one as its "
+                            "adhesive_force and work_of_separation")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol,
                      help=f"CG tolerance, in [{SolverOptions.MIN_RTOL:g}, 1e-3]")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
@@ -362,6 +365,9 @@ def _simulate(args: argparse.Namespace) -> int:
                                    backend=args.backend)
         backend = resolve_backend(base.backend)  # CuPy and a card, before any work
         params = with_input_files(base, {name: getattr(args, name) for name in INPUT_FILES})
+        if args.kbar_file is not None:  # --kbar is required, and would seem to count
+            warnings.warn(f"--kbar-file gives every pillar's stiffness: --kbar {args.kbar:g} "
+                          "is recorded as the curve's kbar but no pillar runs it")
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,
                                 early_decisions=args.early_decisions,
@@ -374,11 +380,15 @@ def _simulate(args: argparse.Namespace) -> int:
         labels = build_labels(params)  # layout and discretisation checked before any solve
         area = int((labels >= 0).sum())
         touching = count_touching_pairs(labels)  # random discs on grids coarser than 512
-        print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements,"
-              f" phi realised {area / labels.size:.4g} (requested {params.phi:g}"
+        asked = {"": "requested", ".csv": "the discs'"}.get(
+            Path(params.layout_file).suffix.lower() if params.layout_file else "", "the file's")
+        n_built = int(labels.max()) + 1
+        print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements"
+              f"{' (equal-area mean)' if params.layout_file else ''},"
+              f" phi realised {area / labels.size:.4g} ({asked} {params.phi:g}"
               + (f", {100 * (area / labels.size / params.phi - 1):+.0f} %: --allow-coarse ran it"
                  if abs(area / labels.size / params.phi - 1) > MAX_PHI_ERROR else "") + "), "
-              f"{int(labels.max()) + 1} pillars"
+              f"{n_built} pillar{'s' * (n_built != 1)}"
               + ("" if backend.on_host else f", on {backend.device_name}")
               + (f"; {touching} pillar pairs share an element edge (their gap is under "
                  f"an element on this grid; a finer grid separates them)" if touching else ""),

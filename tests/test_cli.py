@@ -398,3 +398,22 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     assert "hold the same case" in capsys.readouterr().err
     assert main(["converge", *paths, "--out-dir", paths[0]]) == 2
     assert "is a file: allowed a folder" in capsys.readouterr().err
+    # L held fixed through --h = L / n: one sweep holds one unit system, said
+    other = tmp_path / "h.nc"
+    assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                 "--grid", "128", "--h", "0.5", "--quiet", "--out", str(other)]) == 0
+    assert main(["converge", *paths, str(other), "--out-dir", str(tmp_path / "h")]) == 2
+    assert re.search(r"disagree on h: 1\.0 in .*, 0\.5 in .*run every grid with the same "
+                     r"--e-star, --dgamma and --h", capsys.readouterr().err)
+
+
+def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:
+    """--kbar is required, and --kbar-file replaces it on every pillar: said."""
+    values = tmp_path / "k.txt"
+    values.write_text("0.01\n0.02\n0.03\n0.04\n")
+    with pytest.warns(UserWarning, match=r"--kbar-file gives every pillar's stiffness: "
+                      r"--kbar 5 is recorded as the curve's kbar but no pillar runs it"):
+        assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "5",
+                     "--grid", "48", "--kbar-file", str(values), "--quiet",
+                     "--out", str(tmp_path / "k.nc")]) == 0
+    assert read_curve(tmp_path / "k.nc").pillar_kbar.values.tolist() == [0.01, 0.02, 0.03, 0.04]

@@ -293,6 +293,9 @@ def test_sweep_dataset_round_trip(tmp_path):
     table = convergence_table(conv)
     assert len(table) == 8  # 4 cases x 2 quantities
     assert "n=1024" in table.columns and "radius_elements_finest" in table.columns
+    osc_row = table[(table.n_pillars == 256) & (table.kbar == np.inf) & (table.quantity == "F_ad")]
+    assert float(osc_row["spread"].iloc[0]) == pytest.approx(0.05)  # (1.9 - 1.8) / 2, flagged
+    assert math.isnan(float(osc_row["extrapolated"].iloc[0]))
     text = md.read_text()
     assert "non_monotone" in text and "| regular |" in text
     assert csv.read_text().count("\n") == 9

@@ -123,11 +123,17 @@ def test_soft_discs_of_unequal_radius_let_go_as_independent_pillars(tmp_path: Pa
      r"line 4: x = 0.95, y = 0.5, radius = 0.1\): allowed discs inside the square"),
     ("x, y, radius\n0.3, 0.3, 0.1\n0.7, 0.7, 0.1\n0.45, 0.3, 0.1\n",
      r"lines 2 and 4 \(pillars 0 and 2\) are 0.15 apart, radii 0.1 \+ 0.1\): allowed "
-     r"discs that do not overlap"),
+     r"discs that neither overlap nor touch"),
     ("x, y, radius\n0.25, 0.25, 0.24\n0.75, 0.75, 0.24\n0.25, 0.75, 0.24\n",
      r"pi sum r\^2 = 0.5429\): allowed discs covering at most half"),
+    ("x, y, radius\n0.25, 0.5, 0.125\n0.5, 0.5, 0.125\n",  # tangent: on no grid apart
+     r"lines 2 and 3 .* are 0.25 apart, radii 0.125 \+ 0.125\): allowed discs that neither"),
+    (" ,X,Y,Radius\n1,0.3,0.3,0.1\n",  # an image tool's export with its index column
+     r"line 1: column 1 has no name \(an index column\? leave it out\)"),
+    ("x,y,radius\n0.3,0.3,0.1,0.2\n", r"line 2 holds 4 values\): allowed three"),
 ], ids=["no header", "unknown column", "heights column", "twice", "missing", "empty",
-        "short row", "decimal commas", "nan", "zero radius", "outside", "overlap", "phi"])
+        "short row", "decimal commas", "nan", "zero radius", "outside", "overlap", "phi",
+        "tangent", "index column", "extra value with decimal points"])
 def test_a_table_that_does_not_fit_is_refused_naming_the_line(
         tmp_path: Path, text: str, message: str) -> None:
     path = _table(tmp_path, text)
@@ -175,3 +181,19 @@ def test_the_cli_runs_a_table_on_the_grid_it_is_given(tmp_path: Path) -> None:
         assert (int(curve.attrs["grid"]), int(curve.attrs["n_pillars"])) == (48, 4)
         direct = simulate(file_params(path, 0.01, grid=48))
         assert float(curve[F_AD]) == pytest.approx(float(direct[F_AD]), rel=1e-12)
+
+
+def test_a_stub_among_pillars_is_judged_by_its_own_radius(tmp_path: Path) -> None:
+    """A broken stub (radius 0.004 L beside two of 0.1 L) sets the grid: the
+    refusal names the smallest disc, and the grid it suggests is one where a
+    disc that small is three elements across wherever it sits (radius
+    1 + sqrt(1/2) elements: 427), which runs; allow_coarse asks only that it
+    cover an element centre (sqrt(1/2) elements: 177)."""
+    path = _table(tmp_path, "x, y, radius\n0.25, 0.5, 0.1\n0.75, 0.5, 0.1\n0.5, 0.85, 0.004\n")
+    for grid in (128, 256):
+        with pytest.raises(ParameterError, match=r"allowed grid 427, the next"):
+            build_labels(file_params(path, 0.01, grid=grid))
+    with pytest.raises(ParameterError, match=r"1 of 3 pillars cover no element centre; the "
+                       r"smallest disc's radius is 0.512 elements\): allowed grid 177"):
+        build_labels(file_params(path, 0.01, grid=128, allow_coarse=True))
+    assert np.bincount(build_labels(file_params(path, 0.01, grid=427)).ravel() + 1)[3] > 4

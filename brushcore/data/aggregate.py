@@ -245,9 +245,17 @@ def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> o
     for path, curve in curves.values():
         values.setdefault(curve.attrs.get(name), path)
     if len(values) > 1:
-        found = ", ".join(f"{v!r} in {p}" for v, p in values.items())
-        raise AggregationError(f"curve files disagree on {name}: {found}")
+        found = ", ".join(f"{_plain(v)!r} in {p}" for v, p in values.items())
+        units = (" (one sweep holds one unit system: run every grid with the same --e-star, "
+                 "--dgamma and --h; the normalised results do not depend on them, nor on L)"
+                 if name in ("e_star", "dgamma", "h") else "")
+        raise AggregationError(f"curve files disagree on {name}: {found}{units}")
     return next(iter(values))
+
+
+def _plain(value: object) -> object:
+    """A NumPy scalar as the Python number it holds (for messages)."""
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:

@@ -29,8 +29,9 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
         filling factor's range over those grids relative to its mean, where the
         study has ``phi_actual``: phi^(-1/4) moves by a quarter of it), the
         extrapolated value, error,
-        order, the safety factor the error was built with (1.25 or 3) and the
-        flags (as a comma-separated ``flags`` column; besides
+        order, the safety factor the error was built with (1.25 or 3), the
+        spread (half the range over the grids, also where a flag leaves no
+        extrapolation) and the flags (as a comma-separated ``flags`` column; besides
         the fit's, ``under_resolved``, ``coarsest_under_resolved`` and
         ``touching_pillars``, see `write_tables`).
     """
@@ -54,7 +55,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             if PHI_ACTUAL in one:  # how far the staircase's phi moves between the grids
                 phi = one[PHI_ACTUAL].values[np.isfinite(raw)]
                 row["phi_spread"] = float((phi.max() - phi.min()) / phi.mean())
-            for s in ("extrapolated", "error", "order", "safety_factor"):
+            # spread: half the range over the grids, what a flagged row still says
+            for s in ("extrapolated", "error", "order", "safety_factor", "spread"):
                 row[s] = float(one[f"{q}_{s}"])
             flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
             resolution = resolution_flag(row["radius_elements_finest"],
@@ -99,7 +101,9 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "uncertainty (>= 4 grids), with the safety factor in its column (1.25 at a "
               "trusted order on monotone values, else 3). phi_spread: the realised filling "
               "factor's range over the grids relative to its mean (the rigid limit "
-              "phi^-1/4 moves by a quarter of it). "
+              "phi^-1/4 moves by a quarter of it). spread: half the range of the values "
+              "over the grids (where a flag leaves no extrapolation, finest +- spread is "
+              "what the study can say). "
               f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements; "
               "coarsest_under_resolved: the fit's coarsest grid is under-resolved (the fit "
               "rests on a grid whose own mesh error is a few per cent); "

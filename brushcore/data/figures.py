@@ -784,6 +784,10 @@ def _convergence_cases(conv: xr.Dataset, quantity: str) -> list[dict[str, object
     return cases
 
 
+#: Characters of a convergence panel's flag line (x-small type, 4.6 in wide).
+FLAG_LINE_CHARS = 58
+
+
 def convergence(
     conv: xr.Dataset,
     *,
@@ -848,11 +852,14 @@ def convergence(
             if touch.any():
                 grids = ", ".join(str(int(g)) for g in conv["grid"].values[touch])
                 flags.append(f"touching pillars (n = {grids})")
-            if flags:  # between the title and the plot: on no point, no tick label
-                ax.text(0.5, 1.01, ", ".join(flags), color="tab:red", ha="center",
+            # between the title and the plot: on no point, no tick label; wrapped
+            # to the panel's width (three flags and a radius overran it)
+            lines = textwrap.wrap(", ".join(flags), FLAG_LINE_CHARS)
+            if lines:
+                ax.text(0.5, 1.01, "\n".join(lines), color="tab:red", ha="center",
                         va="bottom", transform=ax.transAxes, fontsize="x-small")
             ax.set_xlim(left=-0.02 * h_line[-1], right=h_line[-1])
-            ax.set_title(title, fontsize="small", pad=12 if flags else 6)
+            ax.set_title(title, fontsize="small", pad=6 + 7 * len(lines))
             ax.set_ylabel(CONVERGENCE_LABELS.get(q, q))
             if row == n_rows - 1:
                 ax.set_xlabel("element size $h/L = 1/n$")

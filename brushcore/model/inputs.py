@@ -64,15 +64,17 @@ def table_rows(path: Path, name: str, header: bool = True
     names, rows, hint, points = None, [], "", False
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.split("#", 1)[0]
+        tokens = line.replace(",", " ").split()
+        if header and tokens and not rows and names is None \
+                and not all(_NUMBER.fullmatch(token) for token in tokens):
+            # a header's commas separate names, an empty one too (an index column)
+            names = (number, [t.strip() for t in line.split(",")] if "," in line
+                     else tokens)
+            continue
         points = points or "." in line
         if re.search(r"\d,\d", line) and not hint:
             hint, first = _COMMA_HINT, (number, line.strip())
-        tokens = line.replace(",", " ").split()
         if not tokens:
-            continue
-        if header and not rows and names is None \
-                and not all(_NUMBER.fullmatch(token) for token in tokens):
-            names = (number, tokens)
             continue
         values = []
         for token in tokens:
@@ -81,7 +83,9 @@ def table_rows(path: Path, name: str, header: bool = True
                                      f"line {number}: {token!r} is not a number")
             values.append(float(token))
         rows.append((number, values))
-    if hint and not points:  # "0,5" and not one decimal point: decimal commas, likely
+    if hint and points:  # decimal points and commas between values: a plain CSV
+        hint = ""
+    elif hint:  # "0,5" and not one decimal point: decimal commas, likely
         warnings.warn(f"{name} {path}: line {first[0]} {first[1]!r} is read as values "
                       "that commas separate, and the file has no decimal point; if those "
                       "are decimal commas, write decimals with a point")

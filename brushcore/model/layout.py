@@ -376,9 +376,11 @@ def build_labels(params: BrushParams) -> np.ndarray:
     except ParameterError as exc:
         if params.layout == "file" and not is_table(params.layout_file):
             raise  # a map or image fits its own grid only
-        # a gap map fits one grid only, and the label map does not depend on it
+        # a gap map fits one grid only, and the label map does not depend on it;
+        # a table's smallest disc may need far more grids than the search tries
+        start = _table_grid_floor(params) - 1 if _smallest_disc(params) else params.grid
         raise grid_hint(exc, lambda grid: replace(params, grid=grid, gap_map=None),
-                        params.grid) from None
+                        max(params.grid, min(start, MAX_GRID))) from None
 
 
 def _checked_labels(params: BrushParams) -> np.ndarray:
@@ -462,6 +464,29 @@ def _check_table_matches(params: BrushParams) -> None:
                              f"{table.phi!r}, the filling factor of {params.layout_file}")
 
 
+#: A disc of this radius [elements] holds an element whose four edge neighbours
+#: lie in it wherever it sits (the element nearest its centre is within
+#: sqrt(1/2), those neighbours within 1 + sqrt(1/2)): `_check_pillar_widths`.
+WIDE_RADIUS_ELEMENTS = 1.0 + math.sqrt(0.5)
+
+
+def _smallest_disc(params: BrushParams) -> float | None:
+    """A pillar table's smallest disc radius in elements on ``params.grid``,
+    None for other layouts (whose pillars the radius rule reads alike)."""
+    if params.layout != "file" or not is_table(params.layout_file):
+        return None
+    return float(read_pillar_table(params.layout_file).radii.min()) * params.grid
+
+
+def _table_grid_floor(params: BrushParams) -> int:
+    """The grid from which a table's smallest disc covers an element centre
+    (allow_coarse) or is three elements across (`WIDE_RADIUS_ELEMENTS`)
+    wherever it sits: where `build_labels` searches a grid to suggest."""
+    r_l = _smallest_disc(params) / params.grid
+    floor = FLOOR_RADIUS_ELEMENTS if params.allow_coarse else WIDE_RADIUS_ELEMENTS
+    return math.ceil(floor / r_l)
+
+
 def _check_pillar_widths(params: BrushParams, labels: np.ndarray, name: str, value: object,
                          finer: str) -> None:
     """Refuse a file layout with a pillar no element of which has all four
@@ -507,14 +532,19 @@ def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
     """
     counts = np.bincount(labels[labels >= 0], minlength=params.n_pillars)
     # an ellipse's semi-minor axis, as the radius rule reads it: its
-    # equal-area radius would suggest a grid that still misses its centres
-    r = params.narrowest_radius_elements
+    # equal-area radius would suggest a grid that still misses its centres;
+    # a table's smallest disc, not the mean one (a stub among pillars)
+    smallest = _smallest_disc(params)
+    r = smallest or params.narrowest_radius_elements
     what = "semi-minor axis" if params.shape == "ellipse" else "radius"
     if np.any(counts == 0):
+        empty = int(np.sum(counts == 0))
         raise ParameterError(
             "grid", params.grid, f"grid >= {math.ceil(FLOOR_RADIUS_ELEMENTS * params.grid / r)}",
-            f"{int(np.sum(counts == 0))} pillars of {what} {r:.3g} elements cover no "
-            "element centre")
+            f"{empty} of {params.n_pillars} pillars cover no element centre; the smallest "
+            f"disc's radius is {r:.3g} elements" if smallest else
+            f"{empty} pillar{'s' * (empty != 1)} of {what} {r:.3g} elements cover"
+            f"{'s' * (empty == 1)} no element centre")
     phi_actual = float(counts.sum()) / labels.size
     error = phi_actual / params.phi - 1.0
     if abs(error) > MAX_PHI_ERROR and not params.allow_coarse:

@@ -77,6 +77,10 @@ _VALUES = ("height", "kbar", "k", "stiff", "factor")
 def _columns(path: Path, names: list[str], number: int) -> list[int]:
     """Positions of x, y and radius in the header line ``names``."""
     lowered = [name.lower() for name in names]
+    if "" in lowered:
+        raise _refuse(path, "a header line naming the columns x, y and radius [L]",
+                      f"line {number}: column {lowered.index('') + 1} has no name (an index "
+                      "column? leave it out)")
     unknown = [n for n in lowered if n not in COLUMNS]
     missing = [c for c in COLUMNS if c not in lowered]
     twice = sorted({n for n in lowered if lowered.count(n) > 1})
@@ -157,18 +161,19 @@ def _read(path: Path) -> PillarTable:
 
 
 def _check_apart(path: Path, lines: np.ndarray, centres: np.ndarray, r: np.ndarray) -> None:
-    """Refuse two discs that overlap (closer than the sum of their radii)."""
+    """Refuse two discs that overlap or touch (no closer than the sum of their
+    radii: tangent discs share element edges on every grid)."""
     pairs = cKDTree(centres).query_pairs(2.0 * float(r.max()), output_type="ndarray")
     if not pairs.size:
         return
     p, q = pairs.T
     distance = np.hypot(*(centres[p] - centres[q]).T)
-    overlap = np.flatnonzero(distance < r[p] + r[q])
+    overlap = np.flatnonzero(distance <= r[p] + r[q])  # touching: no grid parts them
     if overlap.size:
         i = overlap[np.lexsort((q[overlap], p[overlap]))[0]]
         a, b = sorted((int(p[i]), int(q[i])))
-        raise _refuse(path, "discs that do not overlap (centres at least the sum of the "
-                      "radii apart)",
+        raise _refuse(path, "discs that neither overlap nor touch (centres farther apart "
+                      "than the sum of the radii)",
                       f"the pillars of lines {lines[a]} and {lines[b]} (pillars {a} and {b}) "
                       f"are {distance[i]:.6g} apart, radii {r[a]:.6g} + {r[b]:.6g}")
 
