@@ -346,7 +346,7 @@ def test_table_flags_touching_pillars():
 
     from brushcore.data import figures
     fig = figures.convergence(conv)
-    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    texts = [t.get_text().replace("\n", " ") for ax in fig.axes for t in ax.texts]  # wrapped
     assert sum("touching pillars (n = 128)" in t for t in texts) == 2  # F_ad and W panels
     hollow = [line for ax in fig.axes for line in ax.lines
               if line.get_markerfacecolor() == "none" and len(line.get_xdata())]
