@@ -417,3 +417,28 @@ def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:
                      "--grid", "48", "--kbar-file", str(values), "--quiet",
                      "--out", str(tmp_path / "k.nc")]) == 0
     assert read_curve(tmp_path / "k.nc").pillar_kbar.values.tolist() == [0.01, 0.02, 0.03, 0.04]
+
+
+def test_converge_keeps_two_files_of_one_name_apart(tmp_path, capsys) -> None:
+    """Two folders' brush.csv (different discs) are two brushes: refused, not
+    extrapolated as one; and three brushes on three different grids make no
+    study (grids are counted per case)."""
+    paths = []
+    for folder, radius, grid in (("a", 0.1, 32), ("a", 0.1, 48), ("b", 0.14, 64)):
+        (tmp_path / folder).mkdir(exist_ok=True)
+        table = tmp_path / folder / "brush.csv"
+        table.write_text(f"x, y, radius\n0.3, 0.3, {radius}\n0.7, 0.7, {radius}\n")
+        paths.append(str(tmp_path / f"{folder}{grid}.nc"))
+        assert main(["simulate", "--layout", "file", "--layout-file", str(table), "--kbar",
+                     "0.01", "--grid", str(grid), "--quiet", "--out", paths[-1]]) == 0
+    assert main(["converge", *paths, "--out-dir", str(tmp_path / "mix")]) == 2
+    assert re.search(r"a32\.nc and .*b64\.nc are both brush file_brush but were drawn from "
+                     r"files of different content", capsys.readouterr().err)
+    spread = []
+    for n, grid in ((1, 32), (4, 48), (9, 64)):
+        spread.append(str(tmp_path / f"r{n}.nc"))
+        assert main(["simulate", "--layout", "regular", "--pillars", str(n), "--kbar", "1",
+                     "--grid", str(grid), "--quiet", "--out", spread[-1]]) == 0
+    capsys.readouterr()
+    assert main(["converge", *spread, "--out-dir", str(tmp_path / "three")]) == 0
+    assert "no convergence study: it needs a case run on three" in capsys.readouterr().out

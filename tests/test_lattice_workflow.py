@@ -445,19 +445,19 @@ def test_a_pillar_table_runs_on_every_grid_into_the_convergence_study(tmp_path: 
     ({"layout": "arrays/my_table.csv", "gap_map": "arrays/gap.npy"},
      r"layout_files.0.gap_map': 'arrays/gap.npy' is invalid \(the table "
      r"'arrays/my_table.csv' runs on grids \[32, 64\], and a gap map fits one\)"),
-    ("arrays/near.csv", r"grid = 32 is invalid \(pillars 0 and 1 at element .*\): "
-     r"allowed grid \d+, the next"),
+    ("arrays/stub.csv", r"grid = 32 is invalid \(1 of 2 pillars are at most two elements "
+     r"across, pillar 1 of 1 elements among them.*\): allowed grid 171, the next"),
     ({"layout": "arrays/my_table.csv", "heights": "arrays/five.txt"},
      r"layout_files.0.heights': 'arrays/five.txt' is invalid \(it holds 5 values; .*\): "
      r"allowed 4 values, one per pillar"),
-], ids=["gap map on two grids", "discs too close for a grid", "heights miscounted"])
+], ids=["gap map on two grids", "a stub too small for a grid", "heights miscounted"])
 def test_a_pillar_table_that_a_grid_cannot_run_is_refused_at_plan_time(
         repo_copy: Path, tmp_path: Path, entry, message: str) -> None:  # noqa: F811
     _own_table(repo_copy)
     np.save(repo_copy / "arrays" / "gap.npy", np.zeros((32, 32)))
     np.savetxt(repo_copy / "arrays" / "five.txt", np.zeros(5))
-    (repo_copy / "arrays" / "near.csv").write_text(  # 0.005 L apart: they touch on 32^2
-        "x, y, radius\n0.3, 0.3, 0.1\n0.505, 0.3, 0.1\n")
+    (repo_copy / "arrays" / "stub.csv").write_text(  # 0.01 L: 0.32 elements on 32^2
+        "x, y, radius\n0.3, 0.3, 0.1\n0.7, 0.7, 0.01\n")
     assert_refused_at_plan_time(repo_copy, tmp_path, {
         "regular": [], "random": [], "grid": [32, 64], "layout_files": [entry],
         "fig5": {"kbar": []}}, message)

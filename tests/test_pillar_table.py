@@ -9,6 +9,7 @@ does not fit is refused, naming the file and the line.
 from __future__ import annotations
 
 import contextlib
+import warnings
 import math
 import subprocess
 import sys
@@ -131,9 +132,11 @@ def test_soft_discs_of_unequal_radius_let_go_as_independent_pillars(tmp_path: Pa
     (" ,X,Y,Radius\n1,0.3,0.3,0.1\n",  # an image tool's export with its index column
      r"line 1: column 1 has no name \(an index column\? leave it out\)"),
     ("x,y,radius\n0.3,0.3,0.1,0.2\n", r"line 2 holds 4 values\): allowed three"),
+    ("x,y,radius\n0.5,0.5,0.3\n0.85,0.5,0.06\n",  # a small disc in a large one's reach
+     r"lines 2 and 3 \(pillars 0 and 1\) are 0.35 apart, radii 0.3 \+ 0.06"),
 ], ids=["no header", "unknown column", "heights column", "twice", "missing", "empty",
         "short row", "decimal commas", "nan", "zero radius", "outside", "overlap", "phi",
-        "tangent", "index column", "extra value with decimal points"])
+        "tangent", "index column", "extra value with decimal points", "unequal overlap"])
 def test_a_table_that_does_not_fit_is_refused_naming_the_line(
         tmp_path: Path, text: str, message: str) -> None:
     path = _table(tmp_path, text)
@@ -143,15 +146,16 @@ def test_a_table_that_does_not_fit_is_refused_naming_the_line(
     assert err.value.name == "layout_file" and str(path) in str(err.value)
 
 
-def test_a_grid_that_cannot_keep_two_discs_apart_names_one_that_can(tmp_path: Path) -> None:
-    """Discs 0.005 L apart share element edges on 64^2: the grid is refused,
-    with the next grid that separates them (a table runs on any grid)."""
+def test_discs_closer_than_an_element_share_its_edges_and_are_counted(tmp_path: Path) -> None:
+    """Discs 0.005 L apart share element edges on 64^2, as random discs do on
+    grids coarser than 512: the grid runs, the pair is counted (the curve's
+    touching_pillar_pairs, the convergence study's flag), a finer grid parts
+    them.  A table needs a grid, and its N is its lines'."""
+    from brushcore.model.labelmap import count_touching_pairs
+
     path = _table(tmp_path, "x, y, radius\n0.3, 0.3, 0.1\n0.505, 0.3, 0.1\n")
-    with pytest.raises(ParameterError, match=r"grid=64 is invalid \(pillars 0 and 1 at "
-                       r"element .*allowed grid \d+, the next") as err:
-        build_labels(file_params(path, 0.01, grid=64))
-    suggested = int(str(err.value).split("allowed grid ")[1].split(",")[0])
-    assert build_labels(file_params(path, 0.01, grid=suggested)).max() == 1
+    assert count_touching_pairs(build_labels(file_params(path, 0.01, grid=64))) == 1
+    assert count_touching_pairs(build_labels(file_params(path, 0.01, grid=512))) == 0
     with pytest.raises(ParameterError, match=r"grid=None is invalid .* pillar table"):
         file_params(path, 0.01)
     with pytest.raises(ParameterError, match=r"n_pillars=3 is invalid.*allowed 2"):
@@ -197,3 +201,43 @@ def test_a_stub_among_pillars_is_judged_by_its_own_radius(tmp_path: Path) -> Non
                        r"smallest disc's radius is 0.512 elements\): allowed grid 177"):
         build_labels(file_params(path, 0.01, grid=128, allow_coarse=True))
     assert np.bincount(build_labels(file_params(path, 0.01, grid=427)).ravel() + 1)[3] > 4
+
+
+@pytest.mark.parametrize("text", [
+    "# x,y,radius\n0.25,0.25,0.1\n0.75,0.75,0.1\n",  # np.savetxt(header="x,y,radius")
+    'x,y,radius,\n0.25,0.25,0.1,\n0.75,0.75,0.1,\n',  # trailing commas
+    '"x","y","radius"\n0.25,0.25,0.1\n0.75,0.75,0.1\n',  # a spreadsheet's quotes
+    "x y radius\n25e-2 25e-2 1e-1\n75e-2,75e-2,1e-1\n",  # exponents, no point: no warning
+], ids=["commented header", "trailing commas", "quoted names", "exponents"])
+def test_tables_as_tools_write_them_are_read(tmp_path: Path, text: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no decimal-comma warning either
+        table = read_pillar_table(_table(tmp_path, text))
+    assert table.centres.tolist() == [[0.25, 0.25], [0.75, 0.75]]
+    assert table.radii.tolist() == [0.1, 0.1]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("x;y;radius\n0.25;0.25;0.1\n", r"semicolons between values: separate them with commas"),
+    ("x;y;radius\n0,25;0,25;0,1\n", r"semicolons between values and decimal commas"),
+], ids=["semicolons", "semicolons and decimal commas"])
+def test_semicolon_tables_are_told_what_to_change(tmp_path: Path, text: str,
+                                                  message: str) -> None:
+    with pytest.raises(ParameterError, match=message):
+        read_pillar_table(_table(tmp_path, text))
+
+
+def test_generated_tables_run_where_their_brushes_run(tmp_path: Path) -> None:
+    """phi = 0.5 sums to 0.5000000000000001 from 256 discs (accepted), and a
+    random brush's discs that share element edges on 256^2 (its gap is L/512)
+    run there too, counted as the generated brush counts them."""
+    from brushcore.model.labelmap import count_touching_pairs
+
+    dense = BrushParams("regular", 256, 0.01, 256, phi=0.5)
+    table = read_pillar_table(save_pillar_table(generated_table(dense), tmp_path / "dense"))
+    assert table.phi == pytest.approx(0.5, rel=1e-12)
+    random = BrushParams("random", 220, 0.01, 256)
+    path = save_pillar_table(generated_table(random), tmp_path / "random")
+    labels = build_labels(file_params(path, 0.01, grid=256))
+    assert np.array_equal(labels, build_labels(random))
+    assert count_touching_pairs(labels) == count_touching_pairs(build_labels(random)) > 0

@@ -239,6 +239,24 @@ def _check_brush(path: Path, curve: xr.Dataset, key: CaseKey) -> None:
             f"and rerun its job to get the brush that seed {key.seed} draws on every grid")
 
 
+def _check_one_file_per_layout(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -> None:
+    """A file brush is named by its file's name (`curve_layout`): curves of one
+    name drawn from files of different content (two folders' brush.csv, a
+    table edited between runs) are two brushes, not one refined."""
+    digests: dict[str, dict[str, Path]] = {}
+    for key, (path, curve) in curves.items():
+        digest = curve.attrs.get("layout_file_sha256")  # absent before it was recorded
+        if curve.attrs.get("layout") == "file" and digest:
+            digests.setdefault(key.layout, {}).setdefault(str(digest), path)
+    for layout, files in digests.items():
+        if len(files) > 1:
+            first, second = list(files.values())[:2]
+            raise AggregationError(
+                f"curve files {first} and {second} are both brush {layout} but were drawn "
+                "from files of different content (layout_file_sha256): rename one file, "
+                "or rerun the curves of the older one")
+
+
 def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:
     """An attribute every curve must share (e.g. grid); raise naming a mismatch."""
     values = {}
@@ -338,6 +356,7 @@ def build_sweep(
         Naming the offending file when one cannot be read or cases clash.
     """
     curves = load_curves(paths, expected)
+    _check_one_file_per_layout(curves)
     # A file brush has its file's phi (each case's phi_actual); the attribute is
     # that of the generated brushes, whose phi the figures' theory lines take.
     generated = {k: pc for k, pc in curves.items() if pc[1].attrs.get("layout") != "file"}

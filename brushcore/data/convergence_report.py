@@ -99,7 +99,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
     header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
               "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
               "uncertainty (>= 4 grids), with the safety factor in its column (1.25 at a "
-              "trusted order on monotone values, else 3). phi_spread: the realised filling "
+              "trusted order on monotone values whose fine end converges, else 3). phi_spread: the realised filling "
               "factor's range over the grids relative to its mean (the rigid limit "
               "phi^-1/4 moves by a quarter of it). spread: half the range of the values "
               "over the grids (where a flag leaves no extrapolation, finest +- spread is "

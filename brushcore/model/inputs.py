@@ -46,6 +46,16 @@ def _rows(path: Path, name: str) -> tuple[list[tuple[int, list[float]]], str]:
     return rows, hint
 
 
+def header_names(number: int, line: str) -> tuple[int, list[str]]:
+    """(line number, column names) of a header line: commas separate names,
+    an empty one too (an index column's; a trailing comma adds none), else
+    white space; quotes around a name are a spreadsheet's, not the name's."""
+    names = [t.strip().strip("'\"") for t in line.split(",")] if "," in line else line.split()
+    while names and not names[-1]:
+        names.pop()
+    return number, names
+
+
 def table_rows(path: Path, name: str, header: bool = True
                ) -> tuple[tuple[int, list[str]] | None, list[tuple[int, list[float]]], str]:
     """A text file's lines as `_rows` reads them, after a header line.
@@ -67,11 +77,10 @@ def table_rows(path: Path, name: str, header: bool = True
         tokens = line.replace(",", " ").split()
         if header and tokens and not rows and names is None \
                 and not all(_NUMBER.fullmatch(token) for token in tokens):
-            # a header's commas separate names, an empty one too (an index column)
-            names = (number, [t.strip() for t in line.split(",")] if "," in line
-                     else tokens)
+            names = header_names(number, line)
             continue
-        points = points or "." in line
+        # a number's exponent is no decimal comma's sign: "25e-2,5e-1" is plain
+        points = points or "." in line or bool(re.search(r"\d[eE][+-]?\d", line))
         if re.search(r"\d,\d", line) and not hint:
             hint, first = _COMMA_HINT, (number, line.strip())
         if not tokens:
@@ -79,8 +88,12 @@ def table_rows(path: Path, name: str, header: bool = True
         values = []
         for token in tokens:
             if not _NUMBER.fullmatch(token):
+                semicolons = "" if ";" not in token else (
+                    "; semicolons between values and decimal commas, as a spreadsheet in "
+                    "some locales writes: save with decimal points and commas" if "," in line
+                    else "; semicolons between values: separate them with commas or spaces")
                 raise ParameterError(name, str(path), "numbers only",
-                                     f"line {number}: {token!r} is not a number")
+                                     f"line {number}: {token!r} is not a number{semicolons}")
             values.append(float(token))
         rows.append((number, values))
     if hint and points:  # decimal points and commas between values: a plain CSV

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from brushcore.model.inputs import table_rows
+from brushcore.model.inputs import header_names, table_rows
 from brushcore.validation import ParameterError
 
 SUFFIX = ".csv"
@@ -119,8 +119,23 @@ def read_pillar_table(path: str | Path) -> PillarTable:
     return _read_cached(str(path), stat.st_mtime_ns, stat.st_size)
 
 
+def _commented_header(path: Path) -> tuple[int, list[str]] | None:
+    """A header written as a comment before the first row, as
+    ``np.savetxt(..., header="x,y,radius")`` writes it, where it names exactly
+    the table's columns (any other comment stays a comment)."""
+    for number, line in enumerate(path.read_text(encoding="utf-8-sig").splitlines(), 1):
+        text, _, comment = line.partition("#")
+        if text.strip():
+            return None  # the first row: no header before it
+        found = header_names(number, comment.strip())
+        if sorted(n.lower() for n in found[1]) == sorted(COLUMNS):
+            return found
+    return None
+
+
 def _read(path: Path) -> PillarTable:
     header, rows, comma_hint = table_rows(path, _NAME)
+    header = header or (_commented_header(path) if rows else None)
     if header is None:
         raise _refuse(path, "a header line naming the columns x, y and radius [L]",
                       "its first line holds numbers" if rows else "it holds no pillar")
@@ -154,7 +169,7 @@ def _read(path: Path) -> PillarTable:
                       f"radius = {float(r[i])!r}")
     _check_apart(path, lines, np.column_stack([y, x]), r)
     table = PillarTable(np.column_stack([y, x]), r)
-    if table.phi > 0.5:
+    if table.phi > 0.5 * (1.0 + 1e-12):  # a generated brush at 0.5 sums to 0.5000000000000001
         raise _refuse(path, "discs covering at most half the square (phi <= 0.5)",
                       f"pi sum r^2 = {table.phi:.4g}")
     return table
@@ -163,10 +178,17 @@ def _read(path: Path) -> PillarTable:
 def _check_apart(path: Path, lines: np.ndarray, centres: np.ndarray, r: np.ndarray) -> None:
     """Refuse two discs that overlap or touch (no closer than the sum of their
     radii: tangent discs share element edges on every grid)."""
-    pairs = cKDTree(centres).query_pairs(2.0 * float(r.max()), output_type="ndarray")
-    if not pairs.size:
+    # Each disc looks for the discs no larger than itself within twice its own
+    # radius (d <= r_p + r_q <= 2 r_p): one large disc among many small ones
+    # costs its own neighbourhood, not every pair within twice the largest.
+    near = cKDTree(centres).query_ball_point(centres, 2.0 * r, return_sorted=False)
+    counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
+    p = np.repeat(np.arange(len(near)), counts)
+    q = np.fromiter((j for found in near for j in found), dtype=np.int64, count=int(counts.sum()))
+    keep = (p != q) & ((r[q] < r[p]) | ((r[q] == r[p]) & (q > p)))
+    p, q = p[keep], q[keep]
+    if not p.size:
         return
-    p, q = pairs.T
     distance = np.hypot(*(centres[p] - centres[q]).T)
     overlap = np.flatnonzero(distance <= r[p] + r[q])  # touching: no grid parts them
     if overlap.size:

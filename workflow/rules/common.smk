@@ -317,7 +317,6 @@ def check_cases(config, main=True):
         )
     if main:
         _warn_first_touch(config, brushes)
-        _warn_two_grids(config)
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -379,6 +378,8 @@ def check_cases(config, main=True):
                 f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
                 + _inherited_note(config, layout, only_fig5)
             ) from None
+    if main:  # a plan that stands: what it leaves out
+        _warn_two_grids(config)
 
 
 def _warn_first_touch(config, brushes):
