@@ -442,3 +442,23 @@ def test_converge_keeps_two_files_of_one_name_apart(tmp_path, capsys) -> None:
     capsys.readouterr()
     assert main(["converge", *spread, "--out-dir", str(tmp_path / "three")]) == 0
     assert "no convergence study: it needs a case run on three" in capsys.readouterr().out
+
+
+def test_converge_refines_a_map_drawn_once_a_grid(tmp_path, capsys) -> None:
+    """A map fits one grid, so its refinement has one file a grid (g32/brush.npy,
+    ...): their contents differ by nature, and they are one brush."""
+    from brushcore import BrushParams, generated_table
+    from brushcore.model.layout import table_labels
+    from brushcore.model.layout_file import save_label_map
+
+    table = generated_table(BrushParams("regular", 4, 0.01, 64))
+    paths = []
+    for grid in (32, 48, 64):
+        (tmp_path / f"g{grid}").mkdir()
+        brush = save_label_map(table_labels(table, grid), tmp_path / f"g{grid}" / "brush")
+        paths.append(str(tmp_path / f"c{grid}.nc"))
+        assert main(["simulate", "--layout", "file", "--layout-file", str(brush), "--kbar",
+                     "0.01", "--quiet", "--out", paths[-1]]) == 0
+    assert main(["converge", *paths, "--out-dir", str(tmp_path / "s")]) == 0
+    assert "3 curves on grids [32, 48, 64]" in capsys.readouterr().out
+    assert (tmp_path / "s" / "convergence.nc").is_file()

@@ -189,18 +189,22 @@ def test_the_cli_runs_a_table_on_the_grid_it_is_given(tmp_path: Path) -> None:
 
 def test_a_stub_among_pillars_is_judged_by_its_own_radius(tmp_path: Path) -> None:
     """A broken stub (radius 0.004 L beside two of 0.1 L) sets the grid: the
-    refusal names the smallest disc, and the grid it suggests is one where a
-    disc that small is three elements across wherever it sits (radius
-    1 + sqrt(1/2) elements: 427), which runs; allow_coarse asks only that it
-    cover an element centre (sqrt(1/2) elements: 177)."""
+    refusal names the smallest disc.  The grid suggested is the next that
+    passes where the search finds one (263 from 256; 129 from 128 with
+    allow_coarse, where the stub need only cover an element centre), else
+    one from where a disc that small is three elements across wherever it
+    sits (radius 1 + sqrt(1/2) elements: 427), said as such."""
     path = _table(tmp_path, "x, y, radius\n0.25, 0.5, 0.1\n0.75, 0.5, 0.1\n0.5, 0.85, 0.004\n")
-    for grid in (128, 256):
-        with pytest.raises(ParameterError, match=r"allowed grid 427, the next"):
-            build_labels(file_params(path, 0.01, grid=grid))
     with pytest.raises(ParameterError, match=r"1 of 3 pillars cover no element centre; the "
-                       r"smallest disc's radius is 0.512 elements\): allowed grid 177"):
+                       r"smallest disc's radius is 0.512 elements\): allowed grid 427, on "
+                       r"which the smallest disc is three elements across wherever it sits"):
+        build_labels(file_params(path, 0.01, grid=128))
+    with pytest.raises(ParameterError, match=r"allowed grid 263, the next that"):
+        build_labels(file_params(path, 0.01, grid=256))
+    with pytest.raises(ParameterError, match=r"allowed grid 129, the next that"):
         build_labels(file_params(path, 0.01, grid=128, allow_coarse=True))
-    assert np.bincount(build_labels(file_params(path, 0.01, grid=427)).ravel() + 1)[3] > 4
+    for grid in (263, 427):
+        assert np.bincount(build_labels(file_params(path, 0.01, grid=grid)).ravel() + 1)[3] > 4
 
 
 @pytest.mark.parametrize("text", [
@@ -208,7 +212,8 @@ def test_a_stub_among_pillars_is_judged_by_its_own_radius(tmp_path: Path) -> Non
     'x,y,radius,\n0.25,0.25,0.1,\n0.75,0.75,0.1,\n',  # trailing commas
     '"x","y","radius"\n0.25,0.25,0.1\n0.75,0.75,0.1\n',  # a spreadsheet's quotes
     "x y radius\n25e-2 25e-2 1e-1\n75e-2,75e-2,1e-1\n",  # exponents, no point: no warning
-], ids=["commented header", "trailing commas", "quoted names", "exponents"])
+    "x y,radius\n0.25 0.25 0.1\n0.75 0.75 0.1\n",  # white space and a comma
+], ids=["commented header", "trailing commas", "quoted names", "exponents", "mixed header"])
 def test_tables_as_tools_write_them_are_read(tmp_path: Path, text: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no decimal-comma warning either
@@ -241,3 +246,33 @@ def test_generated_tables_run_where_their_brushes_run(tmp_path: Path) -> None:
     labels = build_labels(file_params(path, 0.01, grid=256))
     assert np.array_equal(labels, build_labels(random))
     assert count_touching_pairs(labels) == count_touching_pairs(build_labels(random)) > 0
+
+
+def test_a_decimal_comma_before_an_exponent_is_still_warned_about(tmp_path: Path) -> None:
+    """"2,5e-1" is a decimal-comma locale's 0.25 (read as 2 and 0.5): warned."""
+    from brushcore.model.inputs import read_pillar_values
+
+    path = _table(tmp_path, "2,5e-1\n3,0e-1\n", "h.txt")
+    with pytest.warns(UserWarning, match="no decimal point"):
+        assert read_pillar_values(path, 4, "heights").tolist() == [2.0, 0.5, 3.0, 0.0]
+
+
+def test_exactly_tangent_discs_are_refused_whatever_their_angle(tmp_path: Path) -> None:
+    """Equal discs whose centres lie exactly 2 r apart (np.hypot) at random
+    angles: a k-d tree rounds the distance otherwise, so the search is a hair
+    wider than 2 r (it missed 26 % of such pairs)."""
+    from brushcore.model.pillar_table import _check_apart
+
+    rng = np.random.default_rng(3)
+    found = 0
+    for _ in range(2000):
+        r = 0.05
+        angle = rng.uniform(0, 2 * np.pi)
+        centres = np.array([[0.5, 0.5], [0.5 + 2 * r * np.sin(angle),
+                                         0.5 + 2 * r * np.cos(angle)]])
+        if np.hypot(*(centres[1] - centres[0])) != 2 * r:
+            continue  # not tangent to the last bit
+        found += 1
+        with pytest.raises(ParameterError, match="neither overlap nor touch"):
+            _check_apart(tmp_path / "t.csv", np.array([2, 3]), centres, np.full(2, r))
+    assert found > 100

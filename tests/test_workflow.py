@@ -784,3 +784,8 @@ def test_a_refused_brush_the_user_did_not_list_says_where_it_comes_from(
     assert ("(case random N = 64, grid = 64, phi = 0.12); this brush's 'random' is "
             "config/config.yaml's, which your config files extend: set 'random: []' to run "
             "none") in text, text
+    # the Fig. 5 brush too (the schema adds fig5's defaults to the config)
+    config.write_text(yaml.safe_dump({"grid": [64], "regular": [16], "random": [],
+                                      "kbar": [math.inf]}))
+    text = output(snakemake(repo_copy, "-n", "--cores", "2", "--configfile", str(config)))
+    assert "regular N = 256" in text and "set 'fig5: {kbar: []}' to run none" in text, text

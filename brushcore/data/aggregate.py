@@ -242,13 +242,17 @@ def _check_brush(path: Path, curve: xr.Dataset, key: CaseKey) -> None:
 def _check_one_file_per_layout(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -> None:
     """A file brush is named by its file's name (`curve_layout`): curves of one
     name drawn from files of different content (two folders' brush.csv, a
-    table edited between runs) are two brushes, not one refined."""
-    digests: dict[str, dict[str, Path]] = {}
+    table edited between runs; for a map, on one grid) are two brushes, not
+    one refined."""
+    digests: dict[tuple[str, int | None], dict[str, Path]] = {}
     for key, (path, curve) in curves.items():
         digest = curve.attrs.get("layout_file_sha256")  # absent before it was recorded
         if curve.attrs.get("layout") == "file" and digest:
-            digests.setdefault(key.layout, {}).setdefault(str(digest), path)
-    for layout, files in digests.items():
+            # a table fits every grid; a map or image one (a refinement has one a grid)
+            table = str(curve.attrs.get("layout_file", "")).lower().endswith(".csv")
+            brush = (key.layout, None if table else key.grid)
+            digests.setdefault(brush, {}).setdefault(str(digest), path)
+    for (layout, _), files in digests.items():
         if len(files) > 1:
             first, second = list(files.values())[:2]
             raise AggregationError(

@@ -50,10 +50,12 @@ def header_names(number: int, line: str) -> tuple[int, list[str]]:
     """(line number, column names) of a header line: commas separate names,
     an empty one too (an index column's; a trailing comma adds none), else
     white space; quotes around a name are a spreadsheet's, not the name's."""
-    names = [t.strip().strip("'\"") for t in line.split(",")] if "," in line else line.split()
-    while names and not names[-1]:
-        names.pop()
-    return number, names
+    pieces = line.split(",")
+    while len(pieces) > 1 and not pieces[-1].strip():
+        pieces.pop()
+    # white space inside a comma's piece separates names too ("x y,radius")
+    names = [name for piece in pieces for name in (piece.split() or [""])]
+    return number, [name.strip("'\"") for name in names]
 
 
 def table_rows(path: Path, name: str, header: bool = True
@@ -80,7 +82,8 @@ def table_rows(path: Path, name: str, header: bool = True
             names = header_names(number, line)
             continue
         # a number's exponent is no decimal comma's sign: "25e-2,5e-1" is plain
-        points = points or "." in line or bool(re.search(r"\d[eE][+-]?\d", line))
+        points = points or "." in line or bool(re.search(r"\d[eE][+-]?\d", line)
+                                               and not re.search(r"\d,\d+[eE]", line))
         if re.search(r"\d,\d", line) and not hint:
             hint, first = _COMMA_HINT, (number, line.strip())
         if not tokens:

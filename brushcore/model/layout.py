@@ -377,11 +377,21 @@ def build_labels(params: BrushParams) -> np.ndarray:
     except ParameterError as exc:
         if params.layout == "file" and not is_table(params.layout_file):
             raise  # a map or image fits its own grid only
-        # a gap map fits one grid only, and the label map does not depend on it;
-        # a table's smallest disc may need far more grids than the search tries
-        start = _table_grid_floor(params) - 1 if _smallest_disc(params) else params.grid
-        raise grid_hint(exc, lambda grid: replace(params, grid=grid, gap_map=None),
-                        max(params.grid, min(start, MAX_GRID))) from None
+        def make(grid: int) -> BrushParams:
+            # a gap map fits one grid only, and the label map does not depend on it
+            return replace(params, grid=grid, gap_map=None)
+
+        hinted = grid_hint(exc, make, params.grid)
+        if hinted is exc and _smallest_disc(params):
+            # a table's smallest disc may need more grids than the search tries:
+            # search on from where it is resolved wherever it sits
+            floor = min(_table_grid_floor(params), MAX_GRID) - 1
+            hinted = grid_hint(exc, make, max(params.grid, floor))
+            if hinted is not exc:  # not the first grid that passes: one from the floor
+                hinted = ParameterError(hinted.name, hinted.value, hinted.allowed.replace(
+                    ", the next that", ", on which the smallest disc is three elements "
+                    "across wherever it sits, that", 1), hinted.reason)
+        raise hinted from None
 
 
 def _checked_labels(params: BrushParams) -> np.ndarray:

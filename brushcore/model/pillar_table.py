@@ -181,7 +181,10 @@ def _check_apart(path: Path, lines: np.ndarray, centres: np.ndarray, r: np.ndarr
     # Each disc looks for the discs no larger than itself within twice its own
     # radius (d <= r_p + r_q <= 2 r_p): one large disc among many small ones
     # costs its own neighbourhood, not every pair within twice the largest.
-    near = cKDTree(centres).query_ball_point(centres, 2.0 * r, return_sorted=False)
+    # (a hair wider: the tree's rounding of an exactly tangent pair's distance
+    # is not np.hypot's, which judges below)
+    near = cKDTree(centres).query_ball_point(centres, 2.0 * r * (1.0 + 1e-9),
+                                             return_sorted=False)
     counts = np.fromiter(map(len, near), dtype=np.int64, count=len(near))
     p = np.repeat(np.arange(len(near)), counts)
     q = np.fromiter((j for found in near for j in found), dtype=np.int64, count=int(counts.sum()))

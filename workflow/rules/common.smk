@@ -612,7 +612,12 @@ def _inherited_note(config, layout, only_fig5):
     except (OSError, yaml.YAMLError):
         return ""
     key = "fig5" if only_fig5 else layout
-    if key not in default or config.get(key) != default[key]:
+    if key not in default:
+        return ""
+    mine = config.get(key)
+    if only_fig5:  # the schema adds fig5's defaults (layout, shape) to both
+        mine = {k: v for k, v in mine.items() if k in default[key]}
+    if mine != default[key]:
         return ""
     unset = "fig5: {kbar: []}" if only_fig5 else f"{layout}: []"
     return (
