@@ -390,7 +390,8 @@ def _simulate(args: argparse.Namespace) -> int:
                  if abs(area / labels.size / params.phi - 1) > MAX_PHI_ERROR else "") + "), "
               f"{n_built} pillar{'s' * (n_built != 1)}"
               + ("" if backend.on_host else f", on {backend.device_name}")
-              + (f"; {touching} pillar pairs share an element edge (their gap is under "
+              + (f"; {touching} pillar pair{'s' * (touching != 1)} share"
+                 f"{'s' * (touching == 1)} an element edge (their gap is under "
                  f"an element on this grid; a finer grid separates them)" if touching else ""),
               file=sys.stderr)
         pin_threads(args.threads)
