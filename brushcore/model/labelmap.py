@@ -43,20 +43,18 @@ def count_touching_pairs(labels: np.ndarray) -> int:
     return int(np.unique(np.concatenate(keys)).size)
 
 
-def check_not_touching(labels: np.ndarray, name: str, value: object,
-                       allowed: str = "pillars at least one element apart (no shared "
-                       "element edge)") -> None:
+def check_not_touching(labels: np.ndarray, name: str, value: object) -> None:
     """Refuse a label map whose pillars touch, naming pillars and elements.
 
     Raises
     ------
     ParameterError
-        For parameter ``name`` (the layout's input, or the grid a layout is
-        drawn on) if any two pillars share an element edge; ``allowed`` says
-        what would do.
+        For parameter ``name`` (the layout's input) if any two pillars
+        share an element edge.
     """
     pairs = touching_pillars(labels)
     if pairs:
         where = "; ".join(f"pillars {p} and {q} at element (row {r}, column {c})"
                           for p, q, r, c in pairs)
-        raise ParameterError(name, value, allowed, f"{where}")
+        raise ParameterError(name, value, "pillars at least one element apart (no shared "
+                             "element edge)", f"{where}")

@@ -493,9 +493,9 @@ def _table_grid_floor(params: BrushParams) -> int:
     """The grid from which a table's smallest disc covers an element centre
     (allow_coarse) or is three elements across (`WIDE_RADIUS_ELEMENTS`)
     wherever it sits: where `build_labels` searches a grid to suggest."""
-    r_l = _smallest_disc(params) / params.grid
+    smallest = float(read_pillar_table(params.layout_file).radii.min())  # [L]
     floor = FLOOR_RADIUS_ELEMENTS if params.allow_coarse else WIDE_RADIUS_ELEMENTS
-    return math.ceil(floor / r_l)
+    return math.ceil(floor / smallest)
 
 
 def _check_pillar_widths(params: BrushParams, labels: np.ndarray, name: str, value: object,

@@ -108,8 +108,8 @@ def read_pillar_table(path: str | Path) -> PillarTable:
         For ``layout_file``, naming the file and the line: no header or
         an unknown, missing or repeated column, a row of another length,
         a value that is not a finite number, a radius <= 0, a disc that
-        reaches beyond the square, two discs that overlap, a filling
-        factor above 0.5.
+        reaches beyond the square, two discs that overlap or touch, a
+        filling factor above 0.5.
     """
     path = Path(path)
     if not path.is_file():
@@ -167,8 +167,11 @@ def _read(path: Path) -> PillarTable:
                       "in units of its side L",
                       f"line {lines[i]}: x = {float(x[i])!r}, y = {float(y[i])!r}, "
                       f"radius = {float(r[i])!r}")
-    _check_apart(path, lines, np.column_stack([y, x]), r)
-    table = PillarTable(np.column_stack([y, x]), r)
+    centres = np.column_stack([y, x])
+    _check_apart(path, lines, centres, r)
+    for array in (centres, r):  # a cached reading: what callers get must not be changed
+        array.setflags(write=False)
+    table = PillarTable(centres, r)
     if table.phi > 0.5 * (1.0 + 1e-12):  # a generated brush at 0.5 sums to 0.5000000000000001
         raise _refuse(path, "discs covering at most half the square (phi <= 0.5)",
                       f"pi sum r^2 = {table.phi:.4g}")
