@@ -65,6 +65,9 @@ def test_one_table_runs_on_every_grid_with_the_discs_phi(tmp_path: Path) -> None
     table = read_pillar_table(path)  # columns in any order
     assert table.centres.tolist() == [[0.3, 0.25], [0.7, 0.75]]
     assert table.phi == pytest.approx(math.pi * (0.01 + 0.0025), rel=1e-12)
+    # a phi given within 1e-9 (a plan's, summed on another machine) is kept as given
+    nudged = table.phi * (1 + 1e-12)
+    assert file_params(path, 0.01, grid=64, phi=nudged).phi == nudged
     for grid in (64, 100, 256):
         params = file_params(path, 0.01, grid=grid)
         assert (params.n_pillars, params.grid, params.phi) == (2, grid, table.phi)

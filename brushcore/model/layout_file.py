@@ -297,5 +297,7 @@ def _table_params(path: str | Path, kbar: float, kwargs: dict) -> BrushParams:
     if "phi" in kwargs and abs(kwargs["phi"] / table.phi - 1.0) > 1e-9:
         raise ParameterError("phi", kwargs["phi"], f"{table.phi!r}, the value of {path} "
                              "(pi sum r^2)")
-    kwargs.update(n_pillars=table.n_pillars, phi=table.phi)
+    # a phi given (the workflow's, from the plan) is kept: a job on another
+    # machine, whose sum might round otherwise, then names the plan's case
+    kwargs.update(n_pillars=table.n_pillars, phi=kwargs.get("phi", table.phi))
     return BrushParams(layout="file", kbar=kbar, layout_file=str(path), **kwargs)
