@@ -354,6 +354,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
     from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
+    from brushcore.model.pillar_table import is_table
     from brushcore.numerics.platform.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
@@ -380,8 +381,8 @@ def _simulate(args: argparse.Namespace) -> int:
         labels = build_labels(params)  # layout and discretisation checked before any solve
         area = int((labels >= 0).sum())
         touching = count_touching_pairs(labels)  # random discs on grids coarser than 512
-        asked = {"": "requested", ".csv": "the discs'"}.get(
-            Path(params.layout_file).suffix.lower() if params.layout_file else "", "the file's")
+        asked = ("requested" if not params.layout_file else
+                 "the discs'" if is_table(params.layout_file) else "the file's")
         n_built = int(labels.max()) + 1
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements"
               f"{' (equal-area mean)' if params.layout_file else ''},"

@@ -32,6 +32,7 @@ import xarray as xr
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID
 from brushcore.model.layout_file import curve_layout
+from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
 from brushcore.validation import brief
@@ -249,7 +250,7 @@ def _check_one_file_per_layout(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -
         digest = curve.attrs.get("layout_file_sha256")  # absent before it was recorded
         if curve.attrs.get("layout") == "file" and digest:
             # a table fits every grid; a map or image one (a refinement has one a grid)
-            table = str(curve.attrs.get("layout_file", "")).lower().endswith(".csv")
+            table = is_table(str(curve.attrs.get("layout_file", "")))
             brush = (key.layout, None if table else key.grid)
             digests.setdefault(brush, {}).setdefault(str(digest), path)
     for (layout, _), files in digests.items():

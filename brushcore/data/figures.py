@@ -288,7 +288,8 @@ def fig6(sweep: xr.Dataset) -> Figure:
 
     The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
     punch F_ad = 1 is dotted; a hexagonal panel adds each N's lattice at its
-    local filling factor (`theory.hexagonal_rigid_limit`, dash-dot).  With several seeds the bars span min to max.
+    local filling factor (`theory.hexagonal_rigid_limit`, dash-dot).  With
+    several seeds the bars span min to max.
     Rigid pillars (kbar = inf) are drawn at "rigid" (`_rigid_x`), not joined
     to the finite kbar.
     """
