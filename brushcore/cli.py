@@ -350,7 +350,7 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from brushcore.model.curve import preload_contact, simulate
+    from brushcore.model.curve import preload_contact, simulate, smallest_radius_elements
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels
     from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
@@ -384,8 +384,11 @@ def _simulate(args: argparse.Namespace) -> int:
         asked = ("requested" if not params.layout_file else
                  "the discs'" if is_table(params.layout_file) else "the file's")
         n_built = int(labels.max()) + 1
+        narrowest = smallest_radius_elements(params, labels)  # what the flags read
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements"
-              f"{' (equal-area mean)' if params.layout_file else ''},"
+              f"{' (equal-area mean)' if params.layout_file else ''}"
+              + (f", the narrowest {narrowest:.3g}"
+                 if narrowest < 0.99 * params.pillar_radius_elements else "") + ","
               f" phi realised {area / labels.size:.4g} ({asked} {params.phi:g}"
               + (f", {100 * (area / labels.size / params.phi - 1):+.0f} %: --allow-coarse ran it"
                  if abs(area / labels.size / params.phi - 1) > MAX_PHI_ERROR else "") + "), "

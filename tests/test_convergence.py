@@ -576,6 +576,39 @@ def test_table_says_when_the_fit_rests_on_an_under_resolved_grid(radii, flag):
     assert set(table["flags"]) == {flag}, table
 
 
+@pytest.mark.parametrize(("smallest", "flag"), [((1.5, 3.0, 6.0), "coarsest_under_resolved"),
+                                                ((1.0, 2.0, 3.9), "under_resolved")])
+def test_flags_read_the_narrowest_pillar(smallest, flag):
+    """A brush of unequal pillars (a table with one small disc) is as resolved
+    as its narrowest pillar: the mean radius alone (8.4 on the finest grid
+    here, unflagged) would hide that its smallest disc spans 3.9 elements."""
+    grids = np.array([256, 512, 1024])
+    dims = ("layout", "n_pillars", "kbar", "seed", "grid")
+    coords = {"layout": ["file"], "n_pillars": [64], "kbar": [1.0], "seed": [0],
+              "grid": grids}
+    values = law(1.0 / grids, 1.0).reshape(1, 1, 1, 1, 3)
+    five = (1, 1, 1, 1, 3)
+    sweep = xr.Dataset({q: (dims, values) for q in
+                        ("adhesive_force_normalized", "work_of_separation_normalized")}
+                       | {"pillar_radius_elements": (dims, np.reshape((4.2, 8.4, 16.8), five)),
+                          "smallest_radius_elements": (dims, np.reshape(smallest, five))},
+                       coords=coords)
+    conv = extrapolate_sweep(sweep)
+    table = convergence_table(conv)
+    assert set(table["flags"]) == {flag}, table
+    assert set(table["smallest_radius_elements_finest"]) == {smallest[-1]}
+    assert set(table["radius_elements_finest"]) == {16.8}
+    from brushcore.data import figures
+    from brushcore.data.summary import _resolution_row
+
+    drawn = figures.convergence(conv)
+    assert any(f"under-resolved ({smallest[0 if 'coarsest' in flag else -1]:.1f}"
+               in t.get_text() for ax in drawn.axes for t in ax.texts)
+    row = _resolution_row(sweep.isel(grid=-1, drop=True), "file", 64)
+    assert row.quantity.startswith("narrowest") and row.value == f"{smallest[-1]:g}"
+    assert ("UNDER-RESOLVED" in row.note) == (smallest[-1] < 4)
+
+
 def test_summary_gives_the_seed_count_and_a_t_interval():
     """Three random seeds: the sample SD and Student's t (4.30 for 3 seeds, not
     1.96); a missing seed is said, not silently left out of the mean."""

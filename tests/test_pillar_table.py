@@ -279,3 +279,30 @@ def test_exactly_tangent_discs_are_refused_whatever_their_angle(tmp_path: Path) 
         with pytest.raises(ParameterError, match="neither overlap nor touch"):
             _check_apart(tmp_path / "t.csv", np.array([2, 3]), centres, np.full(2, r))
     assert found > 100
+
+
+def test_the_narrowest_pillar_is_recorded_for_the_resolution_flags(tmp_path: Path) -> None:
+    """`smallest_radius_elements`, which the under-resolved flags read: a
+    generated brush's radius rule (an ellipse's semi-minor axis r/sqrt(4)),
+    a table's smallest disc (0.04 L on 96^2: 3.84 elements, against a mean
+    equal-area radius of 6.07), a label map's smallest pillar as the
+    equal-area radius of its element count, written into the curve file."""
+    from brushcore.model.curve import smallest_radius_elements
+    from brushcore.model.layout_file import save_label_map
+
+    disc = BrushParams("regular", 16, 0.01, 128)
+    assert smallest_radius_elements(disc, build_labels(disc)) == disc.pillar_radius_elements
+    ellipse = BrushParams("regular", 16, 0.01, 256, shape="ellipse", aspect=4.0)
+    assert smallest_radius_elements(ellipse, build_labels(ellipse)) == pytest.approx(
+        ellipse.pillar_radius_elements / 2.0, rel=1e-12)
+    table = _table(tmp_path, "x,y,radius\n0.3,0.3,0.08\n0.7,0.7,0.04\n")
+    params = file_params(table, 1e-3, grid=96)
+    assert params.pillar_radius_elements == pytest.approx(96 * math.sqrt(0.08**2 / 2 + 0.04**2 / 2))
+    assert smallest_radius_elements(params, build_labels(params)) == pytest.approx(3.84)
+    labels = np.full((40, 40), -1)
+    labels[4:14, 4:14] = 0   # 100 elements
+    labels[20:26, 20:26] = 1  # 36 elements: equal-area radius sqrt(36/pi) = 3.385
+    mapped = file_params(save_label_map(labels, tmp_path / "m.npy"), 1e-3)
+    assert smallest_radius_elements(mapped, labels) == pytest.approx(math.sqrt(36 / math.pi))
+    curve = simulate(params)
+    assert curve.attrs["smallest_radius_elements"] == pytest.approx(3.84)

@@ -71,6 +71,8 @@ ATTRIBUTE_SCALARS = {
     "phi_actual": ("1", "filling factor A / L^2 realised on the grid"),
     "real_contact_area": ("m2", "real contact area A"),
     "pillar_radius_elements": ("1", "pillar radius a_p / h (elements a radius spans)"),
+    "smallest_radius_elements": ("1", "the narrowest pillar's radius / h (an ellipse's "
+                                      "semi-minor axis, a table's or map's smallest pillar)"),
     "touching_pillar_pairs": ("1", "pillar pairs whose footprints share an element edge"),
 }
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
@@ -504,8 +506,12 @@ def _attribute(curve: xr.Dataset, name: str) -> float:
     """A numeric curve attribute, NaN when absent.
 
     Curve files written before ``pillar_radius_elements`` was recorded give
-    it from ``pillar_radius`` / ``h``.
+    it from ``pillar_radius`` / ``h``; those written before
+    ``smallest_radius_elements`` give the mean radius for it, which their
+    flags read.
     """
+    if name == "smallest_radius_elements" and name not in curve.attrs:
+        return _attribute(curve, "pillar_radius_elements")
     if name == "pillar_radius_elements" and name not in curve.attrs:
         a = curve.attrs
         return float(a["pillar_radius"]) / float(a["h"]) if "pillar_radius" in a and "h" in a \

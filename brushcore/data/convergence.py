@@ -115,8 +115,22 @@ FIT_FLAGS = ("non_monotone", "poor_fit", "too_few_grids", "not_asymptotic")
 #: Sweep variable counting pillar pairs that share an element edge on a grid
 #: (`brushcore.model.labelmap.count_touching_pairs`): flagged in the table.
 TOUCHING = "touching_pillar_pairs"
+#: Sweep variable of the narrowest pillar's radius [elements] on a grid
+#: (`brushcore.model.curve.smallest_radius_elements`): what the flags read.
+SMALLEST = "smallest_radius_elements"
 #: The filling factor each grid realises (sweep.nc's), carried beside the raw values.
 PHI_ACTUAL = "phi_actual"
+
+
+def flag_radii(conv: xr.Dataset) -> tuple[xr.DataArray, xr.DataArray]:
+    """The radii [elements] the resolution flags read on the finest and the
+    coarsest grid run of each case of `extrapolate_sweep`'s dataset: the
+    narrowest pillar's (`SMALLEST`) where the study has it, else the mean
+    pillar radius (a study of curves written before it was recorded)."""
+    name = SMALLEST if f"{SMALLEST}_finest" in conv else "pillar_radius_elements"
+    finest = conv[f"{name}_finest"]
+    # a study written before the coarsest radius was: no coarsest flag
+    return finest, conv.get(f"{name}_coarsest", xr.full_like(finest, np.inf))
 
 
 def resolution_flag(finest: float, coarsest: float) -> tuple[str, float] | None:
@@ -535,7 +549,8 @@ def extrapolate_sweep(
         `FIT_FLAGS`; the raw values ``{q}`` on (cases..., grid);
         ``finest_grid`` and ``pillar_radius_elements_finest`` of the finest
         grid run (first quantity), ``pillar_radius_elements_coarsest`` of the
-        coarsest; ``h`` = 1/n on ``grid``; ``touching_pillar_pairs`` and
+        coarsest, and ``smallest_radius_elements_{finest,coarsest}`` where the
+        sweep has the narrowest pillar's radius (`flag_radii`); ``h`` = 1/n on ``grid``; ``touching_pillar_pairs`` and
         ``phi_actual`` on (cases..., grid) where the sweep has them.
 
     Raises
@@ -596,6 +611,11 @@ def extrapolate_sweep(
             rad = grid_n * np.sqrt(phi / (np.pi * sweep["n_pillars"].astype(np.float64)))
         out[f"pillar_radius_elements_{end}"] = rad.assign_attrs(
             units="1", long_name=f"pillar radius a_p / h on the {end} grid run [elements]")
+        if SMALLEST in sweep:  # unequal or elliptic pillars: the narrowest sets the error
+            small = sweep[SMALLEST].isel({GRID_DIM: idx}, drop=True)
+            out[f"{SMALLEST}_{end}"] = xr.where(at >= 0, small, np.nan).assign_attrs(
+                units="1", long_name=f"the narrowest pillar's radius / h on the {end} grid "
+                                     "run [elements], which the resolution flags read")
     if TOUCHING in sweep:  # random discs on grids coarser than 512: a mesh error to see
         out[TOUCHING] = sweep[TOUCHING].copy()
     if PHI_ACTUAL in sweep:  # the staircase's filling factor moves F_ad from grid to grid

@@ -12,8 +12,8 @@ import numpy as np
 import xarray as xr
 
 from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, PHI_ACTUAL, QUANTITIES,
-                                        TOUCHING, UNDER_RESOLVED_RADIUS, resolution_flag,
-                                        touching_grids)
+                                        SMALLEST, TOUCHING, UNDER_RESOLVED_RADIUS,
+                                        flag_radii, resolution_flag, touching_grids)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
 
@@ -52,6 +52,9 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             for g, v in zip(grids, raw):
                 row[f"n={g}"] = float(v)
             row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
+            finest, coarsest = (float(r) for r in flag_radii(one))
+            if f"{SMALLEST}_finest" in one:  # unequal or elliptic pillars
+                row["smallest_radius_elements_finest"] = finest
             if PHI_ACTUAL in one:  # how far the staircase's phi moves between the grids
                 phi = one[PHI_ACTUAL].values[np.isfinite(raw)]
                 row["phi_spread"] = float((phi.max() - phi.min()) / phi.mean())
@@ -59,8 +62,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             for s in ("extrapolated", "error", "order", "safety_factor", "spread"):
                 row[s] = float(one[f"{q}_{s}"])
             flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
-            resolution = resolution_flag(row["radius_elements_finest"],
-                                         float(one["pillar_radius_elements_coarsest"]))
+            resolution = resolution_flag(finest, coarsest)
             if resolution:
                 flags.append(resolution[0])
             if TOUCHING in one and touching_grids(one[TOUCHING].values).any():
@@ -105,7 +107,10 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "phi^-1/4 moves by a quarter of it). spread: half the range of the values "
               "over the grids (where a flag leaves no extrapolation, finest +- spread is "
               "what the study can say). "
-              f"under_resolved: finest pillar radius < {UNDER_RESOLVED_RADIUS:g} elements; "
+              f"under_resolved: the narrowest pillar's radius on the finest grid < "
+              f"{UNDER_RESOLVED_RADIUS:g} elements (smallest_radius_elements_finest where "
+              "pillars differ: an ellipse's semi-minor axis, a table's or map's smallest "
+              "pillar); "
               "coarsest_under_resolved: the fit's coarsest grid is under-resolved (the fit "
               "rests on a grid whose own mesh error is a few per cent); "
               "touching_pillars: on some grid two pillars' footprints share an element "

@@ -32,8 +32,8 @@ from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, curve_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
-from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, resolution_flag,
-                                        touching_grids)
+from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, flag_radii,
+                                        resolution_flag, touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
 K_LABEL = r"$\bar k = k / (E^* L)$"
@@ -824,7 +824,7 @@ def convergence(
                  rf"$\bar k$={_kbar_text(float(case.get('kbar', math.nan)))}")
         if case.get("seed", 0):
             title += f", seed {case['seed']}"
-        radius = float(conv["pillar_radius_elements_finest"].sel(case))
+        finest, coarsest = (float(r.sel(case)) for r in flag_radii(conv))
         for col, q in enumerate(quantities):
             ax = axes[row][col]
             values = conv[q].sel(case).values
@@ -844,9 +844,7 @@ def convergence(
                         ha="left", va="top", transform=ax.transAxes, fontsize="small")
             flags = [f.replace("_", " ") for f in FIT_FLAGS
                      if f"{q}_{f}" in conv and int(conv[f"{q}_{f}"].sel(case))]
-            coarsest = float(conv["pillar_radius_elements_coarsest"].sel(case)) \
-                if "pillar_radius_elements_coarsest" in conv else math.inf
-            resolution = resolution_flag(radius, coarsest)  # as the table flags
+            resolution = resolution_flag(finest, coarsest)  # as the table flags
             if resolution:
                 name, r = resolution
                 flags.append(f"{RESOLUTION_TEXT[name]} ({r:.1f} el./radius)")

@@ -65,11 +65,14 @@ def _simulate(smk, clock: CurveClock) -> None:
                      protocol=protocol)
     orphaned()
     write_curve(curve, smk.output[0])
+    mean, narrowest = (float(curve.attrs[f"{which}_radius_elements"])
+                       for which in ("pillar", "smallest"))
     print(
         f"F_ad = {float(curve['adhesive_force_normalized']):.6g}, "
         f"W = {float(curve['work_of_separation_normalized']):.6g} (normalised), "
         f"{curve.attrs.get('events')} events, {curve.attrs.get('wall_time_s', float('nan')):.3g} s; "
-        f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements, "
+        f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements"
+        + (f" (the narrowest {narrowest:.3g})" if narrowest < 0.99 * mean else "") + ", "
         f"phi realised {curve.attrs['phi_actual']:.4g}"
     )
     pressed = preload_contact(curve, "preload", "add a load to the config's 'preload' list "

@@ -24,7 +24,7 @@ from scipy import stats
 from brushcore.model import theory
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index
-from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
+from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
 PLATEAU_RTOL = 0.05
@@ -290,6 +290,10 @@ def _resolution_row(sweep: xr.Dataset, layout: str, n_pillars: int) -> Row:
         return Row("pillar radius in elements", layout, str(n_pillars), "", NOT_AVAILABLE, "",
                    "not recorded in this sweep")
     radius = seed_mean(sweep, "pillar_radius_elements", layout, n_pillars)
+    # the narrowest pillar's where pillars differ: one coarse pillar sets the mesh error
+    narrow = seed_mean(sweep, SMALLEST, layout, n_pillars) if SMALLEST in sweep else radius
+    unequal = bool(np.any(narrow < 0.99 * radius))
+    radius = narrow
     grid = seed_mean(sweep, "grid_used", layout, n_pillars) if "grid_used" in sweep else radius
     r_min = float(radius.min()) if radius.size else math.nan
     grids = sorted({int(g) for g in np.asarray(grid.values) if math.isfinite(g)}) \
@@ -298,7 +302,8 @@ def _resolution_row(sweep: xr.Dataset, layout: str, n_pillars: int) -> Row:
     if math.isfinite(r_min) and r_min < UNDER_RESOLVED_RADIUS:
         note = (note + "; " if note else "") + \
             f"UNDER-RESOLVED (< {UNDER_RESOLVED_RADIUS:g} elements): not converged in h"
-    return Row("pillar radius in elements (finest grid run)", layout, str(n_pillars), "",
+    return Row(f"{'narrowest ' * unequal}pillar radius in elements "
+               "(finest grid run)", layout, str(n_pillars), "",
                _fmt(r_min), "", note)
 
 

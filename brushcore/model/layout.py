@@ -382,7 +382,7 @@ def build_labels(params: BrushParams) -> np.ndarray:
             return replace(params, grid=grid, gap_map=None)
 
         hinted = grid_hint(exc, make, params.grid)
-        if hinted is exc and _smallest_disc(params):
+        if hinted is exc and smallest_disc(params):
             # a table's smallest disc may need more grids than the search tries:
             # search on from where it is resolved wherever it sits
             floor = min(_table_grid_floor(params), MAX_GRID) - 1
@@ -481,7 +481,7 @@ def _check_table_matches(params: BrushParams) -> None:
 WIDE_RADIUS_ELEMENTS = 1.0 + math.sqrt(0.5)
 
 
-def _smallest_disc(params: BrushParams) -> float | None:
+def smallest_disc(params: BrushParams) -> float | None:
     """A pillar table's smallest disc radius in elements on ``params.grid``,
     None for other layouts (whose pillars the radius rule reads alike)."""
     if params.layout != "file" or not is_table(params.layout_file):
@@ -547,7 +547,7 @@ def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
     # an ellipse's semi-minor axis, as the radius rule reads it: its
     # equal-area radius would suggest a grid that still misses its centres;
     # a table's smallest disc, not the mean one (a stub among pillars)
-    smallest = _smallest_disc(params)
+    smallest = smallest_disc(params)
     r = smallest or params.narrowest_radius_elements
     what = "semi-minor axis" if params.shape == "ellipse" else "radius"
     if np.any(counts == 0):
