@@ -627,6 +627,15 @@ def test_a_retry_asks_for_twice_the_time_and_the_same_memory() -> None:
     assert list(inspect.signature(common["simulate_mem_mb"]).parameters) == ["wildcards"]
 
 
+def test_snapshots_are_kept_for_fig5_only_when_it_is_drawn() -> None:
+    """sweep.nc keeps the Fig. 5 brush's contact snapshots beside any others
+    small enough; with `fig5: {kbar: []}` (no Fig. 5) none is asked for."""
+    brushes = _common_rules()["snapshot_brushes"]
+    fig5 = {"layout": "regular", "n_pillars": 256}
+    assert brushes({"fig5": fig5 | {"kbar": [0.455]}}) == [("regular", 256)]
+    assert brushes({"fig5": fig5 | {"kbar": []}}) == []
+
+
 def test_time_requests_follow_the_solver_settings() -> None:
     """symmetry: false solves a regular brush on the whole grid, exact mode's
     global cascades run 4-6x longer, double transforms 1.5x on a random

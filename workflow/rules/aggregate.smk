@@ -12,7 +12,7 @@ rule aggregate:
         mem_mb=4000,
         runtime=30,
     params:
-        keep_snapshots=[(config["fig5"]["layout"], config["fig5"]["n_pillars"])],
+        keep_snapshots=snapshot_brushes(config),
         cases=[named_case(case) for case in sweep_cases(config)],  # as curve_files lists them
     script:
         "../scripts/aggregate.py"

@@ -642,6 +642,13 @@ def wants_convergence(config):
     return any(len(case_grids(config, n)) >= 3 for n in sweep_brushes(config))
 
 
+def snapshot_brushes(config):
+    """(layout, N) whose contact snapshots sweep.nc keeps for Fig. 5: its
+    brush where `fig5.kbar` lists a stiffness, none where Fig. 5 is off."""
+    fig5 = config["fig5"]
+    return [(fig5["layout"], fig5["n_pillars"])] if fig5["kbar"] else []
+
+
 def sweep_brushes(config):
     """Every pillar number N run on the sweep's grids (every layout, the Fig. 5
     brush and pillar tables)."""
