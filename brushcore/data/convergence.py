@@ -550,8 +550,9 @@ def extrapolate_sweep(
         ``finest_grid`` and ``pillar_radius_elements_finest`` of the finest
         grid run (first quantity), ``pillar_radius_elements_coarsest`` of the
         coarsest, and ``smallest_radius_elements_{finest,coarsest}`` where the
-        sweep has the narrowest pillar's radius (`flag_radii`); ``h`` = 1/n on ``grid``; ``touching_pillar_pairs`` and
-        ``phi_actual`` on (cases..., grid) where the sweep has them.
+        sweep has the narrowest pillar's radius (`flag_radii`); ``h`` = 1/n
+        on ``grid``; ``touching_pillar_pairs`` and ``phi_actual`` on
+        (cases..., grid) where the sweep has them.
 
     Raises
     ------
