@@ -248,3 +248,20 @@ def test_curve_is_consistent():
     snap = ds.contact_snapshot.values
     assert (snap[0] == 1).sum() == ds.attrs["real_contact_area"]  # start: all attached
     assert list(ds.snapshot_label.values)[2] == "maximum force"
+
+
+def test_every_curve_names_its_units_d_k_and_f_k() -> None:
+    """d_K and F_K of the realised area are written on every curve, flat ones
+    too (a user converting measured heights reads d_K from a first flat run):
+    the ratios of the dimensional to the normalised columns, and the theory's."""
+    curve = simulate(BrushParams("regular", 16, 0.01, 64))
+    a = curve.attrs
+    d_k = theory.displacement_scale(a["real_contact_area"], a["e_star"], a["dgamma"])
+    f_k = theory.force_scale(a["real_contact_area"], a["e_star"], a["dgamma"])
+    assert a["displacement_unit_d_K"] == pytest.approx(d_k, rel=1e-14)
+    assert a["force_unit_F_K"] == pytest.approx(f_k, rel=1e-14)
+    moved = curve["displacement_normalized"].values != 0
+    assert np.allclose(curve["displacement"].values[moved]
+                       / curve["displacement_normalized"].values[moved], d_k, rtol=1e-14)
+    assert float(curve["adhesive_force"] / curve["adhesive_force_normalized"]) == \
+        pytest.approx(f_k, rel=1e-14)

@@ -180,6 +180,11 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "pillar_radius": params.pillar_radius,
         "pillar_radius_elements": params.pillar_radius_elements,
         "side_length": params.side,
+        # the units of the normalised columns, on every curve: heights measured
+        # in metres are divided by d_K before a run of given heights
+        "displacement_unit_d_K": theory.displacement_scale(area_total, params.e_star,
+                                                           params.dgamma),
+        "force_unit_F_K": theory.force_scale(area_total, params.e_star, params.dgamma),
         "critical_stress": theory.critical_stress(params.e_star, params.dgamma, params.h),
         **geometry_attrs(params, labels),
         "events": events,
@@ -561,8 +566,6 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                        preconditioner=op.preconditioner,
                        hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
     attrs.update({
-        "displacement_unit_d_K": ds_,
-        "force_unit_F_K": fs,
         "preload_force": float(-waypoints[0].value) if waypoints[0].kind == "force" else 0.0,
         "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
         "pillar_order": PILLAR_ORDER,
