@@ -63,27 +63,17 @@ localrules:
 rule all:
     default_target: True
     input:
-        "results/sweep.nc",
-        "results/summary.csv",
-        "results/summary.md",
-        paper_figure_files(config),
-        rough_figure_files(config),
-        lattice_figure_files(config),
-        # the refinement study only where some brush runs on three or more grids
-        (
-            [
-                "results/convergence.nc",
-                "results/convergence.csv",
-                "results/convergence.md",
-                "results/figures/convergence.png",
-                "results/figures/convergence.pdf",
-            ]
-            if wants_convergence(config)
-            else []
-        ),
+        sweep_targets(config),
 
 
 # Once the executor is known (not while the Snakefile is read): a local run
 # with backend gpu needs CuPy and a card here, a cluster's jobs on their node.
 onstart:
     check_local_backend(config, workflow.local_exec)
+
+
+# Figures and tables an earlier sweep made that this config does not: they stay
+# in results/ beside this sweep's files, and would be read as this sweep's.
+onsuccess:
+    if stale := stale_outputs(config):
+        logger.warning(stale)

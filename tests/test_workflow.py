@@ -636,6 +636,31 @@ def test_snapshots_are_kept_for_fig5_only_when_it_is_drawn() -> None:
     assert brushes({"fig5": fig5 | {"kbar": []}}) == []
 
 
+def test_outputs_of_an_earlier_sweep_are_named(tmp_path: Path) -> None:
+    """Snakemake leaves in results/ the figures and tables of an earlier
+    config that this one does not make (a convergence study, Fig. 5): the
+    run ends with a warning naming them, and names none it made itself."""
+    common = _common_rules()
+    config = {"fig5": {"kbar": [], "layout": "regular", "n_pillars": 256},
+              "regular": [16], "hexagonal": [], "random": [], "grid": [64], "grid_by_n": [],
+              "roughness": [0.0], "preload": [0.0], "kbar_spread": [0.0], "shape": ["disc"],
+              "layout_files": [], "kbar": [0.01]}
+    figures = tmp_path / "results/figures"
+    figures.mkdir(parents=True)
+    for name in ("fig6.png", "fig5.png", "convergence.pdf"):
+        (figures / name).write_text("")
+    (tmp_path / "results/convergence.md").write_text("")
+    text = common["stale_outputs"](config, root=tmp_path)
+    assert text.startswith("3 files in results/ are from an earlier sweep"), text
+    for name in ("results/convergence.md", "results/figures/convergence.pdf",
+                 "results/figures/fig5.png"):
+        assert name in text
+    assert "fig6" not in text
+    config["fig5"]["kbar"] = [0.455]
+    config["grid"] = [64, 128, 256]
+    assert common["stale_outputs"](config, root=tmp_path) is None
+
+
 def test_time_requests_follow_the_solver_settings() -> None:
     """symmetry: false solves a regular brush on the whole grid, exact mode's
     global cascades run 4-6x longer, double transforms 1.5x on a random

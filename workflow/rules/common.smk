@@ -982,6 +982,58 @@ def lattice_figure_files(config):
     return [f"results/figures/lattices.{ext}" for ext in ("png", "pdf")]
 
 
+CONVERGENCE_FILES = (
+    "results/convergence.nc",
+    "results/convergence.csv",
+    "results/convergence.md",
+    "results/figures/convergence.png",
+    "results/figures/convergence.pdf",
+)
+
+
+def sweep_targets(config):
+    """What `rule all` makes of a config: sweep.nc, the summary, the figures
+    it asks for, and the refinement study where some brush runs on three or
+    more grids."""
+    return [
+        "results/sweep.nc",
+        "results/summary.csv",
+        "results/summary.md",
+        *paper_figure_files(config),
+        *rough_figure_files(config),
+        *lattice_figure_files(config),
+        *(CONVERGENCE_FILES if wants_convergence(config) else ()),
+    ]
+
+
+def stale_outputs(config, root="."):
+    """A warning naming the figures and tables in results/ that some other
+    config made and this one does not (None where there are none): Snakemake
+    leaves them, beside this sweep's sweep.nc, as if they were its own."""
+    names = (
+        *ROUGH_FIGURES,
+        *CURVE_FIGURES,
+        "lattices",
+        *(f"fig{n}" for n in (5, 6, 7, 8)),
+    )
+    made = {f"results/figures/{n}.{ext}" for n in names for ext in ("png", "pdf")}
+    wanted = set(sweep_targets(config))
+    stale = sorted(
+        p
+        for p in made | set(CONVERGENCE_FILES)
+        if p not in wanted and Path(root, p).exists()
+    )
+    if not stale:
+        return None
+    return (
+        f"{len(stale)} file{'s' * (len(stale) != 1)} in results/ "
+        f"{'are' if len(stale) != 1 else 'is'} from an earlier sweep, which this config "
+        f"does not make: {', '.join(stale)}. Remove {'them' if len(stale) != 1 else 'it'} "
+        "(curve files in results/curves/ are kept and reused), or give each config its "
+        "own working copy"
+    )
+
+
 def paper_figure_files(config):
     """Figs. 5-8 (PNG and PDF); Fig. 5 only where `fig5.kbar` lists a stiffness."""
     numbers = ([5] if config["fig5"]["kbar"] else []) + [6, 7, 8]
