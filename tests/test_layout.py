@@ -83,6 +83,11 @@ def test_random_layout_that_cannot_fit_fails_fast():
         build_labels(BrushParams("random", 400, 1.0, 256, phi=0.5, seed=0))
     with pytest.raises(ParameterError, match="fewer pillars, a smaller phi or a smaller min_gap"):
         build_labels(BrushParams("random", 400, 1.0, 256, phi=0.5, seed=0, min_gap=2.0))
+    # in the units the user gives them (L, and min_gap's L/512), not the grid's elements
+    radius = math.sqrt(0.12 / (math.pi * 64))
+    with pytest.raises(ParameterError, match=rf"discs of radius {radius:.3g} L with gaps of "
+                       r"40 L/512 \(min_gap's unit\)"):
+        build_labels(BrushParams("random", 64, 0.01, 256, min_gap=40.0))
 
 
 def test_count_touching_pairs_counts_pairs_sharing_an_edge() -> None:

@@ -119,7 +119,8 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
         else:
             raise ParameterError(
                 "n_pillars", n_pillars, "fewer pillars, a smaller phi or a smaller min_gap",
-                f"random layout: only {p} discs of radius {radius:.3g} with gap {gap:.3g} "
+                f"random layout: only {p} discs of radius {radius / side:.3g} L with gaps "
+                f"of {gap / side * RANDOM_GAP_GRID:.3g} L/{RANDOM_GAP_GRID} (min_gap's unit) "
                 f"fitted, {max_attempts} trials failed for the next")
     return centres
 
