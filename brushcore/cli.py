@@ -167,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "pillars")
     sim.add_argument("--grid", type=int, action=_Given,
                      help=f"elements per side n, in [{MIN_GRID}, {MAX_GRID}] (required, except "
-                          "for --layout file: the file's)")
+                          "for a label map or image: the file's; a pillar table needs it)")
     sim.add_argument("--phi", type=float, default=0.12, action=_Given,
                      help="filling factor (0, 0.5] (--layout file: the file's)")
     sim.add_argument("--seed", type=int, default=0,
@@ -366,6 +366,9 @@ def _simulate(args: argparse.Namespace) -> int:
                                    backend=args.backend)
         backend = resolve_backend(base.backend)  # CuPy and a card, before any work
         params = with_input_files(base, {name: getattr(args, name) for name in INPUT_FILES})
+        if args.min_gap != 1.0 and params.layout != "random":  # it would seem to count
+            warnings.warn(f"--min-gap applies to random layouts only: the {params.layout} "
+                          f"layout ignores --min-gap {args.min_gap:g}")
         if args.kbar_file is not None:  # --kbar is required, and would seem to count
             warnings.warn(f"--kbar-file gives every pillar's stiffness: --kbar {args.kbar:g} "
                           "is recorded as the curve's kbar but no pillar runs it")

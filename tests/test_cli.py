@@ -420,6 +420,15 @@ def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:
     assert read_curve(tmp_path / "k.nc").pillar_kbar.values.tolist() == [0.01, 0.02, 0.03, 0.04]
 
 
+def test_min_gap_on_a_lattice_is_said_to_be_ignored(tmp_path) -> None:
+    """--min-gap sets only a random layout's draw: given on a lattice, that is said."""
+    with pytest.warns(UserWarning, match=r"--min-gap applies to random layouts only: the "
+                      r"regular layout ignores --min-gap 3"):
+        assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                     "--grid", "48", "--min-gap", "3", "--quiet",
+                     "--out", str(tmp_path / "g.nc")]) == 0
+
+
 def test_converge_keeps_two_files_of_one_name_apart(tmp_path, capsys) -> None:
     """Two folders' brush.csv (different discs) are two brushes: refused, not
     extrapolated as one; and three brushes on three different grids make no
