@@ -396,7 +396,8 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     assert "no convergence study: it needs a case run on three" in capsys.readouterr().out
     assert not (tmp_path / "two" / "convergence.nc").exists()
     assert main(["converge", paths[0], paths[0], "--out-dir", str(tmp_path / "x")]) == 2
-    assert "hold the same case" in capsys.readouterr().err
+    assert "hold the same case (regular N=4 kbar=0.01 seed 0 on 48^2): a sweep takes one " \
+        "file per case and grid" in capsys.readouterr().err
     assert main(["converge", *paths, "--out-dir", paths[0]]) == 2
     assert "is a file: allowed a folder" in capsys.readouterr().err
     # L held fixed through --h = L / n: one sweep holds one unit system, said

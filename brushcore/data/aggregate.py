@@ -138,6 +138,15 @@ class CaseKey:
         """Today's brush: no roughness, preload or stiffness spread."""
         return self.roughness == 0 and self.preload == 0 and self.kbar_spread == 0
 
+    def __str__(self) -> str:
+        """The case as a message names it: "random N=64 kbar=0.01 seed 1 on 256^2"
+        and the rough parameters and shape where they are not the default."""
+        rough = "".join(f" {name}={getattr(self, name):g}" for name in ROUGH_DIMS
+                        if getattr(self, name))
+        return (f"{self.layout} N={self.n_pillars} kbar={self.kbar:g} seed {self.seed}"
+                f"{rough}{'' if self.shape == 'disc' else ' ' + self.shape}"
+                f" on {self.grid}^2")
+
 
 def case_key(curve: xr.Dataset) -> CaseKey:
     """Read the case coordinates from a curve file's attributes."""
@@ -196,7 +205,8 @@ def load_curves(paths: Iterable[str | Path],
         _check_brush(path, curve, key)
         if key in curves:
             raise AggregationError(
-                f"curve files {curves[key][0]} and {path} hold the same case {key}"
+                f"curve files {curves[key][0]} and {path} hold the same case ({key}): "
+                "a sweep takes one file per case and grid"
             )
         curves[key] = (path, curve)
     if unreadable:  # every one of them at once, and what brings them back
