@@ -478,6 +478,13 @@ def test_writing_to_a_folder_says_so_before_writing(cli_curves: list[Path],
                                                 r"as .*curve\.nc"):
         write_curve(read_curve(cli_curves[0]), tmp_path)
     assert list(tmp_path.iterdir()) == []
+    # a folder no file can be made in (a read-only one): the path asked for, not the temporary
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    if os.access(locked, os.W_OK):  # root writes anywhere: /proc's files are made by the kernel
+        locked = Path("/proc")
+    with pytest.raises(OSError, match=rf"no file can be written in {locked}: '{locked}/c\.nc'"):
+        write_curve(read_curve(cli_curves[0]), locked / "c.nc")
 
 
 #: Makes every random brush's solve fail in the jobs (a `sitecustomize` on

@@ -139,8 +139,12 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
     if path.is_dir():  # else a rename error naming the temporary, after the writing
         raise IsADirectoryError(errno.EISDIR, "a folder, not a file name: give one such "
                                 f"as {path / 'curve.nc'}", str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:  # name the path asked for, not the temporary beside it
+        raise type(exc)(exc.errno, f"{exc.strerror}: no file can be written in "
+                                   f"{path.parent}", str(path)) from None
     os.close(fd)
     try:
         ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
