@@ -670,3 +670,20 @@ def test_fig5_numbers_snapshots_in_the_order_of_the_curve(tmp_path: Path) -> Non
                        n_pillars=4, kbar=(0.01,))
     titles = [ax.get_title() for ax in fig.axes[1:] if ax.get_title()]
     assert titles == ["1: preload", "2: maximum force", "3: separated"], titles
+
+
+def test_paper_figures_of_a_rough_only_sweep_say_no_flat_runs() -> None:
+    """Figs. 6-8 draw flat brushes (`flat_slice`): where only rough ones ran,
+    the empty panel says no *flat* runs, not that the layout did not run."""
+    from brushcore.data import figures
+
+    dims = ("layout", "n_pillars", "kbar", "seed")
+    nan = np.full((1, 1, 1, 1), np.nan)
+    sweep = xr.Dataset({"adhesive_force_normalized": (dims, nan),
+                        "work_of_separation_normalized": (dims, nan)},
+                       coords={"layout": ["regular"], "n_pillars": [16], "kbar": [0.01],
+                               "seed": [0]})
+    for draw, said in ((figures.fig6, "no flat regular runs"),
+                       (figures.fig8, "no flat regular runs"), (figures.fig7, "no flat runs")):
+        texts = [t.get_text() for ax in draw(sweep).axes for t in ax.texts]
+        assert said in texts, (draw.__name__, texts)

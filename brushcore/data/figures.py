@@ -172,7 +172,7 @@ def fig5(
     pillars = "" if shape == "disc" else f" ({_shape_text(shape)})"
     fig.suptitle(f"{layout} brush, N = {name} pillars{pillars}")
     if not cases:
-        _no_data(fig.add_subplot(grid[0, :]), f"no {layout} runs with N = {n_pillars}")
+        _no_data(fig.add_subplot(grid[0, :]), f"no flat {layout} runs with N = {n_pillars}")
         return fig
     for row, k in enumerate(cases):
         d, f = _curve(sweep, layout, n_pillars, k, seed)
@@ -313,7 +313,7 @@ def fig6(sweep: xr.Dataset) -> Figure:
                             f" (mean, min-max of {seeds} seeds)" if seeds > 1 else ""))
         _kbar_axes(ax, _panel_title(index, layout), FAD_LABEL, kbars, x_inf)
         if not brushes:
-            _no_data(ax, f"no {layout} runs")
+            _no_data(ax, f"no flat {layout} runs")
             continue
         if math.isfinite(phi):
             ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
@@ -372,7 +372,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     ax.set_ylabel(FAD_LABEL + " (soft plateau)")
     drawn = [int(v) for n, _ in fitted.values() for v in n] + [n for _, n, _ in off]
     if not drawn:
-        _no_data(ax, "no runs")
+        _no_data(ax, "no flat runs")
         return fig
     span = np.geomspace(min(drawn) / 1.5, max(drawn) * 1.5, 50)
     ax.plot(span, theory.soft_limit(span), "k-", lw=1.2, label=r"$N^{1/4}$ (eq. 6)")
@@ -429,7 +429,7 @@ def fig8(sweep: xr.Dataset) -> Figure:
         ax.set_yscale("log")
         _kbar_axes(ax, _panel_title(index, layout), W_LABEL, kbars, x_inf)
         if not brushes:
-            _no_data(ax, f"no {layout} runs")
+            _no_data(ax, f"no flat {layout} runs")
             continue
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
         ax.plot([], [], "k--", lw=1,
