@@ -2,7 +2,7 @@
 
 import sys
 
-from brushcore.data.aggregate import CaseKey, build_sweep, write_sweep
+from brushcore.data.aggregate import AggregationError, CaseKey, build_sweep, write_sweep
 from brushcore.data.joblog import logged
 
 
@@ -27,4 +27,9 @@ def main(smk) -> None:
 
 
 with logged(snakemake.log[0]):  # noqa: F821
-    main(snakemake)  # noqa: F821
+    try:
+        main(snakemake)  # noqa: F821
+    except AggregationError as exc:  # explained: its message, not a traceback
+        print(exc)
+        print(f"aggregate: {exc}", file=sys.__stderr__, flush=True)
+        raise SystemExit(1) from None
