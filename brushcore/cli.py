@@ -330,9 +330,11 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
         fixed = {"n_pillars": args.pillars, "grid": args.grid, "phi": args.phi}
         fixed = {k: v for k, v in fixed.items() if {"n_pillars": "pillars"}.get(k, k) in given}
         return file_params(args.layout_file, args.kbar, **common, **fixed)
-    for flag, value in (("--pillars", args.pillars), ("--grid", args.grid)):
-        if value is None:
-            raise _Missing(f"{flag} is required for --layout {args.layout}")
+    missing = [flag for flag, value in (("--pillars", args.pillars), ("--grid", args.grid))
+               if value is None]
+    if missing:  # both at once: a second try should not meet the second
+        raise _Missing(f"{' and '.join(missing)} {'are' if len(missing) > 1 else 'is'} "
+                       f"required for --layout {args.layout}")
     from brushcore.model.layout import hinted_params
 
     return hinted_params(

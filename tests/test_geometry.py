@@ -561,6 +561,7 @@ def test_cli_runs_shapes_and_file_layouts_and_records_them(tmp_path):
     (["--layout", "regular", "--pillars", "16", "--grid", "128", "--aspect", "2"],
      "--aspect 2.0 is invalid: allowed 1 unless --shape is 'ellipse'"),
     (["--layout", "regular", "--grid", "64"], "--pillars is required for --layout regular"),
+    (["--layout", "random"], "--pillars and --grid are required for --layout random"),
 ])
 def test_cli_refuses_bad_geometry_and_writes_nothing(tmp_path, capsys, extra, message):
     from brushcore.cli import main
