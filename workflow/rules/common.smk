@@ -992,7 +992,7 @@ CONVERGENCE_FILES = (
 
 
 def sweep_targets(config):
-    """What `rule all` makes of a config: sweep.nc, the summary, the figures
+    """What the default target makes of a config: sweep.nc, the summary, the figures
     it asks for, and the refinement study where some brush runs on three or
     more grids."""
     return [
