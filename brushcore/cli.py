@@ -315,7 +315,9 @@ def _error(message: str, progress: _Progress | None = None) -> None:
 def _brush_params(args: argparse.Namespace) -> BrushParams:
     """BrushParams from the flags; for --layout file N, grid and phi come from the file."""
     given = getattr(args, "given", set())
-    common = dict(seed=args.seed, min_gap=args.min_gap, e_star=args.e_star,
+    # a lattice or a file ignores the gap: not recorded, so its curve is the lattice's
+    gap = args.min_gap if args.layout == "random" else 1.0
+    common = dict(seed=args.seed, min_gap=gap, e_star=args.e_star,
                   dgamma=args.dgamma, h=args.h, allow_coarse=args.allow_coarse,
                   shape=args.shape, aspect=args.aspect, orientation=args.orientation)
     if args.layout == "file":
@@ -368,7 +370,7 @@ def _simulate(args: argparse.Namespace) -> int:
                                    backend=args.backend)
         backend = resolve_backend(base.backend)  # CuPy and a card, before any work
         params = with_input_files(base, {name: getattr(args, name) for name in INPUT_FILES})
-        if args.min_gap != 1.0 and params.layout != "random":  # it would seem to count
+        if args.min_gap != 1.0 and args.layout != "random":  # it would seem to count
             warnings.warn(f"--min-gap applies to random layouts only: the {params.layout} "
                           f"layout ignores --min-gap {args.min_gap:g}")
         if args.kbar_file is not None:  # --kbar is required, and would seem to count

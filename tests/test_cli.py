@@ -422,12 +422,18 @@ def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:
 
 
 def test_min_gap_on_a_lattice_is_said_to_be_ignored(tmp_path) -> None:
-    """--min-gap sets only a random layout's draw: given on a lattice, that is said."""
+    """--min-gap sets only a random layout's draw: given on a lattice, that is
+    said, and it is not recorded: the curve is the lattice's, parameter hash
+    included (`converge` refused the two as disagreeing on min_gap)."""
+    argv = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+            "--grid", "48", "--quiet"]
     with pytest.warns(UserWarning, match=r"--min-gap applies to random layouts only: the "
                       r"regular layout ignores --min-gap 3"):
-        assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
-                     "--grid", "48", "--min-gap", "3", "--quiet",
-                     "--out", str(tmp_path / "g.nc")]) == 0
+        assert main([*argv, "--min-gap", "3", "--out", str(tmp_path / "g.nc")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "plain.nc")]) == 0
+    gap, plain = read_curve(tmp_path / "g.nc"), read_curve(tmp_path / "plain.nc")
+    assert gap.attrs["min_gap"] == 1.0
+    assert gap.attrs["parameter_hash"] == plain.attrs["parameter_hash"]
 
 
 def test_converge_keeps_two_files_of_one_name_apart(tmp_path, capsys) -> None:

@@ -605,7 +605,8 @@ def test_flags_read_the_narrowest_pillar(smallest, flag):
     assert any(f"under-resolved ({smallest[0 if 'coarsest' in flag else -1]:.1f}"
                in t.get_text() for ax in drawn.axes for t in ax.texts)
     row = _resolution_row(sweep.isel(grid=-1, drop=True), "file", 64)
-    assert row.quantity.startswith("narrowest") and row.value == f"{smallest[-1]:g}"
+    assert row.quantity == "pillar radius in elements (finest grid run)"
+    assert row.value == f"{smallest[-1]:g}" and "the narrowest pillar's" in row.note
     assert ("UNDER-RESOLVED" in row.note) == (smallest[-1] < 4)
 
 

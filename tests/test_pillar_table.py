@@ -306,3 +306,31 @@ def test_the_narrowest_pillar_is_recorded_for_the_resolution_flags(tmp_path: Pat
     assert smallest_radius_elements(mapped, labels) == pytest.approx(math.sqrt(36 / math.pi))
     curve = simulate(params)
     assert curve.attrs["smallest_radius_elements"] == pytest.approx(3.84)
+
+
+def test_sweeps_carry_the_narrowest_pillar_and_read_it_from_older_files(tmp_path: Path) -> None:
+    """sweep.nc's `smallest_radius_elements` is each curve's; a curve written
+    before it was recorded gives it from its shape (an ellipse's semi-minor
+    axis r / sqrt(aspect), whose mean radius would hide a coarse study)."""
+    import xarray as xr
+
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import read_curve, write_curve
+
+    ellipse = BrushParams("regular", 4, 0.01, 64, shape="ellipse", aspect=4.0)
+    new = write_curve(simulate(ellipse), tmp_path / "new" / "e.nc")
+    old = read_curve(new)
+    del old.attrs["smallest_radius_elements"]
+    old = write_curve(old, tmp_path / "old" / "e.nc")
+    semi_minor = ellipse.pillar_radius_elements / 2.0
+    for path in (new, old):
+        sweep = build_sweep([path])
+        got = sweep["smallest_radius_elements"].values[np.isfinite(
+            sweep["smallest_radius_elements"].values)]
+        assert got.tolist() == pytest.approx([semi_minor], rel=1e-12), path
+    table = _table(tmp_path, "x,y,radius\n0.3,0.3,0.08\n0.7,0.7,0.04\n")
+    curve = write_curve(simulate(file_params(table, 1e-3, grid=96)), tmp_path / "t.nc")
+    with xr.open_dataset(curve) as c:
+        assert c.attrs["smallest_radius_elements"] == pytest.approx(3.84)
+    assert float(np.nanmax(build_sweep([curve])["smallest_radius_elements"])) == \
+        pytest.approx(3.84)

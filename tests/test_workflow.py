@@ -14,6 +14,7 @@ import shutil
 import hashlib
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -650,15 +651,18 @@ def test_outputs_of_an_earlier_sweep_are_named(tmp_path: Path) -> None:
     for name in ("fig6.png", "fig5.png", "convergence.pdf"):
         (figures / name).write_text("")
     (tmp_path / "results/convergence.md").write_text("")
-    text = common["stale_outputs"](config, root=tmp_path)
+    later = time.time() + 1.0  # files written before this run read its Snakefile
+    text = common["stale_outputs"](config, root=tmp_path, since=later)
     assert text.startswith("3 files in results/ are from an earlier sweep"), text
     for name in ("results/convergence.md", "results/figures/convergence.pdf",
                  "results/figures/fig5.png"):
         assert name in text
     assert "fig6" not in text
+    # written by this run (`snakemake results/figures/fig5.png`): its own, not stale
+    assert common["stale_outputs"](config, root=tmp_path, since=0.0) is None
     config["fig5"]["kbar"] = [0.455]
     config["grid"] = [64, 128, 256]
-    assert common["stale_outputs"](config, root=tmp_path) is None
+    assert common["stale_outputs"](config, root=tmp_path, since=later) is None
 
 
 def test_time_requests_follow_the_solver_settings() -> None:

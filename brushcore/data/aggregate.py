@@ -517,11 +517,15 @@ def _attribute(curve: xr.Dataset, name: str) -> float:
 
     Curve files written before ``pillar_radius_elements`` was recorded give
     it from ``pillar_radius`` / ``h``; those written before
-    ``smallest_radius_elements`` give the mean radius for it, which their
-    flags read.
+    ``smallest_radius_elements`` give it from their shape (an ellipse's
+    semi-minor axis r / sqrt(aspect), as `BrushParams.narrowest_radius_elements`),
+    and a file layout's the mean radius (its pillars are not recorded).
     """
     if name == "smallest_radius_elements" and name not in curve.attrs:
-        return _attribute(curve, "pillar_radius_elements")
+        mean = _attribute(curve, "pillar_radius_elements")
+        if str(curve.attrs.get("shape", "disc")) == "ellipse":
+            return mean / math.sqrt(float(curve.attrs.get("aspect", 1.0)))
+        return mean
     if name == "pillar_radius_elements" and name not in curve.attrs:
         a = curve.attrs
         return float(a["pillar_radius"]) / float(a["h"]) if "pillar_radius" in a and "h" in a \

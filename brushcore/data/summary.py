@@ -299,11 +299,12 @@ def _resolution_row(sweep: xr.Dataset, layout: str, n_pillars: int) -> Row:
     grids = sorted({int(g) for g in np.asarray(grid.values) if math.isfinite(g)}) \
         if "grid_used" in sweep else []
     note = f"grid {', '.join(map(str, grids))}" if grids else ""
+    if unequal:  # one row name whatever the pillars, so that summaries line up
+        note = (note + "; " if note else "") + "the narrowest pillar's (pillars differ)"
     if math.isfinite(r_min) and r_min < UNDER_RESOLVED_RADIUS:
         note = (note + "; " if note else "") + \
             f"UNDER-RESOLVED (< {UNDER_RESOLVED_RADIUS:g} elements): not converged in h"
-    return Row(f"{'narrowest ' * unequal}pillar radius in elements "
-               "(finest grid run)", layout, str(n_pillars), "",
+    return Row("pillar radius in elements (finest grid run)", layout, str(n_pillars), "",
                _fmt(r_min), "", note)
 
 

@@ -61,7 +61,7 @@ def regular_centres(n_pillars: int, side: float) -> np.ndarray:
 
 
 def random_centres(n_pillars: int, side: float, radius: float, gap: float,
-                   seed: int, max_attempts: int = 2000) -> np.ndarray:
+                   seed: int, max_attempts: int = 2000, what: str = "discs") -> np.ndarray:
     """Random sequential addition of N equal discs inside the L x L square.
 
     Parameters
@@ -72,6 +72,8 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
     gap : minimum distance between disc edges [length]
     seed : seed of numpy's default Generator
     max_attempts : rejected trials allowed per disc before giving up
+    what : what the discs are, as a refusal names them ("discs", or the
+        pillars whose circumscribed discs they are)
 
     Returns
     -------
@@ -119,7 +121,7 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
         else:
             raise ParameterError(
                 "n_pillars", n_pillars, "fewer pillars, a smaller phi or a smaller min_gap",
-                f"random layout: only {p} discs of radius {radius / side:.3g} L with gaps "
+                f"random layout: only {p} {what} of radius {radius / side:.3g} L with gaps "
                 f"of {gap / side * RANDOM_GAP_GRID:.3g} L/{RANDOM_GAP_GRID} (min_gap's unit) "
                 f"fitted, {max_attempts} trials failed for the next")
     return centres
@@ -240,7 +242,9 @@ def generated_centres(params: BrushParams) -> np.ndarray:
               else pillar_shape(params).circumradius(params.pillar_area))
     try:
         return random_centres(params.n_pillars, params.side, radius,
-                              random_gap(params), params.seed)
+                              random_gap(params), params.seed,
+                              what="discs" if params.shape == "disc" else
+                              f"{params.shape}s (their circumscribed discs)")
     except ParameterError as exc:
         if params.min_gap > 1.0:
             raise

@@ -5,6 +5,7 @@ import functools
 import hashlib
 import math
 import re
+import time
 from pathlib import Path
 
 import jsonschema
@@ -1006,10 +1007,17 @@ def sweep_targets(config):
     ]
 
 
-def stale_outputs(config, root="."):
+#: When this Snakemake read its Snakefile [s since the epoch]: what it writes is newer.
+PLANNED_AT = time.time()
+
+
+def stale_outputs(config, root=".", since=None):
     """A warning naming the figures and tables in results/ that some other
     config made and this one does not (None where there are none): Snakemake
-    leaves them, beside this sweep's sweep.nc, as if they were its own."""
+    leaves them, beside this sweep's sweep.nc, as if they were its own.
+    Files written since ``since`` (default `PLANNED_AT`) are this run's own
+    (a target named on the command line), not stale."""
+    since = PLANNED_AT if since is None else since
     names = (
         *ROUGH_FIGURES,
         *CURVE_FIGURES,
@@ -1021,7 +1029,9 @@ def stale_outputs(config, root="."):
     stale = sorted(
         p
         for p in made | set(CONVERGENCE_FILES)
-        if p not in wanted and Path(root, p).exists()
+        if p not in wanted
+        and Path(root, p).exists()
+        and Path(root, p).stat().st_mtime < since
     )
     if not stale:
         return None
