@@ -526,6 +526,14 @@ def test_summary_quotes_the_paper_only_where_it_applies():
 
     labels = figures.fig7(sweep).axes[0].get_legend_handles_labels()[1]
     assert "regular: not on a plateau (not fitted)" in labels, labels
+    # a brush on its plateau at every kbar run (its value the stiffest): said so
+    onset = rows["kbar where the soft plateau is reached", "64"]
+    assert onset.value == "0.001" and onset.note == "Fig. 6", onset
+    flat = sweep.isel(n_pillars=[0]).copy(deep=True)
+    flat["adhesive_force_normalized"][:] = [[[[2.40], [2.39], [2.38]]]]
+    rows = {(r.quantity.split(" (")[0], r.n_pillars): r for r in headline_rows(flat)}
+    onset = rows["kbar where the soft plateau is reached", "64"]
+    assert onset.value == "1" and "every kbar run lies on it" in onset.note, onset
 
 
 def test_soft_plateau_fit_is_per_layout_and_paper_numbers_sit_where_they_apply():
