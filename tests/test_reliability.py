@@ -302,6 +302,10 @@ def test_aggregate_rule_fails_on_a_truncated_curve(clean_run: Path, tmp_path: Pa
         f"neither Snakemake nor the log names {victim.name}:\n{output(proc)[-4000:]}\n{log}")
     assert not (work / "results/sweep.nc").exists(), "a failed aggregation left sweep.nc"
     assert "rule simulate" not in output(proc), "a truncated curve must not trigger a rerun"
+    # an explained refusal: its message on the terminal and in the log, no traceback
+    assert f"aggregate: cannot aggregate 1 curve file(s): {victim.relative_to(work)}" in \
+        output(proc), output(proc)[-4000:]
+    assert "Traceback" not in log and "Delete them and run snakemake again" in log, log
 
 
 # -- determinism ---------------------------------------------------------------------------
