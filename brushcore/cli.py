@@ -354,9 +354,9 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from brushcore.model.curve import preload_contact, simulate, smallest_radius_elements
+    from brushcore.model.curve import preload_contact, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
-    from brushcore.model.layout import build_labels
+    from brushcore.model.layout import build_labels, pillars_differ, smallest_radius_elements
     from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
     from brushcore.model.pillar_table import is_table
     from brushcore.numerics.platform.threads import pin_threads
@@ -395,7 +395,7 @@ def _simulate(args: argparse.Namespace) -> int:
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements"
               f"{' (equal-area mean)' if params.layout_file else ''}"
               + (f", the narrowest {narrowest:.3g}"
-                 if narrowest < 0.99 * params.pillar_radius_elements else "") + ","
+                 if pillars_differ(narrowest, params.pillar_radius_elements) else "") + ","
               f" phi realised {area / labels.size:.4g} ({asked} {params.phi:g}"
               + (f", {100 * (area / labels.size / params.phi - 1):+.0f} %: --allow-coarse ran it"
                  if abs(area / labels.size / params.phi - 1) > MAX_PHI_ERROR else "") + "), "

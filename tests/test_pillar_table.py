@@ -287,7 +287,7 @@ def test_the_narrowest_pillar_is_recorded_for_the_resolution_flags(tmp_path: Pat
     a table's smallest disc (0.04 L on 96^2: 3.84 elements, against a mean
     equal-area radius of 6.07), a label map's smallest pillar as the
     equal-area radius of its element count, written into the curve file."""
-    from brushcore.model.curve import smallest_radius_elements
+    from brushcore.model.layout import smallest_radius_elements
     from brushcore.model.layout_file import save_label_map
 
     disc = BrushParams("regular", 16, 0.01, 128)

@@ -30,7 +30,7 @@ import numpy as np
 import xarray as xr
 
 from brushcore.model import provenance
-from brushcore.model.params import RANDOM_GAP_GRID
+from brushcore.model.params import RANDOM_GAP_GRID, narrowest_radius
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import shape_label
@@ -522,10 +522,9 @@ def _attribute(curve: xr.Dataset, name: str) -> float:
     and a file layout's the mean radius (its pillars are not recorded).
     """
     if name == "smallest_radius_elements" and name not in curve.attrs:
-        mean = _attribute(curve, "pillar_radius_elements")
-        if str(curve.attrs.get("shape", "disc")) == "ellipse":
-            return mean / math.sqrt(float(curve.attrs.get("aspect", 1.0)))
-        return mean
+        return narrowest_radius(_attribute(curve, "pillar_radius_elements"),
+                                str(curve.attrs.get("shape", "disc")),
+                                float(curve.attrs.get("aspect", 1.0)))
     if name == "pillar_radius_elements" and name not in curve.attrs:
         a = curve.attrs
         return float(a["pillar_radius"]) / float(a["h"]) if "pillar_radius" in a and "h" in a \

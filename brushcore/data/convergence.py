@@ -116,7 +116,7 @@ FIT_FLAGS = ("non_monotone", "poor_fit", "too_few_grids", "not_asymptotic")
 #: (`brushcore.model.labelmap.count_touching_pairs`): flagged in the table.
 TOUCHING = "touching_pillar_pairs"
 #: Sweep variable of the narrowest pillar's radius [elements] on a grid
-#: (`brushcore.model.curve.smallest_radius_elements`): what the flags read.
+#: (`brushcore.model.layout.smallest_radius_elements`): what the flags read.
 SMALLEST = "smallest_radius_elements"
 #: The filling factor each grid realises (sweep.nc's), carried beside the raw values.
 PHI_ACTUAL = "phi_actual"

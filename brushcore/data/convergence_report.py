@@ -53,7 +53,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
                 row[f"n={g}"] = float(v)
             row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
             finest, coarsest = (float(r) for r in flag_radii(one))
-            if f"{SMALLEST}_finest" in one:  # unequal or elliptic pillars
+            if f"{SMALLEST}_finest" in one:  # a study of curves that record it
                 row["smallest_radius_elements_finest"] = finest
             if PHI_ACTUAL in one:  # how far the staircase's phi moves between the grids
                 phi = one[PHI_ACTUAL].values[np.isfinite(raw)]

@@ -25,6 +25,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
     from brushcore import BrushParams, SolverOptions, simulate
     from brushcore.model.curve import preload_contact
+    from brushcore.model.layout import pillars_differ
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.model.inputs import parse_protocol, with_input_files
@@ -72,7 +73,8 @@ def _simulate(smk, clock: CurveClock) -> None:
         f"W = {float(curve['work_of_separation_normalized']):.6g} (normalised), "
         f"{curve.attrs.get('events')} events, {curve.attrs.get('wall_time_s', float('nan')):.3g} s; "
         f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements"
-        + (f" (the narrowest {narrowest:.3g})" if narrowest < 0.99 * mean else "") + ", "
+        + (f" (the narrowest {narrowest:.3g})" if pillars_differ(narrowest, mean) else "")
+        + ", "
         f"phi realised {curve.attrs['phi_actual']:.4g}"
     )
     pressed = preload_contact(curve, "preload", "add a load to the config's 'preload' list "

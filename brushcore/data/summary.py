@@ -22,6 +22,7 @@ import xarray as xr
 from scipy import stats
 
 from brushcore.model import theory
+from brushcore.model.layout import pillars_differ
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.views import finest_grid, flat_slice, kbar_index
 from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
@@ -297,7 +298,7 @@ def _resolution_row(sweep: xr.Dataset, layout: str, n_pillars: int) -> Row:
     radius = seed_mean(sweep, "pillar_radius_elements", layout, n_pillars)
     # the narrowest pillar's where pillars differ: one coarse pillar sets the mesh error
     narrow = seed_mean(sweep, SMALLEST, layout, n_pillars) if SMALLEST in sweep else radius
-    unequal = bool(np.any(narrow < 0.99 * radius))
+    unequal = bool(np.any(pillars_differ(narrow, radius)))
     radius = narrow
     grid = seed_mean(sweep, "grid_used", layout, n_pillars) if "grid_used" in sweep else radius
     r_min = float(radius.min()) if radius.size else math.nan

@@ -19,7 +19,7 @@ from brushcore.model import theory
 from brushcore.model.inputs import PROTOCOL_LOADS, load_beyond_range, protocol_text
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
-from brushcore.model.layout import build_labels, random_gap, smallest_disc
+from brushcore.model.layout import build_labels, random_gap, smallest_radius_elements
 from brushcore.model.params import BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
@@ -73,7 +73,7 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
     ``shape``, ``aspect``, ``orientation`` and ``layout_file`` themselves are
     parameters (see `BrushParams.as_attrs`); ``pillar_radius`` is the
     equal-area radius for every shape, ``smallest_radius_elements`` the
-    narrowest pillar's (`smallest_radius_elements`).
+    narrowest pillar's (`brushcore.model.layout.smallest_radius_elements`).
     """
     attrs: dict[str, float | int | str] = {"n_pillars_realised": int(labels.max()) + 1,
                                            "touching_pillar_pairs": count_touching_pairs(labels),
@@ -88,24 +88,6 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
         attrs["layout_file_sha256"] = hashlib.sha256(
             Path(params.layout_file).read_bytes()).hexdigest()
     return attrs
-
-
-def smallest_radius_elements(params: BrushParams, labels: np.ndarray) -> float:
-    """The narrowest pillar's radius on ``params.grid`` [elements]: what the
-    resolution flags read, since one coarse pillar sets a brush's mesh error.
-
-    A generated brush's pillars are alike: its radius rule's
-    (`BrushParams.narrowest_radius_elements`; an ellipse's semi-minor axis).
-    A pillar table's smallest disc; a label map's or image's smallest pillar
-    as the equal-area radius of its elements.
-    """
-    if params.layout != "file":
-        return params.narrowest_radius_elements
-    smallest = smallest_disc(params)
-    if smallest is not None:
-        return smallest
-    counts = np.bincount(labels[labels >= 0], minlength=int(labels.max()) + 1)
-    return math.sqrt(float(counts.min()) / math.pi)
 
 
 def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:

@@ -27,7 +27,7 @@ import numpy as np
 
 from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
 from brushcore.model.labelmap import check_not_touching
-from brushcore.model.layout_file import read_label_map
+from brushcore.model.layout_file import FILE_PHI_RTOL, read_label_map
 from brushcore.model.pillar_table import PillarTable, is_table, read_pillar_table
 from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_GRID, MAX_PHI_ERROR, MIN_GRID,
                                     RANDOM_GAP_GRID, BrushParams)
@@ -404,14 +404,16 @@ def _checked_labels(params: BrushParams) -> np.ndarray:
     if params.layout == "file" and is_table(params.layout_file):
         # Discs apart (the table's check) may share element edges on a grid too
         # coarse for their gap: counted, as for random discs, not refused.
-        labels = table_labels(read_pillar_table(params.layout_file), params.grid)
-        _check_table_matches(params)
+        table = read_pillar_table(params.layout_file)
+        labels = table_labels(table, params.grid)
+        _check_file_matches(params, table.n_pillars, table.phi)
         check_discretisation(params, labels)
         _check_pillar_widths(params, labels, "grid", params.grid, "a finer grid")
         return labels
     if params.layout == "file":
         labels = read_label_map(params.layout_file, params.grid)
-        _check_file_matches(params, labels)
+        _check_file_matches(params, int(labels.max()) + 1,
+                            float(np.count_nonzero(labels >= 0)) / labels.size)
         check_discretisation(params, labels)
         _check_pillar_widths(params, labels, "layout_file", params.layout_file,
                              "the layout drawn finer")
@@ -431,14 +433,14 @@ def _checked_labels(params: BrushParams) -> np.ndarray:
     return labels
 
 
-def _check_file_matches(params: BrushParams, labels: np.ndarray) -> None:
-    """The file's pillar count and filling factor must be the parameters' own."""
-    n_file = int(labels.max()) + 1
+def _check_file_matches(params: BrushParams, n_file: int, phi_file: float) -> None:
+    """The file's pillar count and filling factor (a map's realised one, a
+    table's pi sum r^2) must be the parameters' own (`brushcore.file_params`
+    sets them)."""
     if n_file != params.n_pillars:
         raise ParameterError("n_pillars", params.n_pillars,
                              f"{n_file}, the count of {params.layout_file}")
-    phi_file = float(np.count_nonzero(labels >= 0)) / labels.size
-    if abs(phi_file / params.phi - 1.0) > 1e-9:
+    if abs(phi_file / params.phi - 1.0) > FILE_PHI_RTOL:
         raise ParameterError("phi", params.phi,
                              f"{phi_file!r}, the filling factor of {params.layout_file}")
 
@@ -468,18 +470,6 @@ def generated_table(params: BrushParams) -> PillarTable:
     return PillarTable(centres, radii)
 
 
-def _check_table_matches(params: BrushParams) -> None:
-    """The table's pillar count and filling factor (pi sum r^2) must be the
-    parameters' own (`brushcore.file_params` sets them)."""
-    table = read_pillar_table(params.layout_file)
-    if table.n_pillars != params.n_pillars:
-        raise ParameterError("n_pillars", params.n_pillars,
-                             f"{table.n_pillars}, the count of {params.layout_file}")
-    if abs(table.phi / params.phi - 1.0) > 1e-9:
-        raise ParameterError("phi", params.phi,
-                             f"{table.phi!r}, the filling factor of {params.layout_file}")
-
-
 #: A disc of this radius [elements] holds an element whose four edge neighbours
 #: lie in it wherever it sits (the element nearest its centre is within
 #: sqrt(1/2), those neighbours within 1 + sqrt(1/2)): `_check_pillar_widths`.
@@ -492,6 +482,31 @@ def smallest_disc(params: BrushParams) -> float | None:
     if params.layout != "file" or not is_table(params.layout_file):
         return None
     return float(read_pillar_table(params.layout_file).radii.min()) * params.grid
+
+
+def smallest_radius_elements(params: BrushParams, labels: np.ndarray) -> float:
+    """The narrowest pillar's radius on ``params.grid`` [elements]: what the
+    resolution flags read, since one coarse pillar sets a brush's mesh error.
+
+    A generated brush's pillars are alike: its radius rule's
+    (`BrushParams.narrowest_radius_elements`; an ellipse's semi-minor axis).
+    A pillar table's smallest disc; a label map's or image's smallest pillar
+    as the equal-area radius of its elements.
+    """
+    if params.layout != "file":
+        return params.narrowest_radius_elements
+    smallest = smallest_disc(params)
+    if smallest is not None:
+        return smallest
+    counts = np.bincount(labels[labels >= 0], minlength=int(labels.max()) + 1)
+    return math.sqrt(float(counts.min()) / math.pi)
+
+
+def pillars_differ(narrowest: float, mean: float) -> bool:
+    """Whether a brush's narrowest pillar radius lies clearly under its mean
+    equal-area radius (by over 1 %): unequal or elliptic pillars, which the
+    messages and the summary name as such."""
+    return narrowest < 0.99 * mean
 
 
 def _table_grid_floor(params: BrushParams) -> int:

@@ -47,6 +47,8 @@ from brushcore.validation import ParameterError
 #: Largest image accepted (the largest grid, 8192^2), checked before decoding.
 MAX_IMAGE_PIXELS = 8192 * 8192
 SUFFIXES = (".npy", ".png")
+#: A phi given with a file must be the file's to this relative tolerance.
+FILE_PHI_RTOL = 1e-9
 _NAME = "layout_file"
 
 
@@ -262,7 +264,7 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
     for name in ("n_pillars", "grid"):
         if name in kwargs and kwargs[name] != found[name]:
             raise ParameterError(name, kwargs[name], f"{found[name]}, the value of {path}")
-    if "phi" in kwargs and abs(kwargs["phi"] / found["phi"] - 1.0) > 1e-9:
+    if "phi" in kwargs and abs(kwargs["phi"] / found["phi"] - 1.0) > FILE_PHI_RTOL:
         raise ParameterError("phi", kwargs["phi"], f"{found['phi']!r}, the value of {path}")
     typed = {name for name in ("n_pillars", "grid", "phi") if name in kwargs}
     kwargs.update(n_pillars=found["n_pillars"], grid=found["grid"], phi=found["phi"])
@@ -294,7 +296,7 @@ def _table_params(path: str | Path, kbar: float, kwargs: dict) -> BrushParams:
     if "n_pillars" in kwargs and kwargs["n_pillars"] != table.n_pillars:
         raise ParameterError("n_pillars", kwargs["n_pillars"],
                              f"{table.n_pillars}, the value of {path}")
-    if "phi" in kwargs and abs(kwargs["phi"] / table.phi - 1.0) > 1e-9:
+    if "phi" in kwargs and abs(kwargs["phi"] / table.phi - 1.0) > FILE_PHI_RTOL:
         raise ParameterError("phi", kwargs["phi"], f"{table.phi!r}, the value of {path} "
                              "(pi sum r^2)")
     # a phi given (the workflow's, from the plan) is kept: a job on another

@@ -68,6 +68,13 @@ UNIT_RANGE = (1e-30, 1e30)  # e_star, dgamma, h in the inputs' units
 MAX_SEED = 2**63 - 1  # a file attribute is an int64
 
 
+def narrowest_radius(radius: float, shape: str, aspect: float) -> float:
+    """Half-width across a pillar's narrowest direction, in the units of its
+    equal-area ``radius``: an ellipse's semi-minor axis r / sqrt(aspect), the
+    equal-area radius itself for discs and squares (as the radius rule reads it)."""
+    return radius / math.sqrt(aspect) if shape == "ellipse" else radius
+
+
 @dataclass(frozen=True)
 class BrushParams:
     """One pull-off problem: a brush of pillars on springs, equal by default,
@@ -413,8 +420,7 @@ class BrushParams:
         disc or square (a square's half-side is 0.89 of it), an ellipse's
         semi-minor axis r / sqrt(aspect) (aspect 10 on 129^2 at phi 0.03 left
         one element across it, and its soft brush weaker than its rigid one)."""
-        r = self.pillar_radius_elements
-        return r / math.sqrt(self.aspect) if self.shape == "ellipse" else r
+        return narrowest_radius(self.pillar_radius_elements, self.shape, self.aspect)
 
     @property
     def pillar_area(self) -> float:
