@@ -20,7 +20,8 @@ class SolverOptions:
     ----------
     rtol : CG stops when its error estimate (the preconditioned residual) is
         below rtol times the largest stress, in [1e-12, 1e-3].  The default
-        1e-4 moves F_ad and W by < 1e-4 against 1e-8 (tested).
+        1e-4 moves F_ad by < 1e-4 and W by < 2e-4 against 1e-8 (tested; W
+        of a one-drop curve goes as the square of the event displacement).
     max_iter : CG iterations allowed per solve before failing, >= 1.
     tie_rtol : elements whose stress is within this relative distance of the
         critical stress detach together, so that mirror images stay

@@ -19,7 +19,9 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int,
         decided: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
         settled: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
-        floor: float = 0.0) -> tuple[np.ndarray, int]:
+        floor: float = 0.0,
+        on_stop: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+        ) -> tuple[np.ndarray, int]:
     """Solve A x = b for symmetric positive definite A.
 
     Parameters
@@ -43,6 +45,9 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         (a caller whose next step depends on comparisons that the error
         could still flip)
     floor : the relative error at which CG stops whether settled or not
+    on_stop : optional, called once as on_stop(x, r, z) with the residual
+        r = b - A x and z = M^-1 r of the iterate returned (what a caller
+        estimates a functional of the true solution from)
 
     Returns
     -------
@@ -58,7 +63,8 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
     xp = namespace(b)
     empty = xp.empty(0, dtype=xp.float64)
     x, _, iterations = pcg_image(lambda p: (apply(p), empty), precondition, b, x0,
-                                 apply(x0), empty, rtol, max_iter, decided, settled, floor)
+                                 apply(x0), empty, rtol, max_iter, decided, settled, floor,
+                                 on_stop)
     return x, iterations
 
 
@@ -68,7 +74,9 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
               rtol: float, max_iter: int,
               decided: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
               settled: Callable[[np.ndarray, np.ndarray, float], bool] | None = None,
-              floor: float = 0.0) -> tuple[np.ndarray, np.ndarray, int]:
+              floor: float = 0.0,
+              on_stop: Callable[[np.ndarray, np.ndarray, np.ndarray], None] | None = None,
+              ) -> tuple[np.ndarray, np.ndarray, int]:
     """`pcg` that also carries a linear image y = Y x of the iterate.
 
     The brush operator's application computes the half-space field on the
@@ -80,7 +88,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
     Parameters
     ----------
     apply : p -> (A p, Y p)
-    precondition, b, x0, rtol, max_iter, decided, settled, floor : as in `pcg`
+    precondition, b, x0, rtol, max_iter, decided, settled, floor, on_stop : as in `pcg`
     ax0, y0 : A x0 and Y x0
 
     Returns
@@ -105,8 +113,13 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
             return settled is None or settled(x, z, zmax) or zmax <= floor * xmax
         return decided is not None and decided(x, z, zmax)
 
+    def stop(iterations: int) -> tuple[np.ndarray, np.ndarray, int]:
+        if on_stop is not None:
+            on_stop(x, r, z)
+        return x, y, iterations
+
     if converged():
-        return x, y, 0
+        return stop(0)
     p = xp.asarray(z, copy=True)
     rz = float(r @ z)
     for it in range(1, max_iter + 1):
@@ -121,7 +134,7 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
         r -= alpha * q
         z = precondition(r)
         if converged():
-            return x, y, it
+            return stop(it)
         rz_new = float(r @ z)
         p *= rz_new / rz
         p += z
