@@ -68,7 +68,7 @@ def mean_self_compliance_by_quadrature(order: int = 24, cells: int = 16) -> floa
 
 class Brush:
     """The pillar elements of a label map, their offsets and springs, and the
-    dense operator K + S over them.
+    dense influence matrix K over them.
 
     Parameters
     ----------
@@ -91,9 +91,7 @@ class Brush:
                              (rows[:, None] - rows[None, :]) * h, h, e_star)
         k = np.broadcast_to(np.asarray(k, dtype=float), (self.n_pillars,))
         self.compliance = np.where(np.isinf(k), 0.0, h * h / np.where(np.isinf(k), 1.0, k))
-        same = self.pillar[:, None] == self.pillar[None, :]
         self.kernel = kernel
-        self.matrix = kernel + np.where(same, self.compliance[self.pillar][:, None], 0.0)
         offsets = np.zeros(self.m)
         if z is not None:
             offsets += np.asarray(z, dtype=float)[self.pillar]
@@ -106,13 +104,39 @@ class Brush:
         self.d_K = math.sqrt(2.0 * math.pi * dgamma * a0 / e_star)
         self.W_K = 2.0 * math.pi * a0 * a0 * dgamma
 
+    def _solve(self, on: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Stresses of the elements ``on`` for right-hand sides ``rhs`` (columns),
+        and each pillar's spring stretch f_p / k_p (rows by pillar).
+
+        Solved with each sprung pillar's stretch t_p as an unknown of its own,
+        K s + t_p = rhs and h^2 sum_p s - k_p t_p = 0, not as K + (h^2 / k_p)
+        1 1^T: at kbar 1e-8 that rank-one term is ~1e6 times K, whose part
+        that shares a face's stress would keep only ~1e-8 of its digits.  The
+        gaps take t_p as solved (h^2 / k_p times sum s would multiply the
+        stresses' round-off by 1e6 again).
+        """
+        pillar = self.pillar[on]
+        sprung = np.unique(pillar[self.compliance[pillar] > 0])
+        m, q = on.size, sprung.size
+        a = np.zeros((m + q, m + q))
+        a[:m, :m] = self.kernel[np.ix_(on, on)]
+        col = np.searchsorted(sprung, pillar)
+        has = np.isin(pillar, sprung)
+        a[np.flatnonzero(has), m + col[has]] = 1.0
+        a[m + col[has], np.flatnonzero(has)] = self.h * self.h
+        a[m + np.arange(q), m + np.arange(q)] = -self.h * self.h / self.compliance[sprung]
+        x = np.linalg.solve(a, np.vstack([rhs, np.zeros((q, rhs.shape[1]))]))
+        stretch = np.zeros((self.n_pillars, rhs.shape[1]))
+        stretch[sprung] = x[m:]
+        return x[:m], stretch
+
     def affine(self, attached: np.ndarray) -> dict[str, np.ndarray | float]:
         """Stresses, force and gaps on ``attached`` as slope and intercept in d."""
         on, off = np.flatnonzero(attached), np.flatnonzero(~attached)
         s1, s0 = np.zeros(self.m), np.zeros(self.m)
+        stretch = np.zeros((self.n_pillars, 2))
         if on.size:
-            x = np.linalg.solve(self.matrix[np.ix_(on, on)],
-                                np.column_stack([np.ones(on.size), -self.z[on]]))
+            x, stretch = self._solve(on, np.column_stack([np.ones(on.size), -self.z[on]]))
             s1[on], s0[on] = x[:, 0], x[:, 1]
         p1 = np.bincount(self.pillar, s1, self.n_pillars)
         p0 = np.bincount(self.pillar, s0, self.n_pillars)
@@ -120,8 +144,8 @@ class Brush:
         if off.size:
             coupling = self.kernel[np.ix_(off, on)]
             q = self.pillar[off]
-            g1[off] = 1.0 - self.compliance[q] * p1[q] - coupling @ s1[on]
-            g0[off] = -self.z[off] - self.compliance[q] * p0[q] - coupling @ s0[on]
+            g1[off] = 1.0 - stretch[q, 0] - coupling @ s1[on]
+            g0[off] = -self.z[off] - stretch[q, 1] - coupling @ s0[on]
         h2 = self.h * self.h
         return dict(s1=s1, s0=s0, f1=h2 * s1.sum(), f0=h2 * s0.sum(), g1=g1, g0=g0,
                     p1=h2 * p1, p0=h2 * p0)

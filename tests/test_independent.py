@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from threadpoolctl import threadpool_limits
 
 import dense_reference as ref
 from brushcore import BrushParams, SolverOptions, Waypoint, simulate
@@ -21,6 +22,14 @@ from brushcore.model import theory
 from brushcore.model.layout import build_labels
 
 EXACT, DEFAULT = 1e-6, 2e-4
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    """The reference's dense solves on one BLAS thread: beside pytest's other
+    worker, threaded BLAS ran them 30-50x slower."""
+    with threadpool_limits(limits=1):
+        yield
 
 
 def test_kernel_and_criterion_are_love_and_the_energy_balance():
@@ -51,6 +60,7 @@ def _brush(params: BrushParams) -> ref.Brush:
 FLAT = [
     BrushParams("regular", 16, 0.455, 64),
     BrushParams("regular", 16, 1e-4, 64),
+    BrushParams("regular", 16, 1e-8, 64),  # springs ~1e6 times the half space
     BrushParams("random", 16, 1e-2, 64, seed=3),
     BrushParams("hexagonal", 16, math.inf, 64),
     BrushParams("regular", 4, math.inf, 64, shape="ellipse", aspect=2.0, orientation=30.0),
