@@ -24,7 +24,7 @@ from brushcore.model.params import BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
-                                   single_transforms)
+                                   single_transforms, spring_options, stiffness_span)
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import (APPROACH, RETRACT, START, Waypoint, loop_energy,
@@ -447,6 +447,8 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     forces = [abs(w.value) / fs for w in waypoints if w.kind == "force"]
     span = max([params.preload, params.roughness, float(np.std(inputs.heights)) / ds_, *forces])
     options = load_options(options, span)  # the attrs record the rtol that ran
+    options = spring_options(options, stiffness_span(inputs.compliance, labels, params.h,
+                                                     params.e_star))
     _, op, curve, applications = run_protocol_curve(
         params, waypoints, options, heights=inputs.heights, gap_map=inputs.gap_map,
         compliance=inputs.compliance, progress=progress, labels=labels)

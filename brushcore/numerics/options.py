@@ -26,7 +26,9 @@ class SolverOptions:
     tie_rtol : elements whose stress is within this relative distance of the
         critical stress detach together, so that mirror images stay
         symmetric, in [0, 1e-6] (1e-9 was too tight at kbar = 1e-8, where
-        the soft springs' round-off reaches ~1e-10).
+        the soft springs' round-off reaches ~1e-10); in protocols, gaps
+        within tie_rtol sigma_c K_ii K_ii / (K_ii + h^2 / k_p) of closing
+        attach together, a window of d that does not grow as 1 / k.
     lookahead : extra relative window of the next event whose elements
         detach in the same batch, in [0, 0.1]; 0 (default) is the exact
         event-driven result, > 0 trades accuracy for fewer solves.

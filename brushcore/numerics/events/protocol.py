@@ -297,7 +297,9 @@ class _Engine:
         # Displacement scale of one element at sigma_c: the unit of the gap
         # tolerance and of the tie window between events.
         self.scale = sigma_c * op.diag
-        self.gap_tol = options.tie_rtol * self.scale
+        # ... and of a gap: once a pillar touches, its other gaps close at
+        # most at K_ii / (K_ii + h^2 / k_p) of the rate before (`_closed`).
+        self.gap_unit = self.scale * op.diag / (op.diag + self.cp)
         # The detached elements whose gap closing is the event `_next` found
         # (attached in the cascade's first round).
         self._closing = xp.zeros(self.total, dtype=xp.bool)
@@ -414,8 +416,7 @@ class _Engine:
         xp = self.xp
         spring = self.d - self.z - g - self.u  # f_p / k_p
         span = abs(self.d) + xp.abs(self.z) + xp.abs(spring) + xp.abs(self.u)
-        diag = self.scale / self.sigma_c
-        return g <= xp.maximum(self.gap_tol * diag / (diag + self.cp), ROUND_OFF * span)
+        return g <= xp.maximum(self.options.tie_rtol * self.gap_unit, ROUND_OFF * span)
 
     # --- events -------------------------------------------------------------
     def _attach(self, which: np.ndarray) -> None:
@@ -448,7 +449,8 @@ class _Engine:
         until the state is consistent; then the unit response for the next leg.
 
         With ``options.lookahead`` > 0 the first round also attaches gaps
-        below lookahead x (sigma_c K_ii) and detaches stresses above
+        below lookahead x sigma_c K_ii x K_ii / (K_ii + h^2 / k_p) (`gap_unit`:
+        a window of d that does not grow as 1 / k) and detaches stresses above
         (1 - lookahead) sigma_c: fewer events, approximate (default 0: exact).
         """
         tie, ahead = self.options.tie_rtol, self.options.lookahead
@@ -460,7 +462,7 @@ class _Engine:
             g, _ = self._gaps()
             closed = self._closed(g) | closing
             closing = xp.zeros_like(closing)  # the event's own ties: first round only
-            close = ~att & (closed | (g <= ahead * self.scale))
+            close = ~att & (closed | (g <= ahead * self.gap_unit))
             jump = close & ~closed  # attached early: sigma jumps
             over = att & (self.sig >= self.sigma_c * (1.0 - tie - ahead))
             ahead = 0.0  # only the event itself is batched

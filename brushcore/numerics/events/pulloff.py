@@ -337,8 +337,14 @@ class _Recorder:
         """A row at displacement ``d`` with unit-displacement stresses ``x``
         (``total``: their sum where better known than sum(x))."""
         xp = self.op.backend.xp
+        force = d * self.h * self.h * (float(xp.sum(x)) if total is None else total)
+        if total is not None and self.disp[-1] == d:
+            # At fixed d, F = d 1.A_C^-1 1 only falls as C shrinks (the
+            # maximum of 2 1.x - x.A x over fewer unknowns): an estimate
+            # never rises above the state before it, nor becomes F_ad.
+            force = min(force, self.force[-1])
         self.disp.append(d)
-        self.force.append(d * self.h * self.h * (float(xp.sum(x)) if total is None else total))
+        self.force.append(force)
         if self.force[-1] > self.best:  # one bincount per event: free next to a solve
             self.best = self.force[-1]
             self.best_pillars = d * self.h * self.h * self.op.pillar_sums(x)

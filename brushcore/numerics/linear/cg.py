@@ -45,9 +45,10 @@ def pcg(apply: Callable[[np.ndarray], np.ndarray],
         (a caller whose next step depends on comparisons that the error
         could still flip)
     floor : the relative error at which CG stops whether settled or not
-    on_stop : optional, called once as on_stop(x, r, z) with the residual
-        r = b - A x and z = M^-1 r of the iterate returned (what a caller
-        estimates a functional of the true solution from)
+    on_stop : optional, called once as on_stop(x, r, z) with CG's residual
+        r (b - A x, updated recursively) and z = M^-1 r of the iterate
+        returned (what a caller estimates a functional of the true solution
+        from)
 
     Returns
     -------
