@@ -27,11 +27,13 @@ class SolverOptions:
         critical stress detach together, so that mirror images stay
         symmetric, in [0, 1e-6] (1e-9 was too tight at kbar = 1e-8, where
         the soft springs' round-off reaches ~1e-10); in protocols, gaps
-        within tie_rtol sigma_c K_ii K_ii / (K_ii + h^2 / k_p) of closing
-        attach together, a window of d that does not grow as 1 / k.
+        within tie_rtol x sigma_c K_ii x K_ii / (K_ii + h^2 / k_p) of
+        closing (K_ii an element's self-compliance) attach together, a
+        window of d that does not grow as 1 / k.
     lookahead : extra relative window of the next event whose elements
-        detach in the same batch, in [0, 0.1]; 0 (default) is the exact
-        event-driven result, > 0 trades accuracy for fewer solves.
+        detach (and, in protocols, whose gaps close) in the same batch, in
+        [0, 0.1]; 0 (default) is the exact event-driven result, > 0 trades
+        accuracy for fewer solves.
     cascade : "local" (default) or "global" (the paper's algorithm, the
         reference).  Both detach, at fixed d, every element above sigma_c
         and re-solve until none is.  "global" re-solves the whole system

@@ -287,7 +287,8 @@ def _solve_stresses(op: BrushOperator, options: SolverOptions, x0: np.ndarray,
     (regular 4, kbar 0.455, 45^2), against an independent dense solver.  With
     A x* = b = 1 the force is h^2 d 1.x* = h^2 d b.A^-1 b, and b.A^-1 b =
     1.x + x.r + r.A^-1 r for any x with residual r, so 1.x + x.r + r.z
-    (z = M^-1 r) errs only by r.(A^-1 - M^-1) r: 4e-5 of that force there.
+    (z = M^-1 r) errs only by r.(A^-1 - M^-1) r: 3.6e-5 F_K there (8e-5 of
+    that force); it is capped by the state before it (`_Recorder.record`).
     """
     xp = op.backend.xp
     b = xp.ones(op.size, dtype=xp.float64)
