@@ -74,12 +74,13 @@ class Brush:
     ----------
     labels : (n, n) int, -1 no pillar, 0 ... N-1 the pillar
     k : spring stiffness per pillar or one for all [force / length]; inf rigid
-    z : protrusion per pillar [length] (default 0)
-    gap : extra gap per element, (n, n) [length] (default 0)
+    z : protrusion per pillar [length, or d_K with ``in_d_k``] (default 0)
+    gap : extra gap per element, (n, n) [length, or d_K with ``in_d_k``] (default 0)
+    in_d_k : whether z and gap are in units of this brush's d_K
     """
 
     def __init__(self, labels: np.ndarray, k, z=None, gap=None, *, h: float = 1.0,
-                 e_star: float = 1.0, dgamma: float = 1.0) -> None:
+                 e_star: float = 1.0, dgamma: float = 1.0, in_d_k: bool = False) -> None:
         labels = np.asarray(labels)
         self.h, self.e_star, self.dgamma = h, e_star, dgamma
         self.index = np.flatnonzero(labels.ravel() >= 0)
@@ -92,17 +93,18 @@ class Brush:
         k = np.broadcast_to(np.asarray(k, dtype=float), (self.n_pillars,))
         self.compliance = np.where(np.isinf(k), 0.0, h * h / np.where(np.isinf(k), 1.0, k))
         self.kernel = kernel
-        offsets = np.zeros(self.m)
-        if z is not None:
-            offsets += np.asarray(z, dtype=float)[self.pillar]
-        if gap is not None:
-            offsets -= np.asarray(gap, dtype=float).ravel()[self.index]
-        self.z = offsets
         self.sigma_c = critical_stress(e_star, dgamma, h)
         a0 = math.sqrt(self.m * h * h / math.pi)
         self.F_K = math.sqrt(8.0 * math.pi * e_star * dgamma * a0**3)
         self.d_K = math.sqrt(2.0 * math.pi * dgamma * a0 / e_star)
         self.W_K = 2.0 * math.pi * a0 * a0 * dgamma
+        unit = self.d_K if in_d_k else 1.0
+        offsets = np.zeros(self.m)
+        if z is not None:
+            offsets += unit * np.asarray(z, dtype=float)[self.pillar]
+        if gap is not None:
+            offsets -= unit * np.asarray(gap, dtype=float).ravel()[self.index]
+        self.z = offsets
 
     def _solve(self, on: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Stresses of the elements ``on`` for right-hand sides ``rhs`` (columns),

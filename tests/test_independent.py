@@ -50,11 +50,8 @@ def _brush(params: BrushParams) -> ref.Brush:
     n_pillars = int(labels.max()) + 1
     kbar = params.kbar if params.kbar_values is None else params.kbar_values
     k = np.broadcast_to(np.asarray(kbar, dtype=float), (n_pillars,)) * params.e_star * params.side
-    b = ref.Brush(labels, k, h=params.h, e_star=params.e_star, dgamma=params.dgamma)
-    d_k = b.d_K
-    z = None if params.heights is None else np.asarray(params.heights) * d_k
-    gap = None if params.gap_map is None else np.asarray(params.gap_map) * d_k
-    return ref.Brush(labels, k, z, gap, h=params.h, e_star=params.e_star, dgamma=params.dgamma)
+    return ref.Brush(labels, k, params.heights, params.gap_map, h=params.h,
+                     e_star=params.e_star, dgamma=params.dgamma, in_d_k=True)
 
 
 FLAT = [

@@ -17,7 +17,7 @@ import xarray as xr
 
 from brushcore.model import theory
 from brushcore.model.inputs import PROTOCOL_LOADS, load_beyond_range, protocol_text
-from brushcore.model.labelmap import count_touching_pairs
+from brushcore.model.labelmap import count_touching_pairs, pillar_element_counts
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap, smallest_radius_elements
 from brushcore.model.params import BrushParams
@@ -643,7 +643,7 @@ def _pillar_results(labels: np.ndarray, h: float, force_at_peak: np.ndarray,
     """Per pillar, in every curve file: centroid [m] and area [m^2] of its
     elements, force at F_ad [N] and the displacement at which it let go [m]."""
     centre = pillar_centroids(labels, h)
-    area = np.bincount(labels[labels >= 0], minlength=len(centre)) * (h * h)
+    area = pillar_element_counts(labels, len(centre)) * (h * h)
     return {
         "pillar_y": _var("pillar", centre[:, 0], "pillar centroid y", "m"),
         "pillar_x": _var("pillar", centre[:, 1], "pillar centroid x", "m"),

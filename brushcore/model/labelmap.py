@@ -9,6 +9,12 @@ import numpy as np
 from brushcore.validation import ParameterError
 
 
+def pillar_element_counts(labels: np.ndarray, n_pillars: int = 0) -> np.ndarray:
+    """Elements of each pillar, indexed by label (at least ``n_pillars``
+    entries: a pillar without an element counts 0)."""
+    return np.bincount(labels[labels >= 0], minlength=n_pillars)
+
+
 def _edge_neighbours(labels: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per axis, the element pairs (a, b) that share an edge, b below or to
     the right of a, and where both are of different pillars."""

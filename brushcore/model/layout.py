@@ -26,7 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
-from brushcore.model.labelmap import check_not_touching
+from brushcore.model.labelmap import check_not_touching, pillar_element_counts
 from brushcore.model.layout_file import FILE_PHI_RTOL, read_label_map
 from brushcore.model.pillar_table import PillarTable, is_table, read_pillar_table
 from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_GRID, MAX_PHI_ERROR, MIN_GRID,
@@ -498,7 +498,7 @@ def smallest_radius_elements(params: BrushParams, labels: np.ndarray) -> float:
     smallest = smallest_disc(params)
     if smallest is not None:
         return smallest
-    counts = np.bincount(labels[labels >= 0], minlength=int(labels.max()) + 1)
+    counts = pillar_element_counts(labels, int(labels.max()) + 1)
     return math.sqrt(float(counts.min()) / math.pi)
 
 
@@ -539,7 +539,7 @@ def _check_pillar_widths(params: BrushParams, labels: np.ndarray, name: str, val
     deepest = ndimage.maximum(depth, labels, index=np.arange(params.n_pillars))
     thin = np.flatnonzero(np.asarray(deepest) < math.sqrt(2.0) - 1e-9)
     if thin.size:
-        counts = np.bincount(labels[labels >= 0], minlength=params.n_pillars)
+        counts = pillar_element_counts(labels, params.n_pillars)
         raise ParameterError(
             name, value, f"{finer}, every pillar at least three elements across (or "
             "allow_coarse to run it anyway)",
@@ -563,7 +563,7 @@ def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
         Naming ``grid``, with the smallest grid that would do where it can
         be computed, and the realised values.
     """
-    counts = np.bincount(labels[labels >= 0], minlength=params.n_pillars)
+    counts = pillar_element_counts(labels, params.n_pillars)
     # an ellipse's semi-minor axis, as the radius rule reads it: its
     # equal-area radius would suggest a grid that still misses its centres;
     # a table's smallest disc, not the mean one (a stub among pillars)

@@ -39,7 +39,7 @@ import numpy as np
 
 from brushcore.model.params import BrushParams
 
-from brushcore.model.labelmap import check_not_touching
+from brushcore.model.labelmap import check_not_touching, pillar_element_counts
 from brushcore.model.inputs import npy_problem
 from brushcore.model.pillar_table import is_table, read_pillar_table
 from brushcore.validation import ParameterError
@@ -170,7 +170,7 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
     if present.size == 0:
         raise _refuse(path, "a map with at least one pillar", "no pillar element",
                       image_rule=True)
-    counts = np.bincount(labels[labels >= 0])
+    counts = pillar_element_counts(labels)
     if counts.max() > labels.size / 2:  # no pillar covers half the square (phi <= 0.5)
         big = int(counts.argmax())
         share = f"{counts[big] / labels.size:.3g}"

@@ -13,6 +13,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from brushcore.model import theory
+from brushcore.model.labelmap import pillar_element_counts
 from brushcore.model.layout import build_labels
 from brushcore.model.params import BrushParams
 from brushcore.numerics.platform.backend import Backend, resolve_backend
@@ -278,8 +279,8 @@ def stiffness_span(compliance: np.ndarray, labels: np.ndarray, h: float,
     each pillar's flat-punch contact stiffness 2 a_p E* (a_p its equal-area
     radius) in series with its spring k_p = h^2 / compliance_p (rigid where
     0).  1 for a brush of equal pillars and springs."""
-    area = np.bincount(labels[labels >= 0], minlength=compliance.size) * h * h
-    contact = 2.0 * e_star * np.sqrt(area / np.pi)
+    area = pillar_element_counts(labels, compliance.size) * h * h
+    contact = theory.flat_punch_stiffness(np.sqrt(area / np.pi), e_star)
     held = area > 0
     k_eff = 1.0 / (1.0 / contact[held] + np.asarray(compliance, dtype=float)[held] / (h * h))
     return float(k_eff.max() / k_eff.min()) if k_eff.size else 1.0

@@ -456,12 +456,12 @@ class _Engine:
         tie, ahead = self.options.tie_rtol, self.options.lookahead
         xp = self.xp
         recorded = False
-        closing, self._closing = self._closing, xp.zeros_like(self._closing)
         for _ in range(self.MAX_CASCADE):
             att = self.op.attached
             g, _ = self._gaps()
-            closed = self._closed(g) | closing
-            closing = xp.zeros_like(closing)  # the event's own ties: first round only
+            closed = self._closed(g)
+            if not recorded:  # the first round: the event's own gaps too
+                closed = closed | self._closing
             close = ~att & (closed | (g <= ahead * self.gap_unit))
             jump = close & ~closed  # attached early: sigma jumps
             over = att & (self.sig >= self.sigma_c * (1.0 - tie - ahead))

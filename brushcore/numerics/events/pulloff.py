@@ -294,11 +294,8 @@ def _solve_stresses(op: BrushOperator, options: SolverOptions, x0: np.ndarray,
     b = xp.ones(op.size, dtype=xp.float64)
     stopped: list[float] = []
     verdicts: list[bool] = []
-    ends: list[float] = []
+    ends: list[tuple] = []  # (x, r, z) where each solve stopped
     tie = options.tie_rtol + options.lookahead
-
-    def on_stop(x, r, z) -> None:
-        ends.append(float(xp.sum(x)) + float(x @ r) + float(r @ z))
 
     def conditions(band: float) -> tuple:
         return ((_decides(threshold, xp, stopped, band)
@@ -308,15 +305,18 @@ def _solve_stresses(op: BrushOperator, options: SolverOptions, x0: np.ndarray,
     band = PRECISION_BAND if op.can_refine else 0.0  # float32 transforms
     floor = SolverOptions.MIXED_MIN_RTOL if op.can_refine else SETTLE_FLOOR
     x, it = pcg(op.apply, op.precondition, b, x0, options.rtol, options.max_iter,
-                *conditions(band), floor, on_stop)
+                *conditions(band), floor, lambda *end: ends.append(end))
     if verdicts and not verdicts[-1] and not stopped and op.can_refine:
         with op.refined():  # unsettled at float32's digits
             x, more = pcg(op.apply, op.precondition, b, x, options.rtol,
-                          options.max_iter, *conditions(0.0), SETTLE_FLOOR, on_stop)
+                          options.max_iter, *conditions(0.0), SETTLE_FLOOR,
+                          lambda *end: ends.append(end))
         it += more
-    # `stopped` holds an entry only where the last solve stopped early.
-    return x, max(stopped + [options.rtol * float(xp.max(x))]), it, \
-        ends[-1] if stopped else None
+    total = None
+    if stopped:  # an entry only where the last solve stopped early
+        _, r, z = ends[-1]
+        total = float(xp.sum(x)) + float(x @ r) + float(r @ z)
+    return x, max(stopped + [options.rtol * float(xp.max(x))]), it, total
 
 
 class _Recorder:
