@@ -162,9 +162,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--pillars", type=int, action=_Given,
                      help="number of pillars N (required, except for --layout file: the "
                           "file's)")
-    sim.add_argument("--kbar", type=_kbar, required=True,
+    sim.add_argument("--kbar", type=_kbar, default=None,
                      help=f"spring stiffness k/(E* L), in [{MIN_KBAR:g}, inf]; 'inf' for rigid "
-                          "pillars")
+                          "pillars (required, except with --kbar-file: then the file's mean)")
     sim.add_argument("--grid", type=int, action=_Given,
                      help=f"elements per side n, in [{MIN_GRID}, {MAX_GRID}] (required, except "
                           "for a label map or image: the file's; a pillar table needs it)")
@@ -218,8 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "pillar")
     rough.add_argument("--kbar-file", type=_path, default=None, metavar="FILE",
                        help=f"pillar kbar in [{MIN_KBAR:g}, inf], one per pillar, in place of "
-                            "--kbar (which the file still records as its kbar attribute; "
-                            "--kbar-factors scales --kbar instead)")
+                            "--kbar; the curve records their mean as its kbar (or --kbar, if "
+                            "given); --kbar-factors scales --kbar instead")
     rough.add_argument("--kbar-factors", type=_path, default=None, metavar="FILE",
                        help="pillar stiffness relative to --kbar (finite, > 0), one per "
                             "pillar: pillar p runs kbar * f_p")
@@ -317,6 +317,8 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
     given = getattr(args, "given", set())
     # a lattice or a file ignores the gap: not recorded, so its curve is the lattice's
     gap = args.min_gap if args.layout == "random" else 1.0
+    # without --kbar, --kbar-file's mean replaces this stand-in once the file is read
+    kbar = args.kbar if args.kbar is not None else 1.0
     common = dict(seed=args.seed, min_gap=gap, e_star=args.e_star,
                   dgamma=args.dgamma, h=args.h, allow_coarse=args.allow_coarse,
                   shape=args.shape, aspect=args.aspect, orientation=args.orientation)
@@ -331,7 +333,7 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
                            "any grid")
         fixed = {"n_pillars": args.pillars, "grid": args.grid, "phi": args.phi}
         fixed = {k: v for k, v in fixed.items() if {"n_pillars": "pillars"}.get(k, k) in given}
-        return file_params(args.layout_file, args.kbar, **common, **fixed)
+        return file_params(args.layout_file, kbar, **common, **fixed)
     missing = [flag for flag, value in (("--pillars", args.pillars), ("--grid", args.grid))
                if value is None]
     if missing:  # both at once: a second try should not meet the second
@@ -340,7 +342,7 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
     from brushcore.model.layout import hinted_params
 
     return hinted_params(
-        lambda grid: BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=args.kbar,
+        lambda grid: BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=kbar,
                                  grid=grid, phi=args.phi, layout_file="" if args.layout_file
                                  is None else str(args.layout_file), **common), args.grid)
 
@@ -357,13 +359,16 @@ def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.curve import preload_contact, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels, pillars_differ, smallest_radius_elements
-    from brushcore.model.inputs import INPUT_FILES, parse_protocol, with_input_files
+    from brushcore.model.inputs import (INPUT_FILES, parse_protocol, recorded_kbar,
+                                        with_input_files)
     from brushcore.model.pillar_table import is_table
     from brushcore.numerics.platform.threads import pin_threads
 
     progress = None if args.quiet else _Progress()
     started = time.time()
     try:
+        if args.kbar is None and args.kbar_file is None:
+            raise _Missing("--kbar is required (or --kbar-file, one kbar per pillar)")
         # Files are checked against the counts the plain parameters imply.
         base = dataclasses.replace(_brush_params(args), roughness=args.roughness,
                                    preload=args.preload, kbar_spread=args.kbar_spread,
@@ -373,7 +378,9 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.min_gap != 1.0 and args.layout != "random":  # it would seem to count
             warnings.warn(f"--min-gap applies to random layouts only: the {params.layout} "
                           f"layout ignores --min-gap {args.min_gap:g}")
-        if args.kbar_file is not None:  # --kbar is required, and would seem to count
+        if args.kbar is None:  # as a --kbar-spread draw's mean is its --kbar
+            params = dataclasses.replace(params, kbar=recorded_kbar(params.kbar_values))
+        elif args.kbar_file is not None:  # it would seem to count
             warnings.warn(f"--kbar-file gives every pillar's stiffness: --kbar {args.kbar:g} "
                           "is recorded as the curve's kbar but no pillar runs it")
         options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -410,7 +411,7 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
 
 
 def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:
-    """--kbar is required, and --kbar-file replaces it on every pillar: said."""
+    """--kbar beside --kbar-file is only recorded: said."""
     values = tmp_path / "k.txt"
     values.write_text("0.01\n0.02\n0.03\n0.04\n")
     with pytest.warns(UserWarning, match=r"--kbar-file gives every pillar's stiffness: "
@@ -419,6 +420,25 @@ def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:
                      "--grid", "48", "--kbar-file", str(values), "--quiet",
                      "--out", str(tmp_path / "k.nc")]) == 0
     assert read_curve(tmp_path / "k.nc").pillar_kbar.values.tolist() == [0.01, 0.02, 0.03, 0.04]
+
+
+def test_a_kbar_file_alone_records_its_mean(tmp_path, capsys) -> None:
+    """Without --kbar, --kbar-file's mean is the curve's kbar (a lognormal
+    draw's mean is its --kbar alike), with no warning; without either, the
+    error names both flags before any work."""
+    values = tmp_path / "k.txt"
+    values.write_text("0.01\n0.02\n0.03\n0.04\n")
+    argv = ["simulate", "--layout", "regular", "--pillars", "4", "--grid", "48", "--quiet"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main([*argv, "--kbar-file", str(values), "--out", str(tmp_path / "k.nc")]) == 0
+    curve = read_curve(tmp_path / "k.nc")
+    assert curve.attrs["kbar"] == pytest.approx(0.025, rel=1e-15)
+    assert curve.pillar_kbar.values.tolist() == [0.01, 0.02, 0.03, 0.04]
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "none.nc")]) == 2
+    assert "--kbar is required (or --kbar-file" in capsys.readouterr().err
+    assert not (tmp_path / "none.nc").exists()
 
 
 def test_min_gap_on_a_lattice_is_said_to_be_ignored(tmp_path) -> None:

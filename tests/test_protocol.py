@@ -232,6 +232,8 @@ def test_foundation_formula_limits():
         assert value == pytest.approx(float(theory.uniform_spread_pull_off(w)), abs=1.0 / n)
     k = np.array([1.0, 1.0, 2.0, 2.0])
     assert theory.foundation_pull_off(np.zeros(4), k, 1.0) / 4 == pytest.approx(0.75)
+    with pytest.raises(ValueError, match=r"k_eff must be finite and > 0 .*got inf"):
+        theory.foundation_pull_off(np.zeros(2), np.array([1.0, np.inf]), 1.0)  # was NaN
     assert theory.bimodal_stiffness_pull_off(2.0, 0.5) == pytest.approx(0.75)
     expected = {0.1: 0.784, 0.2: 0.634, 0.5: 0.343, 1.0: 0.115}
     for s, value in expected.items():

@@ -322,6 +322,9 @@ def test_snakefmt_clean() -> None:
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),
         ({"solver": {"rtoll": 1e-5}}, "config key 'solver.rtoll' is unknown; did you mean"),
         ({"regular": [4, 10]}, "config: regular = 10 is invalid: allowed a perfect square"),
+        # a shape setting no brush reads would seem to count (its default hides it later)
+        ({"aspect": 3.0}, r"config key 'aspect': applies to ellipse pillars only, and no brush "
+                          r"of this config has them \(shape: \['disc'\]\); add ellipse"),
         # checks that need the layout run at plan time too
         ({"grid": 32, "regular": [256]}, r"config: grid = 32 is invalid .*allowed grid \d+, the "
                                          r"next .*, or allow_coarse: true to run it anyway"),

@@ -461,12 +461,15 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     i_max, f_ad, d_ad, work = peaks[-1] if peaks else (-1, math.nan, math.nan, math.nan)
     if not peaks:  # a loading-only protocol is legitimate, but say why F_ad is NaN
         warnings.warn("the protocol never retracts: adhesive_force and work_of_separation "
-                      "are NaN (end it with Waypoint('separation') for a pull-off)",
+                      "are NaN (end it with a separation waypoint for a pull-off: "
+                      "Waypoint('separation'), or 'separation' in --protocol or a config's "
+                      "protocol)",
                       stacklevel=3)
     elif curve.attached_elements[curve.pulls[-1][1]] > 0:
         warnings.warn("the last retraction ends in contact: adhesive_force is the largest "
-                      "force it reached, not a pull-off (end the protocol with "
-                      "Waypoint('separation') for one)", stacklevel=3)
+                      "force it reached, not a pull-off (end the protocol with a "
+                      "separation waypoint for one: Waypoint('separation'), or "
+                      "'separation' in --protocol or a config's protocol)", stacklevel=3)
     dissipated = loop_energy(d, f)
     area = curve.attached_elements * h * h
     n_pillars = op.n_pillars

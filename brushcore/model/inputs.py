@@ -195,6 +195,12 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
 #: (the CLI's flags, the workflow's `layout_files` keys), and the
 #: `BrushParams` field each sets; a refusal is named by that field, but for
 #: factors, which are not the field's values.
+def recorded_kbar(kbar_values: np.ndarray) -> float:
+    """The kbar a brush given every pillar's kbar records: their mean [-]
+    (inf if a pillar is rigid), as a lognormal draw's mean is its kbar."""
+    return float(np.mean(kbar_values))
+
+
 INPUT_FILES = {"heights": "heights", "kbar_file": "kbar_values",
                "kbar_factors": "kbar_values", "gap_map": "gap_map"}
 

@@ -222,11 +222,22 @@ def foundation_pull_off(d0: np.ndarray, k_eff: np.ndarray, f_c: float | np.ndarr
     ----------
     d0 : zero-force displacement of each pillar [length] (its first-touch d;
         larger means it lets go later)
-    k_eff : effective stiffness of each pillar [force / length]
+    k_eff : effective stiffness of each pillar, finite and > 0 [force /
+        length]: its spring in series with its contact (2 a E* for a disc),
+        finite for a rigid spring too
     f_c : critical force of each pillar (or one for all) [force]
+
+    Raises
+    ------
+    ValueError
+        Where a k_eff is not finite and positive (the maximum would be NaN).
     """
     d0 = np.asarray(d0, dtype=float)
     k = np.asarray(k_eff, dtype=float)
+    bad = k[~(np.isfinite(k) & (k > 0))]
+    if bad.size:
+        raise ValueError(f"k_eff must be finite and > 0 (a spring in series with its "
+                         f"contact, 2 a E* for a disc), got {float(bad[0])!r}")
     let_go = d0 + np.broadcast_to(np.asarray(f_c, dtype=float), d0.shape) / k
     attached = let_go[None, :] >= let_go[:, None]  # [j, i]: i still holds at d_j
     force = (attached * k[None, :] * (let_go[:, None] - d0[None, :])).sum(axis=1)

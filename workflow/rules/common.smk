@@ -48,6 +48,7 @@ def check_config(config, schema_path):
                 "in the range the schema gives"
             )
         _integral_counts(config)
+        _shape_settings_used(config)
         return
     where = ".".join(str(p) for p in error.absolute_path)
     if error.validator == "additionalProperties":
@@ -233,6 +234,28 @@ def _integral_counts(config):
         for key in ("n_pillars", "grid"):
             if key in entry:
                 entry[key] = fix(entry[key])
+
+
+#: Shape settings and the pillar shapes that read them (the CLI refuses
+#: --aspect without --shape ellipse alike).
+_SHAPE_SETTINGS = {"aspect": ("ellipse",), "orientation": ("square", "ellipse")}
+
+
+def _shape_settings_used(config):
+    """Refuse `aspect` or `orientation` where no brush of the config has a
+    shape that reads it: set, it would seem to count.  Read before `validate`
+    fills in their defaults, which cannot be told from a value set."""
+    fig5 = config.get("fig5", {})
+    shapes = set(config.get("shape", ["disc"]))
+    if fig5.get("kbar", [None]):  # fig5: {kbar: []} runs no Fig. 5 brush
+        shapes.add(fig5.get("shape", "disc"))
+    for key, readers in _SHAPE_SETTINGS.items():
+        if key in config and not shapes.intersection(readers):
+            raise ConfigError(
+                f"config key '{key}': applies to {' and '.join(readers)} pillars only, "
+                f"and no brush of this config has them (shape: {sorted(shapes)}); add "
+                f"{' or '.join(readers)} to 'shape' (or fig5.shape), or remove '{key}'"
+            )
 
 
 def _first_nan(value, where=""):
