@@ -8,7 +8,6 @@ does not fit is refused, naming the file and the line.
 
 from __future__ import annotations
 
-import contextlib
 import warnings
 import math
 import subprocess
@@ -143,7 +142,8 @@ def test_soft_discs_of_unequal_radius_let_go_as_independent_pillars(tmp_path: Pa
 def test_a_table_that_does_not_fit_is_refused_naming_the_line(
         tmp_path: Path, text: str, message: str) -> None:
     path = _table(tmp_path, text)
-    with pytest.warns(UserWarning) if "0,3" in text else contextlib.nullcontext():
+    with warnings.catch_warnings():  # the refusal says it all (decimal commas too)
+        warnings.simplefilter("error")
         with pytest.raises(ParameterError, match=message) as err:
             file_params(path, 0.01, grid=128)
     assert err.value.name == "layout_file" and str(path) in str(err.value)
@@ -258,6 +258,30 @@ def test_a_decimal_comma_before_an_exponent_is_still_warned_about(tmp_path: Path
     path = _table(tmp_path, "2,5e-1\n3,0e-1\n", "h.txt")
     with pytest.warns(UserWarning, match="no decimal point"):
         assert read_pillar_values(path, 4, "heights").tolist() == [2.0, 0.5, 3.0, 0.0]
+
+
+def test_a_table_in_other_units_is_named_as_such_without_a_comma_warning(tmp_path: Path
+                                                                         ) -> None:
+    """A table of integers (micrometres) separates its values with commas:
+    no decimal-comma warning, and the refusal says the unit is L."""
+    path = _table(tmp_path, "x,y,radius\n25,25,5\n75,75,5\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ParameterError, match=r"every radius exceeds 1: write lengths "
+                                                 r"in units of L"):
+            file_params(path, 0.01, grid=64)
+
+
+def test_a_label_map_names_the_grid_and_the_kinds_of_layout_file(tmp_path: Path) -> None:
+    """A grid other than a map's is the grid's error (as N's and phi's are),
+    and an unknown suffix lists the table's .csv beside the maps'."""
+    path = tmp_path / "m.npy"
+    np.save(path, build_labels(BrushParams("regular", 16, 0.01, 64)))
+    with pytest.raises(ParameterError, match=r"grid=128 is invalid: allowed 64, the value of"):
+        file_params(path, 0.01, grid=128)
+    with pytest.raises(ParameterError, match=r"allowed a label map \(\.npy or \.png\) or a "
+                                             r"pillar table \(\.csv\)"):
+        file_params(tmp_path / "m.txt", 0.01)
 
 
 def test_exactly_tangent_discs_are_refused_whatever_their_angle(tmp_path: Path) -> None:

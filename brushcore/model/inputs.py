@@ -58,9 +58,12 @@ def header_names(number: int, line: str) -> tuple[int, list[str]]:
     return number, [name.strip("'\"") for name in names]
 
 
-def table_rows(path: Path, name: str, header: bool = True
+def table_rows(path: Path, name: str, header: bool = True, comma_warning: bool = True
                ) -> tuple[tuple[int, list[str]] | None, list[tuple[int, list[float]]], str]:
     """A text file's lines as `_rows` reads them, after a header line.
+
+    ``comma_warning`` False: no warning for "0,5" without a decimal point
+    anywhere (a CSV table of integers separates its values with commas).
 
     Returns
     -------
@@ -101,7 +104,7 @@ def table_rows(path: Path, name: str, header: bool = True
         rows.append((number, values))
     if hint and points:  # decimal points and commas between values: a plain CSV
         hint = ""
-    elif hint:  # "0,5" and not one decimal point: decimal commas, likely
+    elif hint and comma_warning:  # "0,5" and not one decimal point: decimal commas, likely
         warnings.warn(f"{name} {path}: line {first[0]} {first[1]!r} is read as values "
                       "that commas separate, and the file has no decimal point; if those "
                       "are decimal commas, write decimals with a point")

@@ -259,7 +259,10 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
     """
     if is_table(path):
         return _table_params(path, kbar, kwargs)
-    labels = read_label_map(path, kwargs.get("grid"))
+    if not Path(path).is_dir() and Path(path).suffix.lower() not in SUFFIXES:
+        raise _refuse(Path(path), f"a label map ({' or '.join(SUFFIXES)}) or a pillar table "
+                      "(.csv)", f"unknown kind {Path(path).suffix or '(no suffix)'!r}")
+    labels = read_label_map(path)  # a grid that differs is the grid's error, named below
     found = describe(labels)
     for name in ("n_pillars", "grid"):
         if name in kwargs and kwargs[name] != found[name]:

@@ -134,7 +134,8 @@ def _commented_header(path: Path) -> tuple[int, list[str]] | None:
 
 
 def _read(path: Path) -> PillarTable:
-    header, rows, comma_hint = table_rows(path, _NAME)
+    # a table's commas separate its columns; an integer table fails the range check
+    header, rows, comma_hint = table_rows(path, _NAME, comma_warning=False)
     header = header or (_commented_header(path) if rows else None)
     if header is None:
         raise _refuse(path, "a header line naming the columns x, y and radius [L]",
@@ -163,10 +164,13 @@ def _read(path: Path) -> PillarTable:
     outside = np.flatnonzero((x - r < 0) | (y - r < 0) | (x + r > 1) | (y + r > 1))
     if outside.size:
         i = outside[0]
+        # every radius beyond L: lengths in another unit (um, elements), likely
+        units = ("; every radius exceeds 1: write lengths in units of L (divide by the "
+                 "square's side)" if np.all(r > 1) else "")
         raise _refuse(path, "discs inside the square: r <= x <= 1 - r and r <= y <= 1 - r, "
                       "in units of its side L",
                       f"line {lines[i]}: x = {float(x[i])!r}, y = {float(y[i])!r}, "
-                      f"radius = {float(r[i])!r}")
+                      f"radius = {float(r[i])!r}{units}")
     centres = np.column_stack([y, x])
     _check_apart(path, lines, centres, r)
     for array in (centres, r):  # a cached reading: what callers get must not be changed
