@@ -306,6 +306,13 @@ class _Progress:
             self.shown = False
 
 
+def _cli_warning(message: Warning | str, *args: object, **kwargs: object) -> str:
+    """A warning as the command prints it: one that opens with a parameter's
+    name ("heights FILE: ...", from the input readers) names its flag."""
+    first, space, rest = str(message).partition(" ")
+    return f"brushcore: warning: {FLAGS.get(first, first)}{space}{rest}\n"
+
+
 def _error(message: str, progress: _Progress | None = None) -> None:
     if progress is not None:
         progress.end_line()
@@ -503,7 +510,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``brushcore`` command."""
     # Warnings read as the errors do: one line, no source line of brushcore's.
     previous = warnings.formatwarning
-    warnings.formatwarning = lambda message, *args, **kwargs: f"brushcore: warning: {message}\n"
+    warnings.formatwarning = _cli_warning
     try:
         args = build_parser().parse_args(argv)
         if args.command == "simulate":

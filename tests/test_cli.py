@@ -499,3 +499,14 @@ def test_converge_refines_a_map_drawn_once_a_grid(tmp_path, capsys) -> None:
     assert main(["converge", *paths, "--out-dir", str(tmp_path / "s")]) == 0
     assert "3 curves on grids [32, 48, 64]" in capsys.readouterr().out
     assert (tmp_path / "s" / "convergence.nc").is_file()
+
+
+def test_a_warning_that_names_a_parameter_names_its_flag() -> None:
+    """The input readers' warnings open with the parameter ("heights FILE:");
+    the command prints the flag a user typed, and leaves other text alone."""
+    from brushcore.cli import _cli_warning
+
+    assert _cli_warning(UserWarning("heights h.txt: line 1 '0,1' is read as values")) == \
+        "brushcore: warning: --heights h.txt: line 1 '0,1' is read as values\n"
+    assert _cli_warning("the protocol never retracts") == \
+        "brushcore: warning: the protocol never retracts\n"

@@ -358,3 +358,17 @@ def test_sweeps_carry_the_narrowest_pillar_and_read_it_from_older_files(tmp_path
         assert c.attrs["smallest_radius_elements"] == pytest.approx(3.84)
     assert float(np.nanmax(build_sweep([curve])["smallest_radius_elements"])) == \
         pytest.approx(3.84)
+
+
+def test_a_label_map_read_back_would_refuse_is_not_written(tmp_path: Path) -> None:
+    """random 220 on 160^2 has 11 pairs of discs that share an element edge:
+    save_label_map refuses it (read_label_map would), naming a pair."""
+    from brushcore.model.labelmap import count_touching_pairs
+    from brushcore.model.layout_file import save_label_map
+
+    labels = build_labels(BrushParams("random", 220, 0.01, 160, seed=0))
+    assert count_touching_pairs(labels) == 11
+    with pytest.raises(ParameterError, match=r"pillars 1 and 137 at element \(row 10, column "
+                                             r"4\).*draw it on a finer grid"):
+        save_label_map(labels, tmp_path / "r220.npy")
+    assert not (tmp_path / "r220.npy").exists()

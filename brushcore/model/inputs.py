@@ -159,7 +159,7 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
         values.extend(row)
         lines.extend([number] * len(row))
     if len(values) != n_pillars:
-        extra = f"; value {n_pillars + 1} is on line {lines[n_pillars]}" \
+        extra = f"; the first too many, value {n_pillars + 1}, is on line {lines[n_pillars]}" \
             if len(values) > n_pillars else ""
         raise ParameterError(name, str(path), f"{n_pillars} values, one per pillar",
                              f"it holds {len(values)} values{extra}{comma_hint}")

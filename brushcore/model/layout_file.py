@@ -198,7 +198,21 @@ def save_label_map(labels: np.ndarray, path: str | Path) -> Path:
     Returns
     -------
     The path written (``.npy`` appended when missing, as numpy does).
+
+    Raises
+    ------
+    ParameterError
+        For ``labels`` whose pillars share an element edge, which
+        `read_label_map` would refuse (a random layout drawn on a grid
+        coarser than 512 can part two discs by less than an element).
     """
+    try:
+        check_not_touching(labels, "labels", "the map")
+    except ParameterError as exc:
+        raise ParameterError("labels", "the map", exc.allowed + ", as read_label_map reads "
+                             "maps (a random layout drawn on a grid coarser than 512 can put "
+                             "two pillars closer than an element: draw it on a finer grid)",
+                             exc.reason) from None
     path = Path(path)
     if path.suffix != ".npy":
         path = path.with_name(path.name + ".npy")
