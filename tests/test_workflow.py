@@ -220,6 +220,26 @@ def test_default_config_makes_no_convergence_study(repo_copy: Path) -> None:
     assert "rule convergence" not in output(proc)
 
 
+def test_values_no_brush_reads_are_said_at_plan_time(repo_copy: Path, tmp_path: Path) -> None:
+    """A seed only flat lattices would run, a spread of rigid pillars and a
+    rough brush at preload 0 (first touch) each plan, with a warning."""
+    config = tmp_path / "unused.yaml"
+    config.write_text(yaml.safe_dump({
+        "regular": [4], "random": [], "kbar": [float("inf")], "seeds": [0, 3],
+        "kbar_spread": [0.0, 0.3], "roughness": [0.0, 0.2], "fig5": {"kbar": []}}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config))
+    text = output(proc)
+    assert proc.returncode == 0, text
+    assert "'kbar_spread' holds [0.3], which no brush of the sweep runs" in text, text
+    assert "'roughness' holds [0.2] and 'preload' holds 0.0: a rough brush's approach" in text
+    assert "'seeds' holds [3]" not in text, text  # roughness draws from every seed
+    config.write_text(yaml.safe_dump({"regular": [4], "random": [], "seeds": [0, 3]}))
+    text = output(snakemake(repo_copy, "-n", "--cores", "2", "--configfile",
+                            "config/test.yaml", str(config)))
+    assert "'seeds' holds [3], which no brush of the sweep draws from" in text, text
+
+
 def test_three_grids_plan_the_convergence_rule(repo_copy: Path, tmp_path: Path) -> None:
     """A list of grids multiplies the jobs, and three or more add the refinement study."""
     config = tmp_path / "tiny3.yaml"
@@ -312,6 +332,11 @@ def test_snakefmt_clean() -> None:
         ({"protocol": "force:-1, push:2"},
          r"config: protocol = force:-1, push:2 is invalid \(waypoint 1 \('push:2'\) is of "
          r"no kind in .*allowed waypoints separated by commas"),
+        # the sweep reads the last retraction as a pull-off: it must end apart
+        ({"protocol": "force:-1, displacement:0.5"},
+         r"config key 'protocol': 'force:-1, displacement:0.5' ends in contact; allowed a "
+         r"protocol that ends with 'separation'"),
+        ({"protocol": ""}, r"config key 'protocol': '' should be non-empty"),  # was null
         ({"protocol": "force:-5000, separation"},
          r"waypoint 0 is a force of -5000 F_K\): allowed force waypoints in \[-1000, 1000\]"),
         ({"protocol": "force:-1, separation", "preload": [0.0, 1.0]},

@@ -100,7 +100,10 @@ _INF = re.compile(r"[-+]?inf(?:inity)?", re.IGNORECASE)
 
 def _typed(text):
     """The number, bool or null a config file would read `text` as (and inf
-    as the CLI reads it), else `_TEXT`."""
+    as the CLI reads it), else `_TEXT`; blank text stays text (YAML reads
+    it as null: `protocol: ""` had run no protocol without a word)."""
+    if not text.strip():
+        return _TEXT
     if _EXPONENT_NUMBER.fullmatch(text.strip()) or _INF.fullmatch(text.strip()):
         return float(text)
     try:
@@ -341,6 +344,7 @@ def check_cases(config, main=True):
         )
     if main:
         _warn_first_touch(config, brushes)
+        _warn_unused(config, cases)
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
     if twice:
@@ -424,6 +428,34 @@ def _warn_first_touch(config, brushes):
             "pull-off is that of the pillars that touched; add a load to 'preload' "
             "to press it on"
         )
+    drawn = sorted(float(s) for s in config["roughness"] if float(s) > 0)
+    if drawn:
+        logger.warning(
+            f"config: 'roughness' holds {drawn} and 'preload' holds 0.0: a rough "
+            "brush's approach at preload 0 stops at first touch, so its pull-off is "
+            "that of the pillar that touched first; add a load to 'preload' to press "
+            "it on"
+        )
+
+
+def _warn_unused(config, cases):
+    """Warn where a listed seed or stiffness spread reaches no case: flat
+    lattice brushes run seed 0 only and rigid ones no spread, so the value
+    would seem to count ('grid_by_n' warns alike)."""
+    seeds = sorted({int(s) for s in config["seeds"]} - {int(c[3]) for c in cases})
+    used = {parse_rough_tag(c[6]).get("kbar_spread", 0.0) for c in cases}
+    spreads = sorted({float(c) for c in config["kbar_spread"]} - used)
+    if seeds:
+        logger.warning(
+            f"config: 'seeds' holds {seeds}, which no brush of the sweep draws from "
+            "(a flat lattice runs seed 0 only; random layouts, roughness and "
+            "kbar_spread draw from the seed): ignored"
+        )
+    if spreads:
+        logger.warning(
+            f"config: 'kbar_spread' holds {spreads}, which no brush of the sweep runs "
+            "(rigid pillars, kbar .inf, have no stiffness to spread): ignored"
+        )
 
 
 def check_cluster_threads(config, cores, jobs, main):
@@ -468,6 +500,12 @@ def config_protocol(config):
         protocol = parse_protocol(text)
     except ParameterError as exc:
         raise ConfigError(f"config: {exc.in_terms_of({}, sep=' = ')}") from None
+    if protocol[-1].kind != "separation":
+        raise ConfigError(
+            f"config key 'protocol': {text!r} ends in contact; allowed a protocol that "
+            "ends with 'separation' (the sweep's F_ad, W, summary and figures read its last "
+            "retraction as a pull-off; `brushcore simulate --protocol` runs a partial cycle)"
+        )
     if [float(p) for p in config["preload"]] != [0.0]:
         raise ConfigError(
             f"config key 'preload': {config['preload']} must be [0.0] when 'protocol' is "
@@ -930,14 +968,19 @@ def rough_brush(config):
     """(layout, N) the rough figures show: the first brush as made (a
     `layout_files` entry given heights, stiffness or a gap map: the paper's
     figures leave it out, so these show it), else the first regular brush,
-    else the first hexagonal, else the first random, else the first file."""
+    else the first hexagonal, else the first random, else the first file.
+    Where `roughness` draws heights, the generated brushes come first: a
+    brush as made has no roughness axis to draw."""
     files = file_brushes(config)
-    for layout, brush in files.items():
-        if brush.inputs:
-            return layout, brush.n_pillars
-    for layout in (*LATTICES, "random"):
-        if config[layout]:
-            return layout, int(config[layout][0])
+    made = [(layout, b.n_pillars) for layout, b in files.items() if b.inputs]
+    generated = [
+        (layout, int(config[layout][0]))
+        for layout in (*LATTICES, "random")
+        if config[layout]
+    ]
+    drawn = any(float(s) > 0 for s in config["roughness"])
+    for brush in (generated + made) if drawn else (made + generated):
+        return brush
     for layout, brush in files.items():
         return layout, brush.n_pillars
     return config["fig5"]["layout"], int(config["fig5"]["n_pillars"])
