@@ -291,8 +291,9 @@ class _Progress:
         if now - self.last < self.every:
             return
         self.last = now
-        text = (f"  {100 * (1 - attached / total):5.1f}% detached, {events} events, "
-                f"{now - self.t0:6.1f} s")
+        # in contact now, not a share let go: an approach or a cycle attaches elements
+        text = (f"  {100 * attached / total:5.1f}% of the pillar area in contact, "
+                f"{events} events, {now - self.t0:6.1f} s")
         if self.live:
             print("\r" + text, end="", file=self.stream, flush=True)
             self.shown = True
@@ -363,7 +364,7 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from brushcore.model.curve import preload_contact, simulate
+    from brushcore.model.curve import check_protocol_preload, preload_contact, simulate
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels, pillars_differ, smallest_radius_elements
     from brushcore.model.inputs import (INPUT_FILES, parse_protocol, recorded_kbar,
@@ -396,6 +397,7 @@ def _simulate(args: argparse.Namespace) -> int:
                                 settle_decisions=args.settle_decisions,
                                 fft_library=args.fft_library)
         protocol = None if args.protocol is None else parse_protocol(args.protocol)
+        check_protocol_preload(args.preload, protocol)  # before the layout's line
         if not 1 <= args.threads <= MAX_THREADS:
             raise ParameterError("threads", args.threads, f"an integer in [1, {MAX_THREADS}]")
         check_output_path(args.out)

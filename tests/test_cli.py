@@ -223,8 +223,8 @@ def test_rough_run_says_how_many_pillars_it_pressed_on(tmp_path):
     assert alone.returncode == 0, alone.stderr
     touching = int(read_curve(tmp_path / "a.nc").pillars_in_contact_at_preload)
     assert touching == 1
-    assert ("1 of 16 pillars in contact at the preload (--preload 0 stops the approach at "
-            "first touch") in alone.stdout, alone.stdout
+    assert ("1 of 16 pillars in contact at the first touch (--preload 0 stops the approach "
+            "there; give --preload") in alone.stdout, alone.stdout
     pressed = _cli(*args, "--preload", "1", "--out", str(tmp_path / "b.nc"))
     assert "16 of 16 pillars in contact at the preload\n" in pressed.stdout, pressed.stdout
 
@@ -266,7 +266,8 @@ def test_progress_in_a_log_has_no_carriage_returns(tmp_path):
     progress.end_line()
     log.seek(0)
     text = log.read()
-    assert "\r" not in text and re.fullmatch(r" +50\.0% detached, 3 events, +\S+ s\n", text)
+    assert "\r" not in text and re.fullmatch(r" +50\.0% of the pillar area in contact, 3 events, "
+                                          r"+\S+ s\n", text)
 
 
 def _default_sigint() -> None:
@@ -510,3 +511,14 @@ def test_a_warning_that_names_a_parameter_names_its_flag() -> None:
         "brushcore: warning: --heights h.txt: line 1 '0,1' is read as values\n"
     assert _cli_warning("the protocol never retracts") == \
         "brushcore: warning: the protocol never retracts\n"
+
+
+def test_input_files_of_an_unknown_key_are_refused_as_bad_input(tmp_path) -> None:
+    """with_input_files names its keys (ParameterError, as other bad input),
+    and points from the field kbar_values to the key kbar_file."""
+    from brushcore import BrushParams, ParameterError, with_input_files
+
+    with pytest.raises(ParameterError, match=r"files=\['kbar_values'\] is invalid \(unknown "
+                                             r"key; kbar_file gives kbar_values\): allowed keys "
+                                             r"among \['gap_map', 'heights'"):
+        with_input_files(BrushParams("regular", 4, 0.01, 48), {"kbar_values": "k.txt"})

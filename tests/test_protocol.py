@@ -19,7 +19,8 @@ import pytest
 import xarray as xr
 from conftest import punch_params
 
-from brushcore import BrushParams, SolverOptions, Waypoint, simulate, theory  # the public API
+from brushcore import (BrushParams, ParameterError, SolverOptions, Waypoint, simulate,  # the public API
+                       theory)
 from brushcore.numerics.halfspace.convolution import Convolver
 from brushcore.model.solve import run, run_protocol_curve
 from brushcore.model.layout import build_labels
@@ -389,6 +390,9 @@ def test_cli_runs_a_protocol_and_reports_every_pull(tmp_path, capsys):
     ("displacement:nan", "needs a finite number"),
     (" , ", "it holds no waypoint"),
     ("force:-5000, separation", "waypoint 0 is a force of -5000 F_K"),
+    ("force=-1, separation", "no kind in ('force', 'displacement', 'separation'); a colon "
+                             "joins a kind and its value (force:-1)"),
+    ("force:-1; separation", "needs a finite number after 'force:'; commas separate"),
 ])
 def test_cli_refuses_bad_protocols_before_any_work(tmp_path, capsys, text, message):
     from brushcore.cli import main
@@ -399,6 +403,18 @@ def test_cli_refuses_bad_protocols_before_any_work(tmp_path, capsys, text, messa
     err = capsys.readouterr().err
     assert rc == 2 and f"--protocol {text} is invalid" in err and message in err, err
     assert "allowed" in err and not out.exists()
+
+
+def test_waypoint_kinds_read_in_any_case_and_separation_takes_no_value():
+    """"Force:-1, Separation" is the protocol in lower case; Python's
+    Waypoint("separation", 3) is refused as the CLI's 'separation:3' is."""
+    from brushcore.model.inputs import parse_protocol
+
+    assert parse_protocol("Force: -1, SEPARATION") == (Waypoint("force", -1.0),
+                                                        Waypoint("separation"))
+    with pytest.raises(ParameterError, match=r"waypoint value=3.0 is invalid: allowed none "
+                                             r"for a separation waypoint"):
+        Waypoint("separation", 3)
 
 
 def test_cli_refuses_a_preload_beside_a_protocol(tmp_path, capsys):

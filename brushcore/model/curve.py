@@ -260,10 +260,18 @@ def preload_contact(ds: xr.Dataset, preload: str, press_hint: str) -> str | None
     protocol = "protocol_normalized" in ds.attrs
     at_first_touch = (touching < n_pillars and not float(ds.attrs.get("preload", 0.0))
                       and not protocol)
+    pressed = protocol or float(ds.attrs.get("preload", 0.0))
     return (f"{touching} of {n_pillars} pillars in contact at the "
-            + ("first waypoint" if protocol else "preload")
-            + (f" ({preload} 0 stops the approach at first touch; {press_hint})"
+            + ("first waypoint" if protocol else "preload" if pressed else "first touch")
+            + (f" ({preload} 0 stops the approach there; {press_hint})"
                if at_first_touch else ""))
+
+
+def check_protocol_preload(preload: float, protocol: object) -> None:
+    """Refuse a preload [F_K] beside a protocol, whose first waypoint is the load."""
+    if protocol is not None and preload != 0:
+        raise ParameterError("preload", preload,
+                             "0 when a protocol is given (its first waypoint is the load)")
 
 
 def _shown(value: object) -> object:
@@ -437,9 +445,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     if protocol is None:
         waypoints = preload_protocol(inputs.preload)
     else:
-        if params.preload != 0:
-            raise ParameterError("preload", params.preload,
-                                 "0 when a protocol is given (its first waypoint is the load)")
+        check_protocol_preload(params.preload, protocol)
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
                           for w in protocol)
     # How far loads and height scatter reach, in F_K and d_K (a displacement

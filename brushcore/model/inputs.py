@@ -233,8 +233,10 @@ def with_input_files(base: BrushParams,
     """
     given = {name: path for name, path in files.items() if path is not None}
     unknown = sorted(set(given) - set(INPUT_FILES))
-    if unknown:
-        raise ValueError(f"unknown input files {unknown}; known: {sorted(INPUT_FILES)}")
+    if unknown:  # kbar_values is the field a kbar_file sets: the likely slip
+        hint = "; kbar_file gives kbar_values" if "kbar_values" in unknown else ""
+        raise ParameterError("files", unknown, f"keys among {sorted(INPUT_FILES)}",
+                             f"unknown key{'s' * (len(unknown) > 1)}{hint}")
     if "kbar_file" in given and "kbar_factors" in given:
         raise ParameterError("kbar_factors", str(given["kbar_factors"]),
                              "no kbar_file beside it (the two are exclusive)")
@@ -335,10 +337,13 @@ def parse_protocol(text: str, name: str = "protocol") -> tuple[Waypoint, ...]:
     waypoints = []
     for k, item in enumerate(items):
         kind, colon, value = (part.strip() for part in item.partition(":"))
+        kind = kind.lower()  # "Force:-1" means force:-1
         where = f"waypoint {k} ({item!r})"
+        hint = ("; a colon joins a kind and its value (force:-1)" if "=" in item else
+                "; commas separate waypoints" if ";" in item else "")
         if kind not in KINDS:
             raise ParameterError(name, text, PROTOCOL_SYNTAX,
-                                 f"{where} is of no kind in {KINDS}")
+                                 f"{where} is of no kind in {KINDS}{hint}")
         if kind == "separation":
             if colon:
                 raise ParameterError(name, text, PROTOCOL_SYNTAX, f"{where} takes no value")
@@ -346,7 +351,7 @@ def parse_protocol(text: str, name: str = "protocol") -> tuple[Waypoint, ...]:
             continue
         if not _NUMBER.fullmatch(value) or not math.isfinite(float(value)):
             raise ParameterError(name, text, PROTOCOL_SYNTAX,
-                                 f"{where} needs a finite number after '{kind}:'")
+                                 f"{where} needs a finite number after '{kind}:'{hint}")
         waypoints.append(Waypoint(kind, float(value)))
     beyond = load_beyond_range(waypoints)
     if beyond:

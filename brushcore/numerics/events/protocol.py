@@ -78,6 +78,8 @@ class Waypoint:
         require(self.kind in KINDS, "waypoint kind", self.kind, f"one of {KINDS}")
         require(is_real(self.value) and np.isfinite(self.value), "waypoint value", self.value,
                 "a finite number")
+        require(self.kind != "separation" or self.value == 0.0, "waypoint value", self.value,
+                "none for a separation waypoint (it retracts until every element lets go)")
 
 
 def preload_protocol(preload: float) -> tuple[Waypoint, ...]:
