@@ -86,7 +86,7 @@ def test_random_layout_that_cannot_fit_fails_fast():
     # in the units the user gives them (L, and min_gap's L/512), not the grid's elements
     radius = math.sqrt(0.12 / (math.pi * 64))
     with pytest.raises(ParameterError, match=rf"discs of radius {radius:.3g} L with gaps of "
-                       r"40 L/512 \(min_gap's unit\)"):
+                       r"at least 40 L/512 \(the minimum gap\)"):
         build_labels(BrushParams("random", 64, 0.01, 256, min_gap=40.0))
 
 

@@ -354,6 +354,9 @@ def test_snakefmt_clean() -> None:
         ({"grid": 32, "regular": [256]}, r"config: grid = 32 is invalid .*allowed grid \d+, the "
                                          r"next .*, or allow_coarse: true to run it anyway"),
         ({"grid": 128, "regular": [256]}, "config: grid = 128 is invalid"),
+        # allow_coarse already on: no "or allow_coarse to run it anyway" (it was hinted twice)
+        ({"grid": 8, "allow_coarse": True},
+         r"allowed grid 15, the next .*0\.12 asked for\) \(case regular N = 16, grid = 8"),
         ({"regular": [16], "random": [], "phi": 0.05},
          r"phi is realised as 0.04688 instead of 0.05 .*allowed grid 65, the next"),
         # a random layout too dense to pack, found by packing it as its job would

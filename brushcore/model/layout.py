@@ -122,7 +122,7 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
             raise ParameterError(
                 "n_pillars", n_pillars, "fewer pillars, a smaller phi or a smaller min_gap",
                 f"random layout: only {p} {what} of radius {radius / side:.3g} L with gaps "
-                f"of {gap / side * RANDOM_GAP_GRID:.3g} L/{RANDOM_GAP_GRID} (min_gap's unit) "
+                f"of at least {gap / side * RANDOM_GAP_GRID:.3g} L/{RANDOM_GAP_GRID} (the minimum gap) "
                 f"fitted, {max_attempts} trials failed for the next")
     return centres
 
@@ -336,7 +336,8 @@ def grid_hint(exc: ParameterError, make: Callable[[int], BrushParams], grid: int
         return unfixable
     if found is None:
         return exc
-    coarse = "" if "allow_coarse" not in exc.allowed else ", or allow_coarse to run it anyway"
+    coarse = (", or allow_coarse to run it anyway" if "allow_coarse to run it anyway"
+              in exc.allowed else "")
     which = "every brush that shares it" if others else "the pillars"
     params = make(found)
     if params.allow_coarse:  # phi was not checked there: say what it comes out as

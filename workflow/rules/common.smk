@@ -19,7 +19,7 @@ from brushcore.model.inputs import (
 )
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams, ParameterError
-from brushcore.model.layout import build_labels, grid_hint, hinted_params
+from brushcore.model.layout import build_labels, grid_hint
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.model.shapes import parse_shape_label, shape_label
@@ -371,7 +371,7 @@ def check_cases(config, main=True):
     }
     for (layout, n, seed, grid, phi, rough, shape), make in makes.items():
         try:
-            build_labels(hinted_params(make, grid))
+            build_labels(make(grid))  # hinted below, with the brushes sharing the grid
         except ParameterError as exc:
             # A grid to suggest must run every brush the same grid key sets.
             key = n if n in by_n else None
