@@ -31,6 +31,7 @@ import xarray as xr
 
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID, narrowest_radius
+from brushcore.model.curve import mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import shape_label
@@ -450,8 +451,8 @@ def build_sweep(
         if values:
             sweep.attrs[name] = (next(iter(values.values())) if len(values) == 1
                                  else "; ".join(sorted(values)))
-    return sweep.assign({**_varying_settings(curves, coords, dims),
-                         **_given_inputs(given, coords, dims)})
+    return mark_element_units(sweep.assign({**_varying_settings(curves, coords, dims),
+                                            **_given_inputs(given, coords, dims)}))
 
 
 def given_inputs(curve: xr.Dataset) -> str:

@@ -36,6 +36,27 @@ from brushcore.validation import ParameterError
 UNITS_CONVENTION = ("SI: e_star in Pa, dgamma in J m-2, h in m, so lengths in m, forces in N, "
                     "energies in J; with the defaults e_star = dgamma = h = 1 the values are "
                     "in units of h, E* h^2 and dgamma h^2")
+#: SI units that mean element units where e_star = dgamma = h = 1 (`mark_element_units`).
+DIMENSIONAL_UNITS = ("m", "m2", "N", "J")
+ELEMENT_UNITS_COMMENT = ("run with e_star = dgamma = h = 1 (the defaults, and the workflow's): "
+                         "the value is in units of h, E* h^2 or dgamma h^2, not of a material; "
+                         "the *_normalized variables are the results")
+
+
+def mark_element_units(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` with a comment on every dimensional variable where it ran with
+    e_star = dgamma = h = 1: a reader of its units (N, m, J) would otherwise
+    take element units for a material's."""
+    if all(float(ds.attrs.get(key, math.nan)) == 1.0 for key in ("e_star", "dgamma", "h")):
+        for variable in ds.variables.values():
+            comment = variable.attrs.get("comment", "")
+            if variable.attrs.get("units") in DIMENSIONAL_UNITS and \
+                    ELEMENT_UNITS_COMMENT not in comment:  # a sweep of marked curves
+                variable.attrs["comment"] = "; ".join(filter(None, (comment,
+                                                                    ELEMENT_UNITS_COMMENT)))
+    return ds
+
+
 #: Definitions of the symbols used in long names.
 SYMBOLS = ("A: real contact area (pillar elements x h^2); a0 = sqrt(A / pi): radius of one "
            "compact punch of area A; F_K = sqrt(8 pi E* dgamma a0^3): Kendall's pull-off "
@@ -429,10 +450,10 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
                        references=REFERENCES, preconditioner=curve.preconditioner,
                        symmetry_fold=curve.symmetry_fold)
     attrs["pillar_order"] = PILLAR_ORDER
-    return xr.Dataset(data, coords={
+    return mark_element_units(xr.Dataset(data, coords={
         **_coords(params, curve.displacement.size, snaps.size,
                   "step of the pull-off (one per solve)"),
-        "pillar": _pillar_coord(params.n_pillars)}, attrs=attrs)
+        "pillar": _pillar_coord(params.n_pillars)}, attrs=attrs))
 
 
 def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Progress | None,
@@ -565,12 +586,12 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     })
     if protocol is not None:  # as given (normalised), the form --protocol and the config take
         attrs["protocol_normalized"] = protocol_text(protocol)
-    return xr.Dataset(data, coords={
+    return mark_element_units(xr.Dataset(data, coords={
         **_coords(params, d.size, len(steps), "step of the protocol (one per event or solve)"),
         "pillar": _pillar_coord(n_pillars),
         "pull": _var("pull", np.arange(len(peaks), dtype=np.int32),
                      "retraction branch index, in order", "1"),
-    }, attrs=attrs)
+    }, attrs=attrs))
 
 
 def _retraction_peak(d: np.ndarray, f: np.ndarray, first: int,
