@@ -492,6 +492,10 @@ def test_sweep_has_a_shape_dimension_with_missing_cases_nan(shape_sweep) -> None
     assert shape_sweep.layout.values.tolist() == ["regular", "hexagonal", "random"]
     assert shape_sweep.shape.values.tolist() == ["disc", "square"]
     assert shape_sweep.shape.attrs["long_name"].startswith("pillar cross-section")
+    # the label's numbers as coordinates along shape (a square: aspect 1, 0 degrees)
+    assert shape_sweep.shape_aspect.values.tolist() == [1.0, 1.0]
+    assert shape_sweep.shape_orientation.values.tolist() == [0.0, 0.0]
+    assert shape_sweep.shape_orientation.attrs["units"] == "degree"
     one = f.isel(n_pillars=0, seed=0, grid=0)
     ran = {(lay, k, s) for lay, k, s in CASES}
     for layout in one.layout.values:
@@ -513,6 +517,7 @@ def test_flat_slice_is_the_disc_sweep(shape_sweep, shape_curves) -> None:
     assert "shape" not in alone.dims  # a disc sweep keeps today's dimensions
     sliced = flat_slice(shape_sweep)
     assert "shape" not in sliced.dims and "case_shape" not in sliced.coords
+    assert "shape_aspect" not in sliced.coords and "shape_orientation" not in sliced.coords
     a = alone["adhesive_force_normalized"]
     b = sliced["adhesive_force_normalized"].sel(layout=a.layout, kbar=a.kbar)
     np.testing.assert_array_equal(a.values, b.values)
@@ -528,6 +533,8 @@ def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
     from brushcore.data.views import flat_slice
 
     fig6 = figures.fig6(flat_slice(shape_sweep))
+    # one shape of several: the title says which (a disc-only sweep's does not)
+    assert fig6._suptitle.get_text().endswith("(disc pillars)")
     titles = [ax.get_title(loc="left") for ax in fig6.axes]
     assert titles == ["(a) regular", "(b) hexagonal", "(c) random"], titles
     # the hexagonal panel adds its lattice's rigid limit at phi / fill, per N

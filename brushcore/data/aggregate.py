@@ -34,7 +34,7 @@ from brushcore.model.params import RANDOM_GAP_GRID, narrowest_radius
 from brushcore.model.curve import mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
-from brushcore.model.shapes import shape_label
+from brushcore.model.shapes import parse_shape_label, shape_label
 from brushcore.data.io import read_curve, write_dataset_atomic
 from brushcore.validation import brief
 
@@ -45,6 +45,8 @@ CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
 #: with `brushcore.model.shapes.shape_label` values ("disc", "square",
 #: "ellipse2.0_30.0"), so a sweep of discs keeps the flat sweep's dimensions.
 SHAPE_DIM = "shape"
+#: Coordinates along SHAPE_DIM: its labels' numbers.
+SHAPE_NUMBERS = ("shape_aspect", "shape_orientation")
 #: Extra case dimensions of rough, preloaded or graded brushes.  A
 #: sweep of flat brushes only keeps the four base dimensions.
 ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
@@ -552,6 +554,17 @@ def _coordinate_arrays(coords: dict[str, np.ndarray],
     for d in ("layout", SHAPE_DIM):
         if d in out:
             out[d] = out[d].astype(str)
+    if SHAPE_DIM in out:  # the label's numbers, for selecting and plotting by them
+        fields = [parse_shape_label(str(label)) for label in coords[SHAPE_DIM]]
+        aspect, orientation = SHAPE_NUMBERS
+        out[aspect] = xr.DataArray(
+            np.array([f["aspect"] for f in fields]), dims=SHAPE_DIM,
+            attrs={"units": "1", "long_name": "major / minor axis of the pillar (1: disc, "
+                                              "square)"})
+        out[orientation] = xr.DataArray(
+            np.array([f["orientation"] for f in fields]), dims=SHAPE_DIM,
+            attrs={"units": "degree", "long_name": "angle from the x axis to a square's side "
+                                                   "or an ellipse's major axis"})
     return out
 
 

@@ -31,7 +31,8 @@ from brushcore.model.lattices import hexagonal_lattice
 from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, curve_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
-from brushcore.data.views import finest_grid, flat_slice, kbar_index, shape_slice, snapshots
+from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index,
+                                  shape_slice, snapshots)
 from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, flag_radii,
                                         resolution_flag, touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
@@ -221,12 +222,18 @@ def fig5(
     return fig
 
 
+def _shape_note(sweep: xr.Dataset) -> str:
+    """" (disc pillars)" where the sweep is one shape of several (`shape_slice`)."""
+    shape = sweep.attrs.get(SHOWN_SHAPE)
+    return f" ({shape} pillars)" if shape else ""
+
+
 def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, object]]:
     layouts = _layouts(sweep)
     fig = _new_figure(4.2 * max(len(layouts), 1), 3.6)
     # One y range for every layout: the panels are read against each other.
     axes = fig.subplots(1, max(len(layouts), 1), squeeze=False, sharey=True)[0]
-    fig.suptitle(title)
+    fig.suptitle(title + _shape_note(sweep))
     return fig, dict(zip(layouts, axes))
 
 
@@ -340,7 +347,7 @@ def fig7(sweep: xr.Dataset) -> Figure:
     sweep = finest_grid(sweep)
     fig = _new_figure(4.6, 3.8)
     ax = fig.add_subplot()
-    ax.set_title("Soft plateau of the adhesive force")
+    ax.set_title("Soft plateau of the adhesive force" + _shape_note(sweep))
     fitted: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # layout -> plateau (N, F)
     styles = _layout_styles(_layouts(sweep))
     off = []  # (N, F) of brushes whose softest kbar is not on the plateau

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from brushcore.data.aggregate import GRID_DIM, ROUGH_DIMS, SHAPE_DIM
+from brushcore.data.aggregate import GRID_DIM, ROUGH_DIMS, SHAPE_DIM, SHAPE_NUMBERS
 
 
 def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
@@ -77,11 +77,17 @@ def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
         return sweep
     if SHAPE_DIM not in sweep.dims:  # discs only: nothing of this shape
         return sweep.where(False)
-    out = sweep.reindex({SHAPE_DIM: [shape]}).isel({SHAPE_DIM: 0}).drop_vars(SHAPE_DIM)
+    out = sweep.reindex({SHAPE_DIM: [shape]}).isel({SHAPE_DIM: 0}).drop_vars(
+        [SHAPE_DIM, *SHAPE_NUMBERS], errors="ignore")  # sweeps before the numbers lack them
     name = f"case_{SHAPE_DIM}"
     if name in out.variables:
         out = out.isel(case=np.flatnonzero(out[name].values == shape)).drop_vars(name)
+    out.attrs[SHOWN_SHAPE] = shape  # one shape of several: figures say which
     return out
+
+
+#: Attribute of a `shape_slice` taken from a sweep of several shapes.
+SHOWN_SHAPE = "pillar_shape_shown"
 
 
 def kbar_index(kbars: np.ndarray, kbar: float) -> int | None:
