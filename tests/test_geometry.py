@@ -331,7 +331,7 @@ def test_file_params_refuse_counts_that_differ_from_the_file(tmp_path):
     path = save_label_map(labels, tmp_path / "m.npy")
     with pytest.raises(ParameterError, match=r"n_pillars=11 .*allowed 12"):
         file_params(path, 0.1, n_pillars=11)
-    with pytest.raises(ParameterError, match=r"layout_file=.*a 128 x 128 map"):
+    with pytest.raises(ParameterError, match=r"grid=128 is invalid: allowed 64, the value of"):
         file_params(path, 0.1, grid=128)
     # a hand-made BrushParams that disagrees with its file is caught by build_labels
     p = BrushParams("file", 13, 0.1, 64, phi=0.15, layout_file=str(path), allow_coarse=True)
@@ -572,8 +572,9 @@ def test_cli_refuses_bad_geometry_and_writes_nothing(tmp_path, capsys, extra, me
     tiny = np.full((32, 32), -1)
     tiny[1::8, 1::8] = np.arange(16).reshape(4, 4)  # one-element pillars
     files = {"LABELS": str(save_label_map(labels, tmp_path / "m.npy")),
-             "TOUCH": str(save_label_map(touch, tmp_path / "t.npy")),
+             "TOUCH": str(tmp_path / "t.npy"),  # np.save: save_label_map refuses it
              "TINY": str(save_label_map(tiny, tmp_path / "s.npy"))}
+    np.save(files["TOUCH"], touch.astype(np.int32))
     out = tmp_path / "never.nc"
     argv = ["simulate", "--kbar", "0.1", "--out", str(out), "--quiet"]
     argv += [files.get(a, a) for a in extra]

@@ -426,6 +426,7 @@ def test_cli_refuses_a_preload_beside_a_protocol(tmp_path, capsys):
                "--protocol", "force:-1, separation"])
     err = capsys.readouterr().err
     assert rc == 2 and "--preload 1.0 is invalid: allowed 0 when a --protocol" in err, err
+    assert "pillar radius" not in err, err  # refused before the layout's line: one line
     assert not out.exists()
 
 

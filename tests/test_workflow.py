@@ -240,6 +240,17 @@ def test_values_no_brush_reads_are_said_at_plan_time(repo_copy: Path, tmp_path: 
     assert "'seeds' holds [3], which no brush of the sweep draws from" in text, text
 
 
+def test_a_default_shape_setting_beside_discs_plans(repo_copy: Path, tmp_path: Path) -> None:
+    """config/lattices.yaml sets orientation: 0.0 (the default); a config
+    layered on it with discs only cannot remove the key, and plans (the
+    CLI's rule: only a value other than the default is refused)."""
+    config = tmp_path / "discs.yaml"
+    config.write_text(yaml.safe_dump({"shape": ["disc"], "fig5": {"shape": "disc"}}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/lattices.yaml",
+                     str(config))
+    assert proc.returncode == 0 and planned_simulations(output(proc)) > 0, output(proc)
+
+
 def test_three_grids_plan_the_convergence_rule(repo_copy: Path, tmp_path: Path) -> None:
     """A list of grids multiplies the jobs, and three or more add the refinement study."""
     config = tmp_path / "tiny3.yaml"
@@ -334,8 +345,8 @@ def test_snakefmt_clean() -> None:
          r"no kind in .*allowed waypoints separated by commas"),
         # the sweep reads the last retraction as a pull-off: it must end apart
         ({"protocol": "force:-1, displacement:0.5"},
-         r"config key 'protocol': 'force:-1, displacement:0.5' ends in contact; allowed a "
-         r"protocol that ends with 'separation'"),
+         r"config key 'protocol': 'force:-1, displacement:0.5' does not end with "
+         r"'separation'; allowed a protocol that does"),
         ({"protocol": ""}, r"config key 'protocol': '' should be non-empty"),  # was null
         ({"protocol": "force:-5000, separation"},
          r"waypoint 0 is a force of -5000 F_K\): allowed force waypoints in \[-1000, 1000\]"),
@@ -350,6 +361,8 @@ def test_snakefmt_clean() -> None:
         # a shape setting no brush reads would seem to count (its default hides it later)
         ({"aspect": 3.0}, r"config key 'aspect': applies to ellipse pillars only, and no brush "
                           r"of this config has them \(shape: \['disc'\]\); add ellipse"),
+        ({"orientation": 30.0, "fig5": {"n_pillars": 16, "kbar": [0.455], "shape": "disc"}},
+         r"config key 'orientation': applies to square and ellipse pillars only"),
         # checks that need the layout run at plan time too
         ({"grid": 32, "regular": [256]}, r"config: grid = 32 is invalid .*allowed grid \d+, the "
                                          r"next .*, or allow_coarse: true to run it anyway"),

@@ -48,7 +48,7 @@ def check_config(config, schema_path):
                 "in the range the schema gives"
             )
         _integral_counts(config)
-        _shape_settings_used(config)
+        _shape_settings_used(config, schema)
         return
     where = ".".join(str(p) for p in error.absolute_path)
     if error.validator == "additionalProperties":
@@ -244,16 +244,19 @@ def _integral_counts(config):
 _SHAPE_SETTINGS = {"aspect": ("ellipse",), "orientation": ("square", "ellipse")}
 
 
-def _shape_settings_used(config):
-    """Refuse `aspect` or `orientation` where no brush of the config has a
-    shape that reads it: set, it would seem to count.  Read before `validate`
-    fills in their defaults, which cannot be told from a value set."""
+def _shape_settings_used(config, schema):
+    """Refuse `aspect` or `orientation` other than its default where no brush
+    of the config has a shape that reads it: it would seem to count (the
+    CLI's and BrushParams' rule; a config that layers shape: [disc] over
+    config/lattices.yaml's orientation: 0.0 runs).  Read before `validate`
+    fills in the defaults."""
     fig5 = config.get("fig5", {})
     shapes = set(config.get("shape", ["disc"]))
     if fig5.get("kbar", [None]):  # fig5: {kbar: []} runs no Fig. 5 brush
         shapes.add(fig5.get("shape", "disc"))
     for key, readers in _SHAPE_SETTINGS.items():
-        if key in config and not shapes.intersection(readers):
+        default = schema["properties"][key]["default"]
+        if config.get(key, default) != default and not shapes.intersection(readers):
             raise ConfigError(
                 f"config key '{key}': applies to {' and '.join(readers)} pillars only, "
                 f"and no brush of this config has them (shape: {sorted(shapes)}); add "
@@ -448,13 +451,14 @@ def _warn_unused(config, cases):
     if seeds:
         logger.warning(
             f"config: 'seeds' holds {seeds}, which no brush of the sweep draws from "
-            "(a flat lattice runs seed 0 only; random layouts, roughness and "
-            "kbar_spread draw from the seed): ignored"
+            "(flat lattices and layout files run seed 0 only; random layouts, "
+            "roughness and kbar_spread draw from the seed): ignored"
         )
     if spreads:
         logger.warning(
             f"config: 'kbar_spread' holds {spreads}, which no brush of the sweep runs "
-            "(rigid pillars, kbar .inf, have no stiffness to spread): ignored"
+            "(rigid pillars, kbar .inf, and brushes given their stiffness in "
+            "kbar_factors run no spread): ignored"
         )
 
 
@@ -502,8 +506,8 @@ def config_protocol(config):
         raise ConfigError(f"config: {exc.in_terms_of({}, sep=' = ')}") from None
     if protocol[-1].kind != "separation":
         raise ConfigError(
-            f"config key 'protocol': {text!r} ends in contact; allowed a protocol that "
-            "ends with 'separation' (the sweep's F_ad, W, summary and figures read its last "
+            f"config key 'protocol': {text!r} does not end with 'separation'; allowed a "
+            "protocol that does (the sweep's F_ad, W, summary and figures read its last "
             "retraction as a pull-off; `brushcore simulate --protocol` runs a partial cycle)"
         )
     if [float(p) for p in config["preload"]] != [0.0]:

@@ -58,7 +58,7 @@ class Waypoint:
     kind : "force" (reach the total force ``value``, tensile positive, so
         a preload P is ``Waypoint("force", -P)``), "displacement" (reach
         d = ``value``) or "separation" (retract until no element is
-        attached; ``value`` unused).
+        attached; takes no ``value``: one other than 0 is refused).
     value : the target, in the units of whoever reads it: normalised in
         `brushcore.simulate(..., protocol=...)` (forces in F_K,
         displacements in d_K, as the curve's ``*_normalized`` variables),
