@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import difflib
+import math
 import re
 import sys
 import time
@@ -309,9 +310,13 @@ class _Progress:
 
 def _cli_warning(message: Warning | str, *args: object, **kwargs: object) -> str:
     """A warning as the command prints it: one that opens with a parameter's
-    name ("heights FILE: ...", from the input readers) names its flag."""
-    first, space, rest = str(message).partition(" ")
-    return f"brushcore: warning: {FLAGS.get(first, first)}{space}{rest}\n"
+    name and a file ("heights FILE: ...", the input readers' form) names its
+    flag; any other text is left as it is."""
+    text = str(message)
+    found = re.match(r"(\w+)( \S+:)", text)
+    if found and found[1] in FLAGS:
+        text = FLAGS[found[1]] + text[len(found[1]):]
+    return f"brushcore: warning: {text}\n"
 
 
 def _error(message: str, progress: _Progress | None = None) -> None:
@@ -387,7 +392,13 @@ def _simulate(args: argparse.Namespace) -> int:
             warnings.warn(f"--min-gap applies to random layouts only: the {params.layout} "
                           f"layout ignores --min-gap {args.min_gap:g}")
         if args.kbar is None:  # as a --kbar-spread draw's mean is its --kbar
-            params = dataclasses.replace(params, kbar=recorded_kbar(params.kbar_values))
+            kbar = recorded_kbar(params.kbar_values)
+            if kbar is None:
+                raise _Missing(f"--kbar is required beside a --kbar-file of rigid and finite "
+                               f"pillars ({sum(map(math.isinf, params.kbar_values))} of "
+                               f"{params.n_pillars} rigid): their mean, inf, would file the "
+                               "brush as rigid")
+            params = dataclasses.replace(params, kbar=kbar)
         elif args.kbar_file is not None:  # it would seem to count
             warnings.warn(f"--kbar-file gives every pillar's stiffness: --kbar {args.kbar:g} "
                           "is recorded as the curve's kbar but no pillar runs it")

@@ -440,6 +440,14 @@ def test_a_kbar_file_alone_records_its_mean(tmp_path, capsys) -> None:
     assert main([*argv, "--out", str(tmp_path / "none.nc")]) == 2
     assert "--kbar is required (or --kbar-file" in capsys.readouterr().err
     assert not (tmp_path / "none.nc").exists()
+    # rigid beside finite pillars: no mean names the brush (inf would file it as rigid)
+    values.write_text("0.01\n0.02\ninf\n0.04\n")
+    assert main([*argv, "--kbar-file", str(values), "--out", str(tmp_path / "m.nc")]) == 2
+    assert ("--kbar is required beside a --kbar-file of rigid and finite pillars (1 of 4 "
+            "rigid)") in capsys.readouterr().err
+    values.write_text("inf\ninf\ninf\ninf\n")
+    assert main([*argv, "--kbar-file", str(values), "--out", str(tmp_path / "r.nc")]) == 0
+    assert read_curve(tmp_path / "r.nc").attrs["kbar"] == math.inf
 
 
 def test_min_gap_on_a_lattice_is_said_to_be_ignored(tmp_path) -> None:
@@ -511,6 +519,7 @@ def test_a_warning_that_names_a_parameter_names_its_flag() -> None:
         "brushcore: warning: --heights h.txt: line 1 '0,1' is read as values\n"
     assert _cli_warning("the protocol never retracts") == \
         "brushcore: warning: the protocol never retracts\n"
+    assert _cli_warning("protocol ends early") == "brushcore: warning: protocol ends early\n"
 
 
 def test_input_files_of_an_unknown_key_are_refused_as_bad_input(tmp_path) -> None:

@@ -1,3 +1,6 @@
+"""What curve files and sweep.nc say about their values beyond the numbers: units."""
+
+from __future__ import annotations
 
 
 def test_dimensional_values_in_element_units_say_so(tmp_path) -> None:

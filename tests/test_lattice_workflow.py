@@ -515,6 +515,8 @@ def test_flat_slice_is_the_disc_sweep(shape_sweep, shape_curves) -> None:
     discs = [p for p, c in zip(shape_curves, CASES) if c[2] == "disc"]
     alone = build_sweep(discs)
     assert "shape" not in alone.dims  # a disc sweep keeps today's dimensions
+    from brushcore.data import figures
+    assert "pillars)" not in figures.fig6(flat_slice(alone))._suptitle.get_text()
     sliced = flat_slice(shape_sweep)
     assert "shape" not in sliced.dims and "case_shape" not in sliced.coords
     assert "shape_aspect" not in sliced.coords and "shape_orientation" not in sliced.coords

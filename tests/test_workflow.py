@@ -871,3 +871,20 @@ def test_a_refused_brush_the_user_did_not_list_says_where_it_comes_from(
                                       "kbar": [math.inf]}))
     text = output(snakemake(repo_copy, "-n", "--cores", "2", "--configfile", str(config)))
     assert "regular N = 256" in text and "set 'fig5: {kbar: []}' to run none" in text, text
+
+
+def test_rough_figures_pick_the_brush_with_the_axis_they_draw() -> None:
+    """A brush as made comes first for the rough figures, but for those with a
+    roughness axis when `roughness` draws heights (a brush as made has none);
+    the one-curve figures keep it first."""
+    from types import SimpleNamespace
+
+    scope = _common_rules()
+    made = SimpleNamespace(inputs=("heights",), n_pillars=9)
+    scope["file_brushes"] = lambda config: {"file_mine": made}
+    config = {"regular": [16], "hexagonal": [], "random": [], "roughness": [0.0],
+              "fig5": {"layout": "regular", "n_pillars": 16}}
+    assert scope["rough_brush"](config) == ("file_mine", 9)
+    config["roughness"] = [0.0, 0.3]
+    assert scope["rough_brush"](config) == ("regular", 16)
+    assert scope["rough_brush"](config, axes=False) == ("file_mine", 9)

@@ -194,16 +194,20 @@ def read_gap_map(path: str | Path, grid: int, name: str = "gap_map") -> np.ndarr
     return np.array([row for _, row in rows])
 
 
+def recorded_kbar(kbar_values: np.ndarray) -> float | None:
+    """The kbar a brush given every pillar's kbar records: their mean [-],
+    as a lognormal draw's mean is its kbar (inf where every pillar is
+    rigid); None where rigid and finite pillars mix, whose mean (inf) would
+    file the brush as rigid: its kbar must then be given."""
+    values = np.asarray(kbar_values, dtype=float)
+    rigid = np.isinf(values)
+    return None if rigid.any() and not rigid.all() else float(values.mean())
+
+
 #: Per-pillar and per-element input files, by the name a caller gives them
 #: (the CLI's flags, the workflow's `layout_files` keys), and the
 #: `BrushParams` field each sets; a refusal is named by that field, but for
 #: factors, which are not the field's values.
-def recorded_kbar(kbar_values: np.ndarray) -> float:
-    """The kbar a brush given every pillar's kbar records: their mean [-]
-    (inf if a pillar is rigid), as a lognormal draw's mean is its kbar."""
-    return float(np.mean(kbar_values))
-
-
 INPUT_FILES = {"heights": "heights", "kbar_file": "kbar_values",
                "kbar_factors": "kbar_values", "gap_map": "gap_map"}
 

@@ -968,13 +968,13 @@ def clipped_runtimes(config):
 ROUGH_FIGURES = ("rough_roughness", "rough_preload")
 
 
-def rough_brush(config):
+def rough_brush(config, axes=True):
     """(layout, N) the rough figures show: the first brush as made (a
     `layout_files` entry given heights, stiffness or a gap map: the paper's
     figures leave it out, so these show it), else the first regular brush,
     else the first hexagonal, else the first random, else the first file.
-    Where `roughness` draws heights, the generated brushes come first: a
-    brush as made has no roughness axis to draw."""
+    For the figures with a roughness axis (`axes`) the generated brushes
+    come first where `roughness` draws heights: a brush as made has none."""
     files = file_brushes(config)
     made = [(layout, b.n_pillars) for layout, b in files.items() if b.inputs]
     generated = [
@@ -982,7 +982,7 @@ def rough_brush(config):
         for layout in (*LATTICES, "random")
         if config[layout]
     ]
-    drawn = any(float(s) > 0 for s in config["roughness"])
+    drawn = axes and any(float(s) > 0 for s in config["roughness"])
     for brush in (generated + made) if drawn else (made + generated):
         return brush
     for layout, brush in files.items():
@@ -1001,7 +1001,7 @@ def rough_example_curve(config):
     closest to 0.01 on a log scale (soft enough that pillars share load,
     stiff enough that they interact).
     """
-    brush = rough_brush(config)
+    brush = rough_brush(config, axes=False)  # one curve: the brush as made first
     entry = file_brushes(config).get(brush[0])
     made = bool(entry and entry.inputs)
     rough = [
