@@ -270,7 +270,7 @@ def with_input_files(base: BrushParams,
         return dataclasses.replace(base, **arrays) if arrays else base
     except ParameterError as exc:  # a value out of range: name the file it came from
         if exc.name == "kbar_spread" and "kbar_factors" in given:
-            raise ParameterError(exc.name, exc.value, "0 when kbar_factors are given (they "
+            raise ParameterError(exc.name, exc.value, "0 beside kbar_factors (the two "
                                  "are exclusive)") from None
         if exc.name not in source:
             raise

@@ -308,7 +308,7 @@ class BrushParams:
         require(self.heights is None or self.roughness == 0, "roughness", self.roughness,
                  "0 when heights are given (they are exclusive)")
         require(self.kbar_values is None or self.kbar_spread == 0, "kbar_spread",
-                 self.kbar_spread, "0 when kbar_values are given (they are exclusive)")
+                 self.kbar_spread, "0 beside kbar_values (the two are exclusive)")
         object.__setattr__(self, "inputs_digest", digest.hexdigest()[:16]
                            if any(getattr(self, k) is not None for k in ARRAY_FIELDS) else "")
 
