@@ -504,13 +504,19 @@ def _converge(args: argparse.Namespace) -> int:
         _error(f"cannot write {out / 'sweep.nc'}: {exc.strerror or exc}")
         return 1
     grids = [int(g) for g in sweep[GRID_DIM].values]
-    study = ", ".join(f"{out / name}" for name in ("convergence.nc", "convergence.csv",
-                                                    "convergence.md", "convergence.png"))
+    files = [out / name for name in ("convergence.nc", "convergence.csv", "convergence.md",
+                                     "convergence.png")]
+    study = ", ".join(map(str, files))
     # per case, not over the sweep: three cases on three grids make no study
     runs = sweep["adhesive_force_normalized"].notnull().sum(GRID_DIM)
     if int(runs.max()) < 3:
+        stale = [f for f in files if f.exists()]  # an earlier study: not of this sweep.nc
+        for f in stale:
+            f.unlink()
         print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}; no "
-              "convergence study: it needs a case run on three or more grids")
+              "convergence study: it needs a case run on three or more grids"
+              + (f" (removed the earlier curves' {', '.join(f.name for f in stale)})"
+                 if stale else ""))
         return 0
     write_study(sweep, out / "convergence.nc", out / "convergence.csv", out / "convergence.md",
                 (out / "convergence.png",))

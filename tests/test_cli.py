@@ -397,6 +397,11 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     assert main(["converge", *paths[:2], "--out-dir", str(tmp_path / "two")]) == 0
     assert "no convergence study: it needs a case run on three" in capsys.readouterr().out
     assert not (tmp_path / "two" / "convergence.nc").exists()
+    # ... in a folder that holds an earlier study: it goes, as it no longer fits sweep.nc
+    assert main(["converge", *paths[:2], "--out-dir", str(out)]) == 0
+    assert "(removed the earlier curves' convergence.nc, convergence.csv" in \
+        capsys.readouterr().out
+    assert not list(out.glob("convergence.*")) and (out / "sweep.nc").is_file()
     assert main(["converge", paths[0], paths[0], "--out-dir", str(tmp_path / "x")]) == 2
     assert "hold the same case (regular N=4 kbar=0.01 seed 0 on 48^2): a sweep takes one " \
         "file per case and grid" in capsys.readouterr().err

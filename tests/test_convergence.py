@@ -662,3 +662,15 @@ def test_not_asymptotic_is_kept_where_no_order_is_observed() -> None:
     README defines the flag, by the data (it was dropped with the fit)."""
     e = extrapolate(1.0 / np.array([256, 512, 1024, 2048]), [1.70, 1.71, 1.73, 1.77])
     assert e.poor_fit and e.not_asymptotic and math.isnan(e.value)
+
+
+def test_grids_of_different_filling_factors_are_flagged():
+    """allow_coarse lets N = 64 realise phi 0.0625, 0.111 and 0.125 on 64, 96
+    and 128: three brushes, flagged phi_varies; the grid rule's 5 % either
+    way (a spread up to 0.10) is one brush refined."""
+    from brushcore.data.convergence import PHI_SPREAD_FLAG, phi_spread, phi_varies
+
+    assert phi_spread(np.array([0.0625, 0.111, 0.125])) == pytest.approx(0.0625 / 0.0995)
+    assert phi_varies(np.array([0.0625, 0.111, 0.125, np.nan]))
+    assert not phi_varies(np.array([0.115, 0.12, 0.125]))  # within the rule: one brush
+    assert PHI_SPREAD_FLAG == pytest.approx(0.1)

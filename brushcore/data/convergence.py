@@ -102,6 +102,7 @@ import xarray as xr
 from scipy import optimize
 
 from brushcore.model import provenance
+from brushcore.model.params import MAX_PHI_ERROR
 from brushcore.validation import is_integer, is_real, normalise, require
 
 #: Results the workflow extrapolates.
@@ -150,6 +151,27 @@ def touching_grids(counts: np.ndarray) -> np.ndarray:
     """Where a `TOUCHING` count marks pillars that share an element edge
     (> 0; NaN, a curve written before the count, does not), elementwise."""
     return np.nan_to_num(counts) > 0
+
+
+#: Relative range of the realised phi over a case's grids beyond which they
+#: hold different brushes, not one refined: twice the grid rule's 5 %, which
+#: only allow_coarse lets a grid exceed.
+PHI_SPREAD_FLAG = 2 * MAX_PHI_ERROR
+
+
+def phi_spread(phi: np.ndarray) -> float:
+    """(max - min) / mean of the realised filling factors of a case's grids
+    (the finite ones; NaN where none is)."""
+    phi = np.asarray(phi, dtype=float)
+    phi = phi[np.isfinite(phi)]
+    return float((phi.max() - phi.min()) / phi.mean()) if phi.size else math.nan
+
+
+def phi_varies(phi: np.ndarray) -> bool:
+    """The ``phi_varies`` flag: the grids realise filling factors more than
+    `PHI_SPREAD_FLAG` apart (e.g. N = 64 with allow_coarse on 64, 96 and 128:
+    0.0625, 0.111, 0.125), so the fit runs through different brushes."""
+    return phi_spread(phi) > PHI_SPREAD_FLAG
 
 
 @dataclass(frozen=True)

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, PHI_ACTUAL, QUANTITIES,
-                                        SMALLEST, TOUCHING, UNDER_RESOLVED_RADIUS,
-                                        flag_radii, resolution_flag, touching_grids)
+from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, PHI_ACTUAL, PHI_SPREAD_FLAG,
+                                        QUANTITIES, SMALLEST, TOUCHING,
+                                        UNDER_RESOLVED_RADIUS, flag_radii, phi_spread,
+                                        phi_varies, resolution_flag, touching_grids)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
 
@@ -55,9 +56,9 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             finest, coarsest = (float(r) for r in flag_radii(one))
             if f"{SMALLEST}_finest" in one:  # a study of curves that record it
                 row["smallest_radius_elements_finest"] = finest
-            if PHI_ACTUAL in one:  # how far the staircase's phi moves between the grids
-                phi = one[PHI_ACTUAL].values[np.isfinite(raw)]
-                row["phi_spread"] = float((phi.max() - phi.min()) / phi.mean())
+            phi = one[PHI_ACTUAL].values[np.isfinite(raw)] if PHI_ACTUAL in one else None
+            if phi is not None:  # how far the staircase's phi moves between the grids
+                row["phi_spread"] = phi_spread(phi)
             # spread: half the range over the grids, what a flagged row still says
             for s in ("extrapolated", "error", "order", "safety_factor", "spread"):
                 row[s] = float(one[f"{q}_{s}"])
@@ -67,6 +68,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
                 flags.append(resolution[0])
             if TOUCHING in one and touching_grids(one[TOUCHING].values).any():
                 flags.append("touching_pillars")
+            if phi is not None and phi_varies(phi):
+                flags.append("phi_varies")
             row["flags"] = ",".join(flags)
             rows.append(row)
     return pd.DataFrame(rows)
@@ -114,7 +117,10 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "coarsest_under_resolved: the fit's coarsest grid is under-resolved (the fit "
               "rests on a grid whose own mesh error is a few per cent); "
               "touching_pillars: on some grid two pillars' footprints share an element "
-              "edge (random discs on grids coarser than 512).\n\n")
+              "edge (random discs on grids coarser than 512); "
+              f"phi_varies: phi_spread > {PHI_SPREAD_FLAG:g}, so the grids hold different "
+              "brushes, not one refined (only allow_coarse lets a grid's phi be more "
+              "than 5 % off): the fit is no h -> 0 limit of one brush.\n\n")
     Path(md_path).write_text(header + to_markdown(table))
 
 

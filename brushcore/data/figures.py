@@ -33,7 +33,8 @@ from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index,
                                   shape_slice, snapshots)
-from brushcore.data.convergence import (FIT_FLAGS, QUANTITIES, TOUCHING, flag_radii,
+from brushcore.data.convergence import (FIT_FLAGS, PHI_ACTUAL, QUANTITIES, TOUCHING,
+                                        flag_radii, phi_spread, phi_varies,
                                         resolution_flag, touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 
@@ -847,7 +848,8 @@ def convergence(
                 err = float(conv[f"{q}_error"].sel(case))
                 ax.plot(h_line, f0 + c * h_line**p, "--", color="C1")
                 ax.errorbar([0.0], [f0], yerr=[err], fmt="s", color="C1", capsize=3)
-                ax.text(0.03, 0.95, f"$f_0$ = {f0:.4g} ± {err:.2g}, p = {p:.2f}",
+                fs = float(conv[f"{q}_safety_factor"].sel(case))  # 3: an untrusted order
+                ax.text(0.03, 0.95, f"$f_0$ = {f0:.4g} ± {err:.2g}, p = {p:.2f}, Fs {fs:g}",
                         ha="left", va="top", transform=ax.transAxes, fontsize="small")
             flags = [f.replace("_", " ") for f in FIT_FLAGS
                      if f"{q}_{f}" in conv and int(conv[f"{q}_{f}"].sel(case))]
@@ -858,6 +860,9 @@ def convergence(
             if touch.any():
                 grids = ", ".join(str(int(g)) for g in conv["grid"].values[touch])
                 flags.append(f"touching pillars (n = {grids})")
+            phi = conv[PHI_ACTUAL].sel(case).values[ok] if PHI_ACTUAL in conv else None
+            if phi is not None and phi_varies(phi):
+                flags.append(f"phi varies ({phi_spread(phi):.2f} of its mean)")
             # between the title and the plot: on no point, no tick label; wrapped
             # to the panel's width (three flags and a radius overran it)
             lines = textwrap.wrap(", ".join(flags), FLAG_LINE_CHARS)
