@@ -43,7 +43,8 @@ def application_ms(n: int, repeats: int = 40) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--grid", type=int, default=512)
     parser.add_argument("--quick", action="store_true",
                         help="skip the exact mode (then no deviations are printed)")

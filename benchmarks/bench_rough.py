@@ -26,7 +26,8 @@ from brushcore.numerics.platform.threads import pin_threads
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--grid", type=int, default=512)
     parser.add_argument("--pillars", type=int, default=256)
     parser.add_argument("--kbar", type=float, default=0.455)

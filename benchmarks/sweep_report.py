@@ -207,7 +207,8 @@ def group_of(name: str) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("root", nargs="?", default="results/benchmarks", type=Path)
     parser.add_argument("--top", type=int, default=10, help="slowest jobs to list")
     parser.add_argument("--floor", action="store_true",
