@@ -3,8 +3,8 @@
     python benchmarks/lattice_study.py                     # N = 64, phi = 0.12, grid 256
     python benchmarks/lattice_study.py --pillars 16 --grid 128 --seeds 1 --out /tmp/x
 
-A stand-in for a workflow study config (the workflow does not know the new
-layouts yet): runs every (layout, kbar, seed), writes ``lattice_study.csv``
+The quick form of the workflow's `config/lattices.yaml` (which adds pillar
+shapes and three seeds to the sweep): runs every (layout, kbar, seed), writes ``lattice_study.csv``
 and ``lattice_study.png`` (F_ad / F_K over kbar with the rigid and soft
 limits, and the three layouts' label maps) to ``--out``.  The hexagonal
 lattice is the `layout.hexagonal_centres` one; its cells cover
