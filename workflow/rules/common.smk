@@ -246,10 +246,10 @@ _SHAPE_SETTINGS = {"aspect": ("ellipse",), "orientation": ("square", "ellipse")}
 
 def _shape_settings_used(config, schema):
     """Refuse `aspect` or `orientation` other than its default where no brush
-    of the config has a shape that reads it: it would seem to count (the
-    CLI's and BrushParams' rule; a config that layers shape: [disc] over
-    config/lattices.yaml's orientation: 0.0 runs).  Read before `validate`
-    fills in the defaults."""
+    of the config has a shape that reads it: it would seem to count (as the
+    CLI and BrushParams rule; a config that layers shape: [disc] over the
+    shipped lattices config, which sets orientation: 0.0, runs).  Read
+    before `validate` fills in the defaults."""
     fig5 = config.get("fig5", {})
     shapes = set(config.get("shape", ["disc"]))
     if fig5.get("kbar", [None]):  # fig5: {kbar: []} runs no Fig. 5 brush
