@@ -122,7 +122,8 @@ def random_centres(n_pillars: int, side: float, radius: float, gap: float,
             raise ParameterError(
                 "n_pillars", n_pillars, "fewer pillars, a smaller phi or a smaller min_gap",
                 f"random layout: only {p} {what} of radius {radius / side:.3g} L with gaps "
-                f"of at least {gap / side * RANDOM_GAP_GRID:.3g} L/{RANDOM_GAP_GRID} (the minimum gap) "
+                f"of at least {gap / side * RANDOM_GAP_GRID:.3g} L/{RANDOM_GAP_GRID} "
+                "(the minimum gap) "
                 f"fitted, {max_attempts} trials failed for the next")
     return centres
 
