@@ -279,13 +279,11 @@ def preload_contact(ds: xr.Dataset, preload: str, press_hint: str) -> str | None
     touching = int(ds.pillars_in_contact_at_preload)
     n_pillars = int(ds.attrs["n_pillars"])
     protocol = "protocol_normalized" in ds.attrs
-    at_first_touch = (touching < n_pillars and not float(ds.attrs.get("preload", 0.0))
-                      and not protocol)
     pressed = protocol or float(ds.attrs.get("preload", 0.0))
     return (f"{touching} of {n_pillars} pillars in contact at the "
             + ("first waypoint" if protocol else "preload" if pressed else "first touch")
             + (f" ({preload} 0 stops the approach there; {press_hint})"
-               if at_first_touch else ""))
+               if touching < n_pillars and not pressed else ""))
 
 
 def check_protocol_preload(preload: float, protocol: object) -> None:
