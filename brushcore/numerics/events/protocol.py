@@ -489,7 +489,7 @@ class _Engine:
         and whether the target is what comes first."""
         op, xp = self.op, self.xp
         att = op.attached
-        self._closing.fill(False)  # in place: no fresh mask an event
+        self._closing[...] = False  # in place (no fresh mask an event; no .fill in the array API)
         t_event = np.inf
         rate = s * self.sig1[att]
         up = rate > 0
