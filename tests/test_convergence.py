@@ -353,6 +353,62 @@ def test_table_flags_touching_pillars():
     assert [float(x) for line in hollow for x in line.get_xdata()] == [1 / 128, 1 / 128]
 
 
+def test_table_flags_grids_run_with_different_solver_settings():
+    """A case whose grids' curves ran at different accuracy settings (sweep.nc's
+    run_* text) is flagged with the settings' names; a grid not run, or a
+    setting that only differs between cases, is not."""
+    sweep = _sweep()
+    rtol = xr.full_like(sweep["adhesive_force_normalized"], np.nan, dtype=object)
+    rtol[:] = "0.0001"
+    rtol.loc[dict(n_pillars=64, kbar=1e-6, grid=256)] = "0.001"  # one grid run coarser
+    rtol.loc[dict(n_pillars=256, kbar=1e-6, grid=1024)] = "0.001"  # that grid not run
+    rtol.loc[dict(n_pillars=64, kbar=np.inf)] = "1e-05"  # the whole case: one setting
+    cascade = xr.full_like(rtol, "local", dtype=object)
+    cascade.loc[dict(n_pillars=64, kbar=1e-6, grid=128)] = "global"
+    conv = extrapolate_sweep(sweep.assign(run_rtol=rtol.astype(str),
+                                          run_cascade=cascade.astype(str),
+                                          run_fft_library_used=cascade.astype(str)))
+    assert str(conv["mixed_settings"].sel(layout="regular", seed=0, n_pillars=64,
+                                          kbar=1e-6).values) == "rtol cascade"
+    table = convergence_table(conv)
+    flagged = table[table["flags"].str.contains("mixed_settings")]
+    assert set(zip(flagged["n_pillars"], flagged["kbar"])) == {(64, 1e-6)}
+    assert all(f.endswith(",mixed_settings(rtol+cascade)") for f in flagged["flags"])
+    assert "mixed_settings" not in convergence_table(extrapolate_sweep(sweep))["flags"].sum()
+    assert "mixed_settings" not in extrapolate_sweep(sweep)
+
+    from brushcore.data import figures
+    texts = [t.get_text().replace("\n", " ") for ax in figures.convergence(conv).axes
+             for t in ax.texts]
+    assert sum("mixed settings (rtol cascade)" in t for t in texts) == 2
+
+
+def test_an_order_outside_the_trusted_range_is_flagged_where_nothing_else_explains_fs_3():
+    """p = 2 (plausible, not trusted): Fs 3 and untrusted_order; p = 1 and
+    p = 0.5 (trusted): neither; p = 0.2, a poor fit, has no error and no
+    such flag."""
+    grids = np.array([128, 256, 512])
+    h = 1.0 / grids
+    fad = np.stack([law(h, 2.0, f0=1.5), law(h, 1.0, f0=1.5), law(h, 0.5, f0=1.5),
+                    law(h, 0.2, f0=1.5)])[None, :, None, None, :]
+    sweep = xr.Dataset(
+        {q: (("layout", "n_pillars", "kbar", "seed", "grid"), fad, {"units": "1"})
+         for q in ("adhesive_force_normalized", "work_of_separation_normalized")},
+        coords={"layout": ["regular"], "n_pillars": [64, 256, 576, 2304], "kbar": [1.0],
+                "seed": [0], "grid": grids}, attrs={"phi": 0.12})
+    conv = extrapolate_sweep(sweep)
+    q = "adhesive_force_normalized"
+    assert conv[f"{q}_untrusted_order"].values.ravel().tolist() == [1, 0, 0, 0]
+    assert conv[f"{q}_safety_factor"].values.ravel()[:3].tolist() == [3.0, 1.25, 1.25]
+    assert conv[f"{q}_poor_fit"].values.ravel().tolist() == [0, 0, 0, 1]
+    table = convergence_table(conv).set_index(["n_pillars", "quantity"])
+    # the resolution flags (r < 4 on 128^2) are not this test's
+    flags = table["flags"].str.replace(r",?(coarsest_)?under_resolved", "", regex=True)
+    assert flags[(64, "F_ad")] == "untrusted_order"
+    assert flags[(256, "F_ad")] == ""
+    assert flags[(2304, "F_ad")] == "poor_fit"
+
+
 def test_sweep_uses_recorded_radius_and_needs_grid():
     sweep = _sweep()
     rad = xr.full_like(sweep["adhesive_force_normalized"], 7.0)

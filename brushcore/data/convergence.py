@@ -113,6 +113,12 @@ GRID_DIM = "grid"
 UNDER_RESOLVED_RADIUS = 4.0
 #: The fit's flags, as `Extrapolation` fields and ``{q}_{flag}`` variables.
 FIT_FLAGS = ("non_monotone", "poor_fit", "too_few_grids", "not_asymptotic")
+#: A fit whose observed order lies outside `ConvergenceOptions.trusted_order`
+#: and that no other flag explains: its error carries Fs 3 for that alone.
+ORDER_FLAG = "untrusted_order"
+#: Every ``{q}_{flag}`` variable of `extrapolate_sweep`, as the table and the
+#: figure name them.
+STUDY_FLAGS = (*FIT_FLAGS, ORDER_FLAG)
 #: Sweep variable counting pillar pairs that share an element edge on a grid
 #: (`brushcore.model.labelmap.count_touching_pairs`): flagged in the table.
 TOUCHING = "touching_pillar_pairs"
@@ -121,6 +127,13 @@ TOUCHING = "touching_pillar_pairs"
 SMALLEST = "smallest_radius_elements"
 #: The filling factor each grid realises (sweep.nc's), carried beside the raw values.
 PHI_ACTUAL = "phi_actual"
+#: Solver settings that set a curve's accuracy (sweep.nc's ``run_{name}``
+#: where they differ between curves): a case whose grids ran with different
+#: ones mixes their errors into the mesh's.
+ACCURACY_SETTINGS = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "precision",
+                     "early_decisions", "settle_decisions")
+#: Study variable naming, per case, the `ACCURACY_SETTINGS` that differ between its grids.
+MIXED = "mixed_settings"
 
 
 def flag_radii(conv: xr.Dataset) -> tuple[xr.DataArray, xr.DataArray]:
@@ -172,6 +185,42 @@ def phi_varies(phi: np.ndarray) -> bool:
     `PHI_SPREAD_FLAG` apart (e.g. N = 64 with allow_coarse on 64, 96 and 128:
     0.0625, 0.111, 0.125), so the fit runs through different brushes."""
     return phi_spread(phi) > PHI_SPREAD_FLAG
+
+
+def mixed_settings(sweep: xr.Dataset, values: xr.DataArray) -> xr.DataArray | None:
+    """Per case, the `ACCURACY_SETTINGS` whose recorded values differ between
+    the grids where ``values`` is finite, space-separated ("" where none do).
+
+    Parameters
+    ----------
+    sweep : aggregated sweep; its ``run_{name}`` variables (text, present
+        only where a setting differs between any of its curves) are read.
+    values : a result on (cases..., grid); NaN where a grid was not run.
+
+    Returns
+    -------
+    xarray.DataArray or None
+        Text on the case dimensions; None where the sweep records none of
+        the settings as differing.
+    """
+    names = [n for n in ACCURACY_SETTINGS if f"run_{n}" in sweep]
+    if not names:
+        return None
+    cases = [d for d in values.dims if d != GRID_DIM]
+    ran = values.transpose(*cases, GRID_DIM).notnull().values
+    differ = []
+    for name in names:
+        text = sweep[f"run_{name}"].broadcast_like(values).transpose(*cases, GRID_DIM).values
+        rows = text.reshape(-1, text.shape[-1])
+        differ.append([len({str(v) for v, r in zip(row, run) if r}) > 1
+                       for row, run in zip(rows, ran.reshape(rows.shape))])
+    out = [" ".join(n for n, d in zip(names, differ) if d[i]) for i in range(len(differ[0]))]
+    case = values.isel({GRID_DIM: 0}, drop=True).transpose(*cases)
+    text = case.copy(data=np.array(out, dtype=str).reshape(case.shape))
+    text.attrs = {"long_name": "accuracy settings that differ between the case's grids "
+                               "(space-separated; sweep.nc's run_* give their values); '' "
+                               "where none do"}
+    return text
 
 
 @dataclass(frozen=True)
@@ -575,7 +624,9 @@ def extrapolate_sweep(
         coarsest, and ``smallest_radius_elements_{finest,coarsest}`` where the
         sweep has the narrowest pillar's radius (`flag_radii`); ``h`` = 1/n
         on ``grid``; ``touching_pillar_pairs`` and ``phi_actual`` on
-        (cases..., grid) where the sweep has them.
+        (cases..., grid) where the sweep has them; ``{q}_untrusted_order``
+        (`ORDER_FLAG`); ``mixed_settings`` (`mixed_settings`) where the
+        sweep's curves differ in an accuracy setting.
 
     Raises
     ------
@@ -612,6 +663,16 @@ def extrapolate_sweep(
             else:
                 attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
             out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
+        # Fs 3 for an order outside the trusted range alone (poor fits have no
+        # error, and the other flags name their own cause)
+        order = out[f"{q}_order"]
+        t_lo, t_hi = opts.trusted_order
+        untrusted = (np.isfinite(order) & (out[f"{q}_poor_fit"] == 0)
+                     & ~((order >= t_lo * (1 - 1e-9)) & (order <= t_hi)))
+        out[f"{q}_{ORDER_FLAG}"] = untrusted.astype(np.int8).assign_attrs(
+            long_name=f"observed order of {q} outside the trusted range, so its error "
+                      "carries Fs 3 (1 = yes)", units="1",
+            flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="no yes")
         out[q] = raw.copy()
         # {q}_finest comes from here: NaN on a grid where the other quantity
         # is finite (a protocol without retraction has no W) moves it
@@ -644,6 +705,9 @@ def extrapolate_sweep(
         out[TOUCHING] = sweep[TOUCHING].copy()
     if PHI_ACTUAL in sweep:  # the staircase's filling factor moves F_ad from grid to grid
         out[PHI_ACTUAL] = sweep[PHI_ACTUAL].copy()
+    mixed = mixed_settings(sweep, anyq)
+    if mixed is not None:  # e.g. one grid at rtol 1e-3: its solver error joins the mesh's
+        out[MIXED] = mixed
     ds = xr.Dataset(out).assign_coords(h=h)
     ds.attrs = {
         "title": "brushcore mesh-refinement study: results extrapolated to h -> 0",

@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.data.convergence import (FIT_FLAGS, GRID_DIM, PHI_ACTUAL, PHI_SPREAD_FLAG,
-                                        QUANTITIES, SMALLEST, TOUCHING,
+from brushcore.data.convergence import (ACCURACY_SETTINGS, GRID_DIM, MIXED, PHI_ACTUAL,
+                                        PHI_SPREAD_FLAG, QUANTITIES, SMALLEST,
+                                        STUDY_FLAGS, TOUCHING,
                                         UNDER_RESOLVED_RADIUS, flag_radii, phi_spread,
                                         phi_varies, resolution_flag, touching_grids)
 
@@ -33,8 +34,9 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
         order, the safety factor the error was built with (1.25 or 3), the
         spread (half the range over the grids, also where a flag leaves no
         extrapolation) and the flags (as a comma-separated ``flags`` column; besides
-        the fit's, ``under_resolved``, ``coarsest_under_resolved`` and
-        ``touching_pillars``, see `write_tables`).
+        the fit's and ``untrusted_order``, ``under_resolved``,
+        ``coarsest_under_resolved``, ``touching_pillars``, ``phi_varies`` and
+        ``mixed_settings(...)``, see `write_tables`).
     """
     import pandas as pd
 
@@ -62,7 +64,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             # spread: half the range over the grids, what a flagged row still says
             for s in ("extrapolated", "error", "order", "safety_factor", "spread"):
                 row[s] = float(one[f"{q}_{s}"])
-            flags = [f for f in FIT_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
+            flags = [f for f in STUDY_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
             resolution = resolution_flag(finest, coarsest)
             if resolution:
                 flags.append(resolution[0])
@@ -70,6 +72,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
                 flags.append("touching_pillars")
             if phi is not None and phi_varies(phi):
                 flags.append("phi_varies")
+            if MIXED in one and str(one[MIXED].values):
+                flags.append(f"{MIXED}({str(one[MIXED].values).replace(' ', '+')})")
             row["flags"] = ",".join(flags)
             rows.append(row)
     return pd.DataFrame(rows)
@@ -120,7 +124,13 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "edge (random discs on grids coarser than 512); "
               f"phi_varies: phi_spread > {PHI_SPREAD_FLAG:g}, so the grids hold different "
               "brushes, not one refined (only allow_coarse lets a grid's phi be more "
-              "than 5 % off): the fit is no h -> 0 limit of one brush.\n\n")
+              "than 5 % off): the fit is no h -> 0 limit of one brush; "
+              "untrusted_order: the observed order lies outside "
+              f"{conv.attrs.get('trusted_order', 'the trusted range')}, so the "
+              "error carries Fs 3; mixed_settings(rtol+...): the grids' curves ran "
+              "with different solver settings among "
+              f"{', '.join(ACCURACY_SETTINGS)} (sweep.nc's run_* give the values), so "
+              "their solver errors differ and mix into the fit.\n\n")
     Path(md_path).write_text(header + to_markdown(table))
 
 

@@ -33,7 +33,7 @@ from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
 from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index,
                                   shape_slice, snapshots)
-from brushcore.data.convergence import (FIT_FLAGS, PHI_ACTUAL, QUANTITIES, TOUCHING,
+from brushcore.data.convergence import (MIXED, PHI_ACTUAL, QUANTITIES, STUDY_FLAGS, TOUCHING,
                                         flag_radii, phi_spread, phi_varies,
                                         resolution_flag, touching_grids)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
@@ -851,7 +851,7 @@ def convergence(
                 fs = float(conv[f"{q}_safety_factor"].sel(case))  # 3: an untrusted order
                 ax.text(0.03, 0.95, f"$f_0$ = {f0:.4g} ± {err:.2g}, p = {p:.2f}, Fs {fs:g}",
                         ha="left", va="top", transform=ax.transAxes, fontsize="small")
-            flags = [f.replace("_", " ") for f in FIT_FLAGS
+            flags = [f.replace("_", " ") for f in STUDY_FLAGS
                      if f"{q}_{f}" in conv and int(conv[f"{q}_{f}"].sel(case))]
             resolution = resolution_flag(finest, coarsest)  # as the table flags
             if resolution:
@@ -863,6 +863,8 @@ def convergence(
             phi = conv[PHI_ACTUAL].sel(case).values[ok] if PHI_ACTUAL in conv else None
             if phi is not None and phi_varies(phi):
                 flags.append(f"phi varies ({phi_spread(phi):.2f} of its mean)")
+            if MIXED in conv and str(conv[MIXED].sel(case).values):
+                flags.append(f"mixed settings ({conv[MIXED].sel(case).values})")
             # between the title and the plot: on no point, no tick label; wrapped
             # to the panel's width (three flags and a radius overran it)
             lines = textwrap.wrap(", ".join(flags), FLAG_LINE_CHARS)
