@@ -367,6 +367,10 @@ def test_snakefmt_clean() -> None:
         ({"grid": 32, "regular": [256]}, r"config: grid = 32 is invalid .*allowed grid \d+, the "
                                          r"next .*, or allow_coarse: true to run it anyway"),
         ({"grid": 128, "regular": [256]}, "config: grid = 128 is invalid"),
+        # a grid list: every grid that refuses the brush, in one message
+        ({"grid": [32, 48, 256, 24], "regular": [256]},
+         r"config: grid = 24 is invalid .*\(case regular N = 16, grid = 24, phi = 0.12\); "
+         r"grid = \[32, 48\] refuse it too"),
         # allow_coarse already on: no "or allow_coarse to run it anyway" (it was hinted twice)
         ({"grid": 8, "allow_coarse": True},
          r"allowed grid 15, the next .*0\.12 asked for\) \(case regular N = 16, grid = 8"),

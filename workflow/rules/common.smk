@@ -407,10 +407,26 @@ def check_cases(config, main=True):
             )
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
+                + _also_refused(makes, (layout, n, seed, grid, phi, rough, shape))
                 + _inherited_note(config, layout, only_fig5)
             ) from None
     if main:  # a plan that stands: what it leaves out
         _warn_two_grids(config)
+
+
+def _also_refused(makes, refused):
+    """The other grids of a refused brush that refuse it too, as a clause of
+    its error: one edit of a grid list fixes them all, not one per run."""
+    layout, n, seed, grid, phi, rough, shape = refused
+    more = []
+    for (l2, n2, s2, g2, p2, r2, sh2), make in makes.items():
+        if (l2, n2, s2, p2, r2, sh2) != (layout, n, seed, phi, rough, shape) or g2 == grid:
+            continue
+        try:
+            build_labels(make(g2))
+        except ParameterError:
+            more.append(g2)
+    return f"; grid = {sorted(more)} refuse it too" if more else ""
 
 
 def _warn_first_touch(config, brushes):
