@@ -417,11 +417,12 @@ def check_cases(config, main=True):
 def _also_refused(makes, refused):
     """The other grids of a refused brush that refuse it too, as a clause of
     its error: one edit of a grid list fixes them all, not one per run."""
-    layout, n, seed, grid, phi, rough, shape = refused
+    brush = refused[:3] + refused[4:]  # all but the grid
     more = []
-    for (l2, n2, s2, g2, p2, r2, sh2), make in makes.items():
-        if (l2, n2, s2, p2, r2, sh2) != (layout, n, seed, phi, rough, shape) or g2 == grid:
+    for key, make in makes.items():
+        if key[:3] + key[4:] != brush or key[3] == refused[3]:
             continue
+        g2 = key[3]
         try:
             build_labels(make(g2))
         except ParameterError:
