@@ -68,9 +68,13 @@ def application_ms(params: BrushParams, backend: Backend, repeats: int = 20) -> 
     return _timed(backend, lambda: op.apply(x), repeats)
 
 
+class _HelpFormat(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """The module docstring as written (its examples), and each option's default."""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], allow_abbrev=False,
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False,
+                                     formatter_class=_HelpFormat)
     parser.add_argument("--backend", choices=("gpu", "cpu"), default="gpu")
     parser.add_argument("--grid", type=int, nargs="+", action="extend",
                         help="grid(s) for every case instead of the issue's "

@@ -108,9 +108,13 @@ def plot(rows, n_pillars: int, grid: int, phi: float, shape: str, path: Path) ->
     fig.savefig(path, dpi=130)
 
 
+class _HelpFormat(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """The module docstring as written (its examples), and each option's default."""
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False,
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False,
+                                     formatter_class=_HelpFormat)
     parser.add_argument("--pillars", type=int, default=64, help="N (a perfect square)")
     parser.add_argument("--grid", type=int, default=256, help="elements per side")
     parser.add_argument("--phi", type=float, default=0.12, help="filling factor")

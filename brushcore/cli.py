@@ -326,7 +326,8 @@ def _error(message: str, progress: _Progress | None = None) -> None:
 
 
 def _brush_params(args: argparse.Namespace) -> BrushParams:
-    """BrushParams from the flags; for --layout file N, grid and phi come from the file."""
+    """BrushParams from the flags (`_missing_flags` found none missing); for --layout
+    file N, grid and phi come from the file."""
     given = getattr(args, "given", set())
     # a lattice or a file ignores the gap: not recorded, so its curve is the lattice's
     gap = args.min_gap if args.layout == "random" else 1.0
@@ -337,27 +338,39 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
                   shape=args.shape, aspect=args.aspect, orientation=args.orientation)
     if args.layout == "file":
         from brushcore.model.layout_file import file_params
-        from brushcore.model.pillar_table import is_table
 
-        if args.layout_file is None:
-            raise _Missing("--layout-file is required for --layout file")
-        if is_table(args.layout_file) and "grid" not in given:
-            raise _Missing("--grid is required for a pillar table (.csv): it is drawn on "
-                           "any grid")
         fixed = {"n_pillars": args.pillars, "grid": args.grid, "phi": args.phi}
         fixed = {k: v for k, v in fixed.items() if {"n_pillars": "pillars"}.get(k, k) in given}
         return file_params(args.layout_file, kbar, **common, **fixed)
-    missing = [flag for flag, value in (("--pillars", args.pillars), ("--grid", args.grid))
-               if value is None]
-    if missing:  # both at once: a second try should not meet the second
-        raise _Missing(f"{' and '.join(missing)} {'are' if len(missing) > 1 else 'is'} "
-                       f"required for --layout {args.layout}")
     from brushcore.model.layout import hinted_params
 
     return hinted_params(
         lambda grid: BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=kbar,
                                  grid=grid, phi=args.phi, layout_file="" if args.layout_file
                                  is None else str(args.layout_file), **common), args.grid)
+
+
+def _missing_flags(args: argparse.Namespace) -> str:
+    """Every flag the chosen layout needs and ``args`` lacks, in one sentence
+    ("" where none): a second try should not meet the next one."""
+    from brushcore.model.pillar_table import is_table
+
+    parts = []
+    if args.layout == "file":
+        if args.layout_file is None:
+            parts.append("--layout-file is required for --layout file")
+        elif is_table(args.layout_file) and "grid" not in getattr(args, "given", set()):
+            parts.append("--grid is required for a pillar table (.csv): it is drawn on any "
+                         "grid")
+    else:
+        missing = [flag for flag, value in (("--pillars", args.pillars), ("--grid", args.grid))
+                   if value is None]
+        if missing:
+            parts.append(f"{' and '.join(missing)} {'are' if len(missing) > 1 else 'is'} "
+                         f"required for --layout {args.layout}")
+    if args.kbar is None and args.kbar_file is None:
+        parts.append("--kbar is required (or --kbar-file, one kbar per pillar)")
+    return "; ".join(parts)
 
 
 class _Missing(Exception):
@@ -380,8 +393,9 @@ def _simulate(args: argparse.Namespace) -> int:
     progress = None if args.quiet else _Progress()
     started = time.time()
     try:
-        if args.kbar is None and args.kbar_file is None:
-            raise _Missing("--kbar is required (or --kbar-file, one kbar per pillar)")
+        missing = _missing_flags(args)
+        if missing:
+            raise _Missing(missing)
         # Files are checked against the counts the plain parameters imply.
         base = dataclasses.replace(_brush_params(args), roughness=args.roughness,
                                    preload=args.preload, kbar_spread=args.kbar_spread,
@@ -432,6 +446,11 @@ def _simulate(args: argparse.Namespace) -> int:
                  f"{'s' * (touching == 1)} an element edge (their gap is under "
                  f"an element on this grid; a finer grid separates them)" if touching else ""),
               file=sys.stderr)
+        if options.lookahead:  # opt-in and documented, but a number could be quoted unread
+            warnings.warn(f"--lookahead {options.lookahead:g} batches the events within "
+                          f"{100 * options.lookahead:g} % of the next one: approximate (W and F_ad "
+                          "of soft or rough brushes can move by per cent); 0 is the exact "
+                          "event-driven result")
         pin_threads(args.threads)
         # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
         previous = on_sigterm(terminate)

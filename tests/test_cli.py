@@ -206,6 +206,30 @@ def test_version_and_defaults_in_help():
     assert "(default: True)" not in text and "(default: False)" not in text
 
 
+def test_every_missing_flag_is_named_at_once(tmp_path, capsys):
+    """The layout's flags and --kbar in one error: a second try should not
+    meet the next missing flag."""
+    out = tmp_path / "never.nc"
+    assert main(["simulate", "--layout", "regular", "--out", str(out), "--quiet"]) == 2
+    assert ("--pillars and --grid are required for --layout regular; --kbar is required "
+            "(or --kbar-file, one kbar per pillar)") in capsys.readouterr().err
+    assert main(["simulate", "--layout", "file", "--out", str(out), "--quiet"]) == 2
+    assert ("--layout-file is required for --layout file; --kbar is required"
+            in capsys.readouterr().err)
+    assert not out.exists()
+
+
+def test_lookahead_says_at_run_time_that_it_is_approximate(tmp_path):
+    """--lookahead trades accuracy for solves: said when the run starts, not
+    only in the help; the exact default says nothing."""
+    res = _cli(*SMALL, "--lookahead", "0.02", "--quiet", "--out", str(tmp_path / "c.nc"))
+    assert res.returncode == 0, res.stderr
+    assert ("brushcore: warning: --lookahead 0.02 batches the events within 2 % of the next "
+            "one: approximate") in res.stderr
+    res = _cli(*SMALL, "--quiet", "--out", str(tmp_path / "d.nc"))
+    assert "lookahead" not in res.stderr
+
+
 def test_every_run_reports_its_discretisation(tmp_path):
     res = _cli(*SMALL, "--out", str(tmp_path / "c.nc"), "--quiet")
     assert res.returncode == 0, res.stderr
