@@ -19,7 +19,7 @@ The package is layered; imports point down only:
 
 from brushcore.data.io import read_curve, write_curve
 from brushcore.model import theory
-from brushcore.model.curve import simulate
+from brushcore.model.curve import FirstTouchWarning, simulate
 from brushcore.model.inputs import with_input_files
 from brushcore.model.layout import generated_table
 from brushcore.model.layout_file import file_params
@@ -29,6 +29,6 @@ from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import Waypoint
 from brushcore.validation import ParameterError
 
-__all__ = ["BrushParams", "ParameterError", "SolverOptions", "Waypoint", "file_params",
+__all__ = ["BrushParams", "FirstTouchWarning", "ParameterError", "SolverOptions", "Waypoint", "file_params",
            "generated_table", "read_curve", "read_pillar_table", "save_pillar_table",
            "simulate", "theory", "with_input_files", "write_curve"]

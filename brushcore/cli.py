@@ -382,7 +382,8 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from brushcore.model.curve import check_protocol_preload, preload_contact, simulate
+    from brushcore.model.curve import (FirstTouchWarning, check_protocol_preload,
+                                       preload_contact, simulate)
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.model.layout import build_labels, pillars_differ, smallest_radius_elements
     from brushcore.model.inputs import (INPUT_FILES, parse_protocol, recorded_kbar,
@@ -455,6 +456,7 @@ def _simulate(args: argparse.Namespace) -> int:
         # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
         previous = on_sigterm(terminate)
         try:
+            warnings.filterwarnings("ignore", category=FirstTouchWarning)  # said after the run
             ds = simulate(params, options, progress=progress, labels=labels, protocol=protocol)
             try:
                 write_curve(ds, args.out)

@@ -249,8 +249,24 @@ def test_rough_run_says_how_many_pillars_it_pressed_on(tmp_path):
     assert touching == 1
     assert ("1 of 16 pillars in contact at the first touch (--preload 0 stops the approach "
             "there; give --preload") in alone.stdout, alone.stdout
+    assert "pillars in contact" not in alone.stderr  # said once, in the flag's words
     pressed = _cli(*args, "--preload", "1", "--out", str(tmp_path / "b.nc"))
     assert "16 of 16 pillars in contact at the preload\n" in pressed.stdout, pressed.stdout
+
+
+def test_the_python_api_warns_where_preload_0_left_pillars_out():
+    """simulate() says what the command prints: a rough brush at preload 0
+    pulls off the one pillar that touched; pressed on, or flat, no warning."""
+    from brushcore import BrushParams, FirstTouchWarning, simulate
+
+    rough = BrushParams("regular", 16, 0.01, 64, roughness=0.3)
+    with pytest.warns(FirstTouchWarning, match=r"^1 of 16 pillars in contact at the first "
+                                                r"touch: preload 0 stops the approach there"):
+        simulate(rough)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate(BrushParams("regular", 16, 0.01, 64, roughness=0.3, preload=1.0))
+        simulate(BrushParams("regular", 16, 0.01, 64))
 
 
 def test_run_reports_random_discs_that_touch(tmp_path):

@@ -7,6 +7,7 @@ when a module it imports does, so the job's logic lives here.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 
 from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm
@@ -24,7 +25,7 @@ def run_job(smk) -> None:
 def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
     from brushcore import BrushParams, SolverOptions, simulate
-    from brushcore.model.curve import preload_contact
+    from brushcore.model.curve import FirstTouchWarning, preload_contact
     from brushcore.model.layout import pillars_differ
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
@@ -62,6 +63,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
     text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
     protocol = None if text is None else parse_protocol(text)
+    warnings.filterwarnings("ignore", category=FirstTouchWarning)  # said below, as a key
     curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
                      protocol=protocol)
     orphaned()

@@ -286,6 +286,13 @@ def preload_contact(ds: xr.Dataset, preload: str, press_hint: str) -> str | None
                if touching < n_pillars and not pressed else ""))
 
 
+class FirstTouchWarning(UserWarning):
+    """An approach at preload 0 stopped at first touch with pillars out of
+    contact (heights, roughness or a gap map): a pull-off of the few that
+    touched.  The command and the workflow's jobs say it in their own words
+    (`preload_contact`) and filter this."""
+
+
 def check_protocol_preload(preload: float, protocol: object) -> None:
     """Refuse a preload [F_K] beside a protocol, whose first waypoint is the load."""
     if protocol is not None and preload != 0:
@@ -513,6 +520,11 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     preload_step = int(curve.waypoint_step[0])
     in_contact = int(np.count_nonzero(np.bincount(
         pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
+    if protocol is None and not params.preload and in_contact < n_pillars:
+        warnings.warn(FirstTouchWarning(
+            f"{in_contact} of {n_pillars} pillars in contact at the first touch: preload 0 "
+            "stops the approach there, so only those pull off (BrushParams(preload=P), P in "
+            "F_K, presses the brush on)"), stacklevel=3)
     pillar_force = curve.pillar_force_at_peak
     if pillar_force is None or i_max < 0:
         pillar_force = np.full(n_pillars, np.nan)
