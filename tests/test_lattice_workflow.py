@@ -262,6 +262,7 @@ def test_bad_inputs_of_a_brush_as_made_stop_before_any_job(
         "layout_files": [{"layout": "arrays/my_array.npy", **entry}], **extra}, message)
 
 
+@pytest.mark.filterwarnings("ignore::brushcore.FirstTouchWarning")  # first touch meant
 def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) -> None:
     """sweep.nc gives a brush as made the rough dimensions and `given_inputs`
     even at preload 0; `flat_slice` (the paper's figures and summary) leaves

@@ -273,6 +273,7 @@ _GRADED_KBAR[3] = math.inf  # one rigid pillar
                 heights=np.random.default_rng(1).normal(size=16) * 0.3),
     BrushParams("regular", 16, 0.01, 64, kbar_values=_GRADED_KBAR, gap_map=_tilt(64)),
 ], ids=["flat_coarse", "random", "rough_preloaded", "heights", "graded_gap_map"])
+@pytest.mark.filterwarnings("ignore::brushcore.FirstTouchWarning")  # first touch meant
 def test_a_curve_file_gives_its_parameters_back(params, tmp_path):
     """Rebuilt from the file: equal, same arrays bit for bit, same parameter_hash
     (x * d_K / d_K differs from x in 14 % of draws: given arrays are stored as given)."""
@@ -302,6 +303,7 @@ def test_from_attrs_needs_the_curve_for_arrays_and_switches_of_0_or_1():
         BrushParams.from_attrs({**attrs, "inputs_digest": "0123"})
 
 
+@pytest.mark.filterwarnings("ignore::brushcore.FirstTouchWarning")  # first touch meant
 def test_from_curve_refuses_arrays_it_cannot_rebuild():
     from brushcore import simulate
 
