@@ -215,19 +215,26 @@ class BrushOperator:
         """The convolved buffer at ``where``, in double precision whatever
         the transforms' (single-precision transforms: `SolverOptions.precision`)."""
         xp = self.backend.xp
-        return xp.astype(self.conv.apply_flat()[where], xp.float64, copy=False)
+        return xp.astype(xp.take(self.conv.apply_flat(), where), xp.float64, copy=False)
+
+    def _scatter(self, x: Any) -> None:
+        """Write attached-element stresses x into the convolver's buffer,
+        cast to its precision first (the same rounding as the scatter's
+        own cast; 2x faster for a float32 buffer than casting in it)."""
+        buf = self.conv.flat_buffer
+        self.backend.put(buf, self.idx, self.backend.xp.astype(x, buf.dtype, copy=False))
 
     def field(self, x: Any) -> Any:
         """Half-space displacement K x [length] at every pillar element
         (operator order) from attached-element stresses x [stress]; one
         operator application."""
-        self.backend.put(self.conv.flat_buffer, self.idx, x)
+        self._scatter(x)
         return self._gather(self._padded)
 
     def spring(self, x: Any) -> Any:
         """Spring part S x of A x (compressed) [length]."""
         if self._springs:
-            return (self.compliance * self.pillar_sums(x))[self.pl]
+            return self.backend.xp.take(self.compliance * self.pillar_sums(x), self.pl)
         return self.backend.xp.zeros_like(x)
 
     def apply_with_field(self, x: Any) -> tuple[Any, Any]:
@@ -254,10 +261,10 @@ class BrushOperator:
 
     def apply(self, x: Any) -> Any:
         """A x: displacement [length] from attached-element stresses x [stress]."""
-        self.backend.put(self.conv.flat_buffer, self.idx, x)
+        self._scatter(x)
         y = self._gather(self.idx)
         if self._springs:
-            y += (self.compliance * self.pillar_sums(x))[self.pl]
+            y += self.backend.xp.take(self.compliance * self.pillar_sums(x), self.pl)
         return y
 
     def precondition(self, r: Any) -> Any:
