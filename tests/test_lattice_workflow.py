@@ -159,6 +159,7 @@ def test_bad_layout_files_stop_before_any_job(repo_copy: Path, tmp_path: Path,  
     assert_refused_at_plan_time(repo_copy, tmp_path, {"layout_files": files}, message)
 
 
+@pytest.mark.slow
 def test_a_brush_of_ones_own_runs_through_the_workflow(tmp_path: Path) -> None:
     """End to end: the file brush enters sweep.nc as layout file_my_array with the
     file's N and phi, and its numbers are those of `simulate(file_params(...))`
@@ -312,6 +313,7 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
     assert not any("Fig. 5a" in row.quantity for row in rows)
 
 
+@pytest.mark.slow
 def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
     """End to end, a sweep of one's own brush alone (no generated brush, no
     Fig. 5): heights, stiffness factors and a preload reach sweep.nc (layout
@@ -393,6 +395,7 @@ def _own_table(workdir: Path, name: str = "my_table") -> Path:
                              workdir / "arrays" / name)
 
 
+@pytest.mark.slow
 def test_a_pillar_table_runs_on_every_grid_into_the_convergence_study(tmp_path: Path) -> None:
     """A table runs on the sweep's grids (its N's grid_by_n or grid) at the
     discs' phi: sweep.nc holds it at each grid with the numbers of `simulate`

@@ -33,6 +33,7 @@ def test_default_tolerance_is_harmless(reference, case):
     assert ds.attrs["operator_applications"] < ref.attrs["operator_applications"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
 def test_local_cascade_agrees_with_global(reference, case):
     """Certified local cascades reach the global cascade's contact sets."""
@@ -49,6 +50,7 @@ def test_local_cascade_agrees_with_global(reference, case):
     assert fast.attrs["operator_applications"] <= ref.attrs["operator_applications"]
 
 
+@pytest.mark.slow
 def test_settled_decisions_follow_the_model_not_the_rounding():
     """Random 220 at kbar 1e-4: pillars reach sigma_c within CG's error of
     each other.  Stopped at the tolerance, the cascades follow the warm
@@ -67,6 +69,7 @@ def test_settled_decisions_follow_the_model_not_the_rounding():
 ALL_DOUBLE = SolverOptions(precision="double", early_decisions=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CASES])
 def test_mixed_precision_and_early_decisions_change_no_result(case):
     """Neither option is meant to change physics: F_ad and W within 2e-4 of the

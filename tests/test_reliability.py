@@ -132,6 +132,7 @@ def clean_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return work
 
 
+@pytest.mark.slow
 def test_killed_sweep_resumes_to_the_same_sweep(clean_run: Path, tmp_path: Path) -> None:
     work = copy_repo(tmp_path / "repo")
     with open(tmp_path / "killed.log", "w") as log:
