@@ -29,6 +29,6 @@ from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import Waypoint
 from brushcore.validation import ParameterError
 
-__all__ = ["BrushParams", "FirstTouchWarning", "ParameterError", "SolverOptions", "Waypoint", "file_params",
-           "generated_table", "read_curve", "read_pillar_table", "save_pillar_table",
-           "simulate", "theory", "with_input_files", "write_curve"]
+__all__ = ["BrushParams", "FirstTouchWarning", "ParameterError", "SolverOptions", "Waypoint",
+           "file_params", "generated_table", "read_curve", "read_pillar_table",
+           "save_pillar_table", "simulate", "theory", "with_input_files", "write_curve"]

@@ -449,15 +449,17 @@ def _simulate(args: argparse.Namespace) -> int:
               file=sys.stderr)
         if options.lookahead:  # opt-in and documented, but a number could be quoted unread
             warnings.warn(f"--lookahead {options.lookahead:g} batches the events within "
-                          f"{100 * options.lookahead:g} % of the next one: approximate (W and F_ad "
-                          "of soft or rough brushes can move by per cent); 0 is the exact "
-                          "event-driven result")
+                          f"{100 * options.lookahead:g} % of the next one: approximate (W and "
+                          "F_ad of soft or rough brushes can move by per cent); 0 is the "
+                          "exact event-driven result")
         pin_threads(args.threads)
         # SIGTERM goes the way of Ctrl-C: one line, and the temporary file removed.
         previous = on_sigterm(terminate)
         try:
-            warnings.filterwarnings("ignore", category=FirstTouchWarning)  # said after the run
-            ds = simulate(params, options, progress=progress, labels=labels, protocol=protocol)
+            with warnings.catch_warnings():  # said after the run, in the flag's words
+                warnings.filterwarnings("ignore", category=FirstTouchWarning)
+                ds = simulate(params, options, progress=progress, labels=labels,
+                              protocol=protocol)
             try:
                 write_curve(ds, args.out)
             except OSError as exc:  # the disk filled up or the folder went away

@@ -63,9 +63,10 @@ def _simulate(smk, clock: CurveClock) -> None:
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
     text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
     protocol = None if text is None else parse_protocol(text)
-    warnings.filterwarnings("ignore", category=FirstTouchWarning)  # said below, as a key
-    curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
-                     protocol=protocol)
+    with warnings.catch_warnings():  # said below, in the config's words
+        warnings.filterwarnings("ignore", category=FirstTouchWarning)
+        curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
+                         protocol=protocol)
     orphaned()
     write_curve(curve, smk.output[0])
     mean, narrowest = (float(curve.attrs[f"{which}_radius_elements"])
