@@ -989,6 +989,12 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert cf_errors(files[1], tmp_path) == []
     sweep = build_sweep(files, keep_snapshots=[("regular", 4)])
     assert sweep.adhesive_force.dims[-3:] == ("roughness", "preload", "kbar_spread")
+    # the flat brush at preload 0 ran no approach: NaN, and the variable says why
+    energy = sweep.dissipated_energy_normalized.squeeze()
+    assert np.isnan(float(energy.sel(roughness=0.0, preload=0.0)))
+    assert float(energy.sel(roughness=0.0, preload=1.0)) > 0
+    assert "flat brush at preload 0" in energy.attrs["comment"]
+    assert "flat brush at preload 0" in sweep.pillars_in_contact_at_preload.attrs["comment"]
     write_sweep(sweep, tmp_path / "sweep.nc")
     assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
     flat = flat_slice(sweep)  # today's four dimensions, the flat case's numbers

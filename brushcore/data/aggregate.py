@@ -53,6 +53,10 @@ ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
 #: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are
 #: (some case is rough or a brush as made) or a protocol ran.
 ROUGH_SCALARS = ("dissipated_energy_normalized", "pillars_in_contact_at_preload")
+#: Why a ROUGH_SCALARS value is NaN where the variable has values elsewhere.
+FLAT_PULL_OFF_NAN = ("NaN for a flat brush at preload 0 without a protocol: it pulls off from "
+                     "full contact with no approach (every pillar in contact; its loop is the "
+                     "retraction alone, so its dissipated energy equals W)")
 #: The resolution dimension (elements per side n of the L x L square).
 GRID_DIM = "grid"
 SWEEP_DIMS = (*CASE_DIMS, GRID_DIM)
@@ -422,6 +426,8 @@ def build_sweep(
         data[name] = xr.DataArray(scalars[name], dims=dims, attrs=dict(first[name].attrs))
     for name in rough_scalars:
         attrs = next((dict(c[name].attrs) for _, c in curves.values() if name in c), {})
+        if any(name not in c for _, c in curves.values()):  # say why, or NaN reads as lost
+            attrs["comment"] = FLAT_PULL_OFF_NAN
         data[name] = xr.DataArray(scalars[name], dims=dims, attrs=attrs)
     for name, (units, long_name) in ATTRIBUTE_SCALARS.items():
         data[name] = xr.DataArray(
