@@ -555,9 +555,9 @@ _OUTPUTS = {
     "coefficient": ("coefficient C of {q} = f0 + C h^p, h = 1/n", False),
     "finest": ("{q} on the finest grid run", False),
     "spread": ("half range of {q} over the grids", False),
-    "gci": ("grid convergence index of the finest {q} (Roache; Fs 1.25 at a trusted "
-            "order, else 3 on the larger correction of the observed and the nearest "
-            "trusted order)", False),
+    "gci": ("grid convergence index of the finest {q}, absolute (Roache; Fs 1.25 at a "
+            "trusted order, else 3 on the larger correction of the observed and the nearest "
+            "trusted order; on three grids it is the error itself)", False),
     "n_grids": ("grids with a value of {q} (not NaN)", False),
     "safety_factor": ("safety factor Fs of the {q} error (1.25 at a trusted order, else 3)",
                       False),
