@@ -28,6 +28,10 @@ from brushcore.model.pillar_table import read_pillar_table, save_pillar_table
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import Waypoint
 from brushcore.validation import ParameterError
+from brushcore.model.provenance import version as _version
+
+#: The installed version (``brushcore --version`` adds the commit).
+__version__ = _version()
 
 __all__ = ["BrushParams", "FirstTouchWarning", "ParameterError", "SolverOptions", "Waypoint",
            "file_params", "generated_table", "read_curve", "read_pillar_table",

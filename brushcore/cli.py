@@ -135,11 +135,24 @@ class _DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
+class _Version(argparse.Action):
+    """``--version``: the version, the commit (a git call, so only when asked)
+    and the libraries the numbers pass through, as a curve file records them."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        from brushcore.model.provenance import git_commit, software_versions
+
+        print(f"brushcore {version()} (commit {git_commit()})\n{software_versions()}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation and tests)."""
     parser = _Parser(prog="brushcore", description=__doc__.splitlines()[0],
                      allow_abbrev=False)
-    parser.add_argument("--version", action="version", version=f"brushcore {version()}")
+    parser.add_argument("--version", action=_Version, nargs=0,
+                        help="show the version, commit and libraries, and exit")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     sim = sub.add_parser("simulate", help="pull one brush off and write its curve (netCDF)",
                          description="Pull one brush off and write its curve (netCDF). "

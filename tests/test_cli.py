@@ -31,6 +31,7 @@ def test_simulate_writes_a_complete_curve(tmp_path, capsys):
     ds = read_curve(out)
     assert ds.attrs["n_pillars"] == 4 and ds.attrs["kbar"] == 0.01
     assert ds.attrs["Conventions"] == "CF-1.10" and ds.attrs["git_commit"]
+    assert re.match(r"python \S+, numpy \S+, scipy \S+, pyfftw ", ds.attrs["software_versions"])
     for name in ("displacement", "force", "contact_area", "attached_pillars"):
         assert ds[name].dims == ("step",) and "units" in ds[name].attrs
     assert [p.name for p in tmp_path.iterdir()] == ["c.nc"]  # no temporary left behind
@@ -185,7 +186,14 @@ def test_negative_numbers_in_any_notation_are_values(tmp_path):
 
 def test_version_and_defaults_in_help():
     res = _cli("--version")
-    assert res.returncode == 0 and re.fullmatch(r"brushcore \S+\n", res.stdout), res
+    import brushcore
+    from brushcore.model.provenance import git_commit
+
+    # the version, the commit and the libraries, as a curve file records them
+    assert res.returncode == 0 and re.fullmatch(
+        rf"brushcore {re.escape(brushcore.__version__)} \(commit {re.escape(git_commit())}\)\n"
+        r"python \S+, numpy \S+, scipy \S+, pyfftw \S+.*xarray \S+, netCDF4 \S+\n",
+        res.stdout), res
     package = subprocess.run([sys.executable, "-m", "brushcore", "--version"],
                              capture_output=True, text=True, timeout=120)
     assert package.returncode == 0 and package.stdout == res.stdout, package

@@ -995,6 +995,12 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert float(energy.sel(roughness=0.0, preload=1.0)) > 0
     assert "flat brush at preload 0" in energy.attrs["comment"]
     assert "flat brush at preload 0" in sweep.pillars_in_contact_at_preload.attrs["comment"]
+    # every paper its curves cite, once; the libraries the curves ran on
+    from brushcore.model.curve import REFERENCES, ROUGH_REFERENCE
+    from brushcore.model.provenance import software_versions
+
+    assert sweep.attrs["references"] == f"{REFERENCES}; {ROUGH_REFERENCE}"
+    assert sweep.attrs["simulation_software_versions"] == software_versions()
     write_sweep(sweep, tmp_path / "sweep.nc")
     assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
     flat = flat_slice(sweep)  # today's four dimensions, the flat case's numbers

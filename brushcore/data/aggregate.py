@@ -656,17 +656,23 @@ def _provenance(
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
     commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
     versions = sorted({str(c.attrs.get("brushcore_version", "unknown")) for _, c in curves.values()})
+    software = sorted({str(c.attrs["software_versions"]) for _, c in curves.values()
+                       if "software_versions" in c.attrs})  # files written before: none
+    # every paper any curve cites, in the order first met (rough curves cite one more)
+    cited = [ref for _, c in curves.values()
+             for ref in str(c.attrs.get("references", "")).split("; ") if ref]
     now = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     return {
         "title": "brushcore sweep: adhesive pull-off of spring-mounted brushes",
         "Conventions": "CF-1.10",
-        "references": "He, Li & Popov, Lubricants 8 (2020) 94",
+        "references": "; ".join(dict.fromkeys(cited)) or "He, Li & Popov, Lubricants 8 (2020) 94",
         "history": f"{now} aggregated {len(files)} curve files by brushcore.data.aggregate",
         "date_created": now,
         "brushcore_version": provenance.version(),
         "git_commit": provenance.git_commit(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
+        **({"simulation_software_versions": "; ".join(software)} if software else {}),
         "grid": np.array(sorted({k.grid for k in curves}), dtype=np.int64),  # every grid run
         "phi": float(phi) if phi is not None else math.nan,
         "source_files": "\n".join(files),

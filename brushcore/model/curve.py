@@ -21,7 +21,7 @@ from brushcore.model.labelmap import count_touching_pairs, pillar_element_counts
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap, smallest_radius_elements
 from brushcore.model.params import BrushParams
-from brushcore.model.provenance import git_commit, parameter_hash, version
+from brushcore.model.provenance import git_commit, parameter_hash, software_versions, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
                                    single_transforms, spring_options, stiffness_span)
@@ -206,6 +206,7 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),
         "git_commit": git_commit(),
+        "software_versions": software_versions(),
         "parameter_hash": parameter_hash(params.as_attrs(), asdict(options), *hashed),
         "Conventions": "CF-1.10",
         "title": title,
@@ -347,6 +348,8 @@ def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
 #: The papers every curve file cites.
 REFERENCES = ("He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
               "Facta Univ. Mech. Eng. 13 (2015) 3")
+#: What a rough, graded or preloaded curve cites besides (DESIGN.md's follow-up work).
+ROUGH_REFERENCE = "He, Li & Popov, J. Adhesion (2021), doi:10.1080/00218464.2021.1939017"
 
 
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
@@ -586,7 +589,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                        steps=int(d.size), applications=applications,
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Approach, preload and pull-off of a rough, graded pillar brush",
-                       references=f"{REFERENCES}; He, Li & Popov, J. Adhesion (2021)",
+                       references=f"{REFERENCES}; {ROUGH_REFERENCE}",
                        preconditioner=op.preconditioner,
                        hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
     attrs.update({

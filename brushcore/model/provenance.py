@@ -34,6 +34,26 @@ def git_commit() -> str:
     return sha + ("+dirty" if dirty else "")
 
 
+#: The libraries a curve's numbers pass through (MKL's FFT and spmv where installed).
+SOFTWARE = ("numpy", "scipy", "pyfftw", "mkl_fft", "mkl", "xarray", "netCDF4", "cupy")
+
+
+@lru_cache(maxsize=1)
+def software_versions() -> str:
+    """Python's and the installed `SOFTWARE` packages' versions, as
+    "python 3.11.7, numpy 1.26.4, ..." (packages not installed are left out),
+    for a methods section."""
+    import platform
+
+    found = [f"python {platform.python_version()}"]
+    for name in SOFTWARE:
+        try:
+            found.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            continue
+    return ", ".join(found)
+
+
 def parameter_hash(*parts: dict) -> str:
     """Short stable hash of parameter dictionaries (sorted JSON, SHA-256)."""
     text = json.dumps(parts, sort_keys=True, default=repr)
