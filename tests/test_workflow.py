@@ -892,3 +892,22 @@ def test_rough_figures_pick_the_brush_with_the_axis_they_draw() -> None:
     config["roughness"] = [0.0, 0.3]
     assert scope["rough_brush"](config) == ("regular", 16)
     assert scope["rough_brush"](config, axes=False) == ("file_mine", 9)
+
+
+def test_a_jobs_log_says_what_the_command_says_of_its_curve() -> None:
+    """The log names touching pillars (random 16 on 64^2, seed 0: 3 pairs) and
+    how far a first-touch approach pressed, in the config's words."""
+    import warnings
+
+    from brushcore import BrushParams, FirstTouchWarning, simulate
+    from brushcore.data.simulate_job import log_lines
+
+    lines = log_lines(simulate(BrushParams("random", 16, 1.0, 64)))
+    assert lines[0].startswith("F_ad = ") and "phi realised" in lines[0]
+    assert lines[1].startswith("3 pillar pairs share an element edge"), lines
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FirstTouchWarning)
+        rough = simulate(BrushParams("regular", 16, 0.01, 64, roughness=0.3))
+    assert log_lines(rough)[-1] == (
+        "1 of 16 pillars in contact at the first touch (preload 0 stops the approach there; "
+        "add a load to the config's 'preload' list to press the brush on)")

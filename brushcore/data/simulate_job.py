@@ -25,8 +25,7 @@ def run_job(smk) -> None:
 def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
     from brushcore import BrushParams, SolverOptions, simulate
-    from brushcore.model.curve import FirstTouchWarning, preload_contact
-    from brushcore.model.layout import pillars_differ
+    from brushcore.model.curve import FirstTouchWarning
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.model.inputs import parse_protocol, with_input_files
@@ -69,18 +68,35 @@ def _simulate(smk, clock: CurveClock) -> None:
                          protocol=protocol)
     orphaned()
     write_curve(curve, smk.output[0])
+    for line in log_lines(curve):
+        print(line)
+
+
+def log_lines(curve) -> list[str]:
+    """What a job's log says of its curve: F_ad, W, events and time, the
+    resolution, touching pillars (as the command says them) and how far an
+    approach pressed, in the config's words."""
+    from brushcore.model.curve import preload_contact
+    from brushcore.model.layout import pillars_differ
+
     mean, narrowest = (float(curve.attrs[f"{which}_radius_elements"])
                        for which in ("pillar", "smallest"))
-    print(
+    lines = [
         f"F_ad = {float(curve['adhesive_force_normalized']):.6g}, "
         f"W = {float(curve['work_of_separation_normalized']):.6g} (normalised), "
-        f"{curve.attrs.get('events')} events, {curve.attrs.get('wall_time_s', float('nan')):.3g} s; "
-        f"pillar radius {curve.attrs['pillar_radius_elements']:.3g} elements"
+        f"{curve.attrs.get('events')} events, "
+        f"{curve.attrs.get('wall_time_s', float('nan')):.3g} s; "
+        f"pillar radius {mean:.3g} elements"
         + (f" (the narrowest {narrowest:.3g})" if pillars_differ(narrowest, mean) else "")
-        + ", "
-        f"phi realised {curve.attrs['phi_actual']:.4g}"
-    )
+        + f", phi realised {curve.attrs['phi_actual']:.4g}"
+    ]
+    touching = int(curve.attrs.get("touching_pillar_pairs", 0))
+    if touching:  # random discs on grids coarser than 512
+        lines.append(f"{touching} pillar pair{'s' * (touching != 1)} share"
+                     f"{'s' * (touching == 1)} an element edge (their gap is under an element "
+                     "on this grid; a finer grid separates them)")
     pressed = preload_contact(curve, "preload", "add a load to the config's 'preload' list "
                                                 "to press the brush on")
     if pressed:
-        print(pressed)
+        lines.append(pressed)
+    return lines
