@@ -686,7 +686,7 @@ def test_summary_gives_the_seed_count_and_a_t_interval():
                                "seed": [0, 1, 2]})
     note = seed_note(sweep, "adhesive_force_normalized", "random", 64, 1e-4)
     sd = np.std(f, ddof=1)
-    assert f"SD {sd:.2g}" in note and "mean of 3 seeds" in note
+    assert f"SD {sd:.2g}" in note and f"mean of 3 seeds {f.mean():.4g}," in note
     assert f"+- {4.3027 * sd / math.sqrt(3):.2g}" in note
     sweep["adhesive_force_normalized"][0, 0, 0, 2] = np.nan
     assert "(1 of 3 seeds missing)" in seed_note(sweep, "adhesive_force_normalized",

@@ -52,7 +52,7 @@ def seed_mean(sweep: xr.Dataset, name: str, layout: str, n_pillars: int) -> xr.D
 def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> str:
     """How many seeds a random brush's seed mean rests on, and their scatter,
     as a note: "" for a sweep of one seed or another layout; else "F_ad mean
-    of k seeds, SD s, 95 % t-interval +- t s / sqrt(k)" (sample SD,
+    of k seeds m, SD s, 95 % t-interval of that mean +- t s / sqrt(k)" (sample SD,
     Student's t with k - 1 degrees of freedom: 4.30 for three seeds, not
     1.96), saying when seeds are missing."""
     if sweep.sizes.get("seed", 1) < 2 or layout != "random" or layout not in sweep.layout:
@@ -69,8 +69,9 @@ def seed_note(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: f
         return f"; F_ad of {k} seed{missing}"
     sd = float(np.std(values, ddof=1))
     half = float(stats.t.ppf(0.975, k - 1)) * sd / math.sqrt(k)
-    return (f"; F_ad mean of {k} seeds, SD {_fmt(sd, 2)}, 95 % t-interval +- {_fmt(half, 2)}"
-            + missing)
+    # the mean itself: a row whose value is N^1/4 / F_ad shows a different number
+    return (f"; F_ad mean of {k} seeds {_fmt(float(values.mean()), 4)}, SD {_fmt(sd, 2)}, "
+            f"95 % t-interval of that mean +- {_fmt(half, 2)}" + missing)
 
 
 def value_at(sweep: xr.Dataset, name: str, layout: str, n_pillars: int, kbar: float) -> float:
