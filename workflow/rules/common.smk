@@ -20,6 +20,7 @@ from brushcore.model.inputs import (
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams, ParameterError
 from brushcore.model.layout import build_labels, grid_hint
+from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.model.shapes import parse_shape_label, shape_label
@@ -412,6 +413,7 @@ def check_cases(config, main=True):
             ) from None
     if main:  # a plan that stands: what it leaves out
         _warn_two_grids(config)
+        _warn_coarse_study(config, makes)
 
 
 def _also_refused(makes, refused):
@@ -717,6 +719,37 @@ def _warn_two_grids(config):
         logger.warning(
             f"config: N = {two} run on two grids each; the convergence study "
             "(results/convergence.*) needs three or more, so none is made"
+        )
+
+
+def _warn_coarse_study(config, makes):
+    """Warn where a brush of the refinement study starts on a grid that gives
+    its narrowest pillar under `UNDER_RESOLVED_RADIUS` elements a radius: the
+    study flags those fits coarsest_under_resolved, known before any job."""
+    if not wants_convergence(config):
+        return
+    coarse = {}
+    for key, make in makes.items():
+        n, grid = key[1], key[3]
+        grids = case_grids(config, n)
+        if len(grids) < 3 or grid != min(grids):
+            continue
+        radius = make(grid).narrowest_radius_elements
+        if radius < UNDER_RESOLVED_RADIUS and radius < coarse.get(n, (math.inf,))[0]:
+            coarse[n] = (radius, grid)
+    if coarse:
+        need = {
+            n: math.ceil(g * UNDER_RESOLVED_RADIUS / r) for n, (r, g) in coarse.items()
+        }
+        text = "; ".join(
+            f"N = {n} on {g}: {r:.2g} elements, {need[n]} resolves it"
+            for n, (r, g) in sorted(coarse.items())
+        )
+        logger.warning(
+            f"config: the convergence study's coarsest grid gives pillars a radius under "
+            f"{UNDER_RESOLVED_RADIUS:g} elements ({text}): their fits will be flagged "
+            "coarsest_under_resolved, as they rest on a grid whose own mesh error is a few "
+            "per cent"
         )
 
 
