@@ -995,6 +995,12 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert float(energy.sel(roughness=0.0, preload=1.0)) > 0
     assert "flat brush at preload 0" in energy.attrs["comment"]
     assert "flat brush at preload 0" in sweep.pillars_in_contact_at_preload.attrs["comment"]
+    # the height scatter the seed drew, beside the S asked for; 0 for the flat brushes
+    sd = sweep.pillar_height_sd_normalized.squeeze()
+    drawn = xr.open_dataset(files[1]).pillar_height_normalized.values
+    assert float(sd.sel(roughness=0.2, preload=1.0)) == pytest.approx(np.std(drawn), rel=1e-12)
+    assert float(sd.sel(roughness=0.0, preload=0.0)) == 0.0
+    assert float(sd.sel(roughness=0.0, preload=1.0)) == 0.0
     # every paper its curves cite, once; the libraries the curves ran on
     from brushcore.model.curve import REFERENCES, ROUGH_REFERENCE
     from brushcore.model.provenance import software_versions

@@ -53,6 +53,8 @@ ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
 #: Scalars of rough runs, NaN for flat curve files, kept when ROUGH_DIMS are
 #: (some case is rough or a brush as made) or a protocol ran.
 ROUGH_SCALARS = ("dissipated_energy_normalized", "pillars_in_contact_at_preload")
+#: The realised height scatter of each case (`realised_height_sd`), beside ROUGH_SCALARS.
+HEIGHT_SD = "pillar_height_sd_normalized"
 #: Why a ROUGH_SCALARS value is NaN where the variable has values elsewhere.
 FLAT_PULL_OFF_NAN = ("NaN for a flat brush at preload 0 without a protocol: it pulls off from "
                      "full contact with no approach (every pillar in contact; its loop is the "
@@ -407,11 +409,14 @@ def build_sweep(
     scalars["n_steps"] = np.full(shape, np.nan)
     lines = {name: np.full((*shape, n_steps), np.nan) for name in CURVE_VARIABLES}
     pulls = {name: np.full((*shape, n_pulls), np.nan) for name in pull_names}
+    heights_sd = np.full(shape, np.nan) if rough_scalars else None
     for key, (_, curve) in curves.items():
         at = _index(coords, key, dims)
         for name in (*SCALAR_VARIABLES, *rough_scalars):
             if name in curve:
                 scalars[name][at] = float(curve[name])
+        if heights_sd is not None:  # what a seed drew: S is only its expectation
+            heights_sd[at] = realised_height_sd(curve)
         for name in ATTRIBUTE_SCALARS:
             scalars[name][at] = _attribute(curve, name)
         scalars["n_steps"][at] = curve.sizes["step"]
@@ -429,6 +434,10 @@ def build_sweep(
         if any(name not in c for _, c in curves.values()):  # say why, or NaN reads as lost
             attrs["comment"] = FLAT_PULL_OFF_NAN
         data[name] = xr.DataArray(scalars[name], dims=dims, attrs=attrs)
+    if heights_sd is not None:
+        data[HEIGHT_SD] = xr.DataArray(heights_sd, dims=dims, attrs={
+            "units": "1", "long_name": "standard deviation of the brush's pillar heights / d_K "
+                                       "as drawn or given (population SD; 0 for a flat brush)"})
     for name, (units, long_name) in ATTRIBUTE_SCALARS.items():
         data[name] = xr.DataArray(
             scalars[name], dims=dims, attrs={"units": units, "long_name": long_name}
@@ -461,6 +470,15 @@ def build_sweep(
                                  else "; ".join(sorted(values)))
     return mark_element_units(sweep.assign({**_varying_settings(curves, coords, dims),
                                             **_given_inputs(given, coords, dims)}))
+
+
+def realised_height_sd(curve: xr.Dataset) -> float:
+    """Population standard deviation of a curve's pillar heights [d_K]: what
+    its seed drew (16 pillars at S = 0.3: 0.370 and 0.157 for seeds 0 and 1)
+    or what it was given; 0 for a flat pull-off, whose file has no heights."""
+    if "pillar_height_normalized" not in curve:
+        return 0.0
+    return float(np.std(np.asarray(curve["pillar_height_normalized"].values, dtype=float)))
 
 
 def given_inputs(curve: xr.Dataset) -> str:
