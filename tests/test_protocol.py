@@ -1001,6 +1001,12 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert float(sd.sel(roughness=0.2, preload=1.0)) == pytest.approx(np.std(drawn), rel=1e-12)
     assert float(sd.sel(roughness=0.0, preload=0.0)) == 0.0
     assert float(sd.sel(roughness=0.0, preload=1.0)) == 0.0
+    # d at F_ad in d_K, the curve's own normalised d at its largest force
+    flat_curve = xr.open_dataset(files[0])
+    d_ad = flat_curve.displacement_normalized.values[int(np.argmax(flat_curve.force.values))]
+    at = sweep.squeeze().sel(roughness=0.0, preload=0.0)
+    assert float(at.displacement_at_adhesive_force_normalized) == pytest.approx(d_ad, rel=1e-12)
+    assert float(at.force_unit_F_K) == flat_curve.attrs["force_unit_F_K"]
     # every paper its curves cite, once; the libraries the curves ran on
     from brushcore.model.curve import REFERENCES, ROUGH_REFERENCE
     from brushcore.model.provenance import software_versions

@@ -83,6 +83,9 @@ ATTRIBUTE_SCALARS = {
     "smallest_radius_elements": ("1", "the narrowest pillar's radius / h (an ellipse's "
                                       "semi-minor axis, a table's or map's smallest pillar)"),
     "touching_pillar_pairs": ("1", "pillar pairs whose footprints share an element edge"),
+    # the normalisation's units per case (A is the case's own): F = F_bar F_K, d = d_bar d_K
+    "force_unit_F_K": ("N", "Kendall's force F_K of the compact punch of area A"),
+    "displacement_unit_d_K": ("m", "Kendall's displacement d_K of the compact punch of area A"),
 }
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
 SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols",
@@ -442,6 +445,9 @@ def build_sweep(
         data[name] = xr.DataArray(
             scalars[name], dims=dims, attrs={"units": units, "long_name": long_name}
         )
+    data["displacement_at_adhesive_force_normalized"] = xr.DataArray(
+        scalars["displacement_at_adhesive_force"] / scalars["displacement_unit_d_K"],
+        dims=dims, attrs={"units": "1", "long_name": "d at the adhesive force / d_K"})
     data["n_steps"] = xr.DataArray(
         scalars["n_steps"], dims=dims,
         attrs={"units": "1", "long_name": "valid entries along step (rest is NaN padding)"},
