@@ -112,6 +112,11 @@ def test_sweep_dataset(test_run: Path, test_config: dict) -> None:
             assert sweep[name].dims == (*CASE_DIMS, "step"), f"{name}: {sweep[name].dims}"
         for attr in ("brushcore_version", "git_commit", "source_files", "date_created", "Conventions"):
             assert attr in sweep.attrs, f"sweep.nc lacks provenance attribute {attr}"
+        # the config that made it, after every --configfile: the test config over the default
+        made_by = yaml.safe_load(sweep.attrs["workflow_config"])
+        assert made_by["grid"] == test_config["grid"] and made_by["kbar"] == test_config["kbar"]
+        default = yaml.safe_load((test_run / "config/config.yaml").read_text())["solver"]
+        assert default.items() <= made_by["solver"].items()  # with the schema's defaults
 
         cases = expected_cases(test_config)
         assert set(sweep.layout.values) == {c[0] for c in cases}

@@ -13,6 +13,7 @@ def main(smk) -> None:
         list(smk.input), keep_snapshots=[tuple(k) for k in smk.params.keep_snapshots],
         expected=expected,
     )
+    sweep.attrs["workflow_config"] = smk.params.config_yaml  # the methods section's input
     write_sweep(sweep, smk.output[0])
     print(sweep)
     # (rtol may differ by design: large loads tighten it, see solve.load_options)
