@@ -14,7 +14,6 @@ rule aggregate:
     params:
         keep_snapshots=snapshot_brushes(config),
         cases=[named_case(case) for case in sweep_cases(config)],  # as curve_files lists them
-        config_yaml=config_text(config),  # recorded in sweep.nc: which config made it
     script:
         "../scripts/aggregate.py"
 

@@ -753,12 +753,6 @@ def _warn_coarse_study(config, makes):
         )
 
 
-def config_text(config):
-    """The sweep's config after every --configfile and --config, as YAML
-    (sweep.nc's attribute ``workflow_config``)."""
-    return yaml.safe_dump(dict(config), sort_keys=True)
-
-
 def wants_convergence(config):
     """True when some brush runs on three or more grids: the refinement study is made."""
     return any(len(case_grids(config, n)) >= 3 for n in sweep_brushes(config))

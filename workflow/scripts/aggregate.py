@@ -2,6 +2,8 @@
 
 import sys
 
+import yaml
+
 from brushcore.data.aggregate import AggregationError, CaseKey, build_sweep, write_sweep
 from brushcore.data.joblog import logged
 
@@ -13,7 +15,9 @@ def main(smk) -> None:
         list(smk.input), keep_snapshots=[tuple(k) for k in smk.params.keep_snapshots],
         expected=expected,
     )
-    sweep.attrs["workflow_config"] = smk.params.config_yaml  # the methods section's input
+    # The config that made it, for a methods section; read here, not as a param,
+    # so that keys that change no curve (threads, backend) rerun nothing.
+    sweep.attrs["workflow_config"] = yaml.safe_dump(dict(smk.config), sort_keys=True)
     write_sweep(sweep, smk.output[0])
     print(sweep)
     # (rtol may differ by design: large loads tighten it, see solve.load_options)
