@@ -363,6 +363,9 @@ def test_table_flags_grids_run_with_different_solver_settings():
     rtol.loc[dict(n_pillars=64, kbar=1e-6, grid=256)] = "0.001"  # one grid run coarser
     rtol.loc[dict(n_pillars=256, kbar=1e-6, grid=1024)] = "0.001"  # that grid not run
     rtol.loc[dict(n_pillars=64, kbar=np.inf)] = "1e-05"  # the whole case: one setting
+    # a protocol's rtol scaled by a stiffness span that moves a little with the grid
+    rtol.loc[dict(n_pillars=256, kbar=np.inf)] = ["9.8996e-05", "9.8934e-05", "9.9084e-05",
+                                                  "9.9e-05"]
     cascade = xr.full_like(rtol, "local", dtype=object)
     cascade.loc[dict(n_pillars=64, kbar=1e-6, grid=128)] = "global"
     conv = extrapolate_sweep(sweep.assign(run_rtol=rtol.astype(str),
@@ -386,7 +389,7 @@ def test_table_flags_grids_run_with_different_solver_settings():
 def test_an_order_outside_the_trusted_range_is_flagged_where_nothing_else_explains_fs_3():
     """p = 2 (plausible, not trusted): Fs 3 and untrusted_order; p = 1 and
     p = 0.5 (trusted): neither; p = 0.2, a poor fit, has no error and no
-    such flag."""
+    such flag; nor has a non-monotone fit, whose flag says why its Fs is 3."""
     grids = np.array([128, 256, 512])
     h = 1.0 / grids
     fad = np.stack([law(h, 2.0, f0=1.5), law(h, 1.0, f0=1.5), law(h, 0.5, f0=1.5),
@@ -407,6 +410,30 @@ def test_an_order_outside_the_trusted_range_is_flagged_where_nothing_else_explai
     assert flags[(64, "F_ad")] == "untrusted_order"
     assert flags[(256, "F_ad")] == ""
     assert flags[(2304, "F_ad")] == "poor_fit"
+    four = xr.Dataset(
+        {q: (("n_pillars", "grid"), [[1.0, 1.3, 1.29, 1.4]], {"units": "1"})
+         for q in ("adhesive_force_normalized", "work_of_separation_normalized")},
+        coords={"n_pillars": [64], "grid": [128, 256, 512, 1024]}, attrs={"phi": 0.12})
+    wavy = extrapolate_sweep(four).isel(n_pillars=0)
+    assert int(wavy[f"{q}_non_monotone"]) == 1 and np.isfinite(float(wavy[f"{q}_order"]))
+    assert not opts_trusts(float(wavy[f"{q}_order"]))
+    assert int(wavy[f"{q}_untrusted_order"]) == 0
+
+
+def opts_trusts(order: float) -> bool:
+    from brushcore.data.convergence import ConvergenceOptions
+
+    return bool(ConvergenceOptions().trusts(order))
+
+
+def test_settings_differ_by_more_than_a_factor_of_two_or_in_kind():
+    from brushcore.data.convergence import settings_differ
+
+    assert not settings_differ(["9.8996e-05", "9.9084e-05"])
+    assert settings_differ(["0.0001", "0.001"])
+    assert settings_differ(["0.0", "0.01"])  # lookahead off and on
+    assert settings_differ(["local", "global"]) and settings_differ(["True", "False"])
+    assert not settings_differ(["inf", "inf"]) and not settings_differ(["local"])
 
 
 def test_sweep_uses_recorded_radius_and_needs_grid():

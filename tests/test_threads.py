@@ -31,6 +31,32 @@ def test_stacked_matmul_gives_the_same_bits_on_any_thread_count(dtype):
             assert got.dtype == one.dtype and np.array_equal(got, one), (n_items, threads)
 
 
+@pytest.mark.parametrize("m", [8, 64, 70])
+def test_products_over_the_live_pillars_are_the_whole_products(m):
+    """Skipping the pillars that have let go (zero blocks) gives the whole
+    stack's product bit for bit, on any thread count and however the live
+    pillars are split into runs; small blocks take the whole product."""
+    from brushcore.numerics.linear.precondition import RUNS_MIN_BLOCK, _live_runs
+
+    rng = np.random.default_rng(m)
+    for trial in range(40):
+        n = int(rng.integers(1, 30))
+        a = rng.normal(size=(n, m, m)).astype(np.float32 if trial % 2 else np.float64)
+        remaining = rng.integers(0, 3, size=n) * (rng.random(n) < rng.random())
+        a[remaining == 0] = 0.0
+        b = rng.normal(size=(n, m, 1)).astype(a.dtype)
+        runs = _live_runs(a, remaining)
+        if m < RUNS_MIN_BLOCK or remaining.all():
+            assert runs is None
+        else:
+            covered = np.zeros(n, dtype=int)
+            for start, stop in runs:
+                covered[start:stop] += 1
+            assert np.array_equal(covered, (remaining > 0).astype(int)), (runs, remaining)
+        for threads in (1, 2, 3):
+            assert np.array_equal(stacked_matmul(a, b, threads, runs), np.matmul(a, b))
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_packed_products_are_scipys_spmv_on_any_thread_count(dtype):
     """The packed blocks' products through SciPy's exported BLAS pointer

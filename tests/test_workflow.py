@@ -384,6 +384,8 @@ def test_snakefmt_clean() -> None:
         ({"grid": [32, 48, 256, 24], "regular": [256]},
          r"config: grid = 24 is invalid .*\(case regular N = 16, grid = 24, phi = 0.12\); "
          r"grid = \[32, 48\] refuse it too"),
+        ({"grid_by_n": [{"n_pillars": 16, "grid": [16, 24, 256]}]},
+         r"config: grid_by_n.grid = 16 is invalid .*; grid_by_n.grid = \[24\] refuses it too"),
         # allow_coarse already on: no "or allow_coarse to run it anyway" (it was hinted twice)
         ({"grid": 8, "allow_coarse": True},
          r"allowed grid 15, the next .*0\.12 asked for\) \(case regular N = 16, grid = 8"),

@@ -64,6 +64,10 @@ Method
   apart ever faster, monotone with no positive order: the fit rests on the
   coarse grids; the value is kept, with Fs = 3; an oscillating fine end is
   ``non_monotone``).
+  `extrapolate_sweep` adds ``untrusted_order`` (an order outside
+  ``trusted_order`` where no other flag is raised: Fs 3 for that alone)
+  and, per case, ``mixed_settings`` (the accuracy settings its grids' curves
+  ran with differently, `mixed_settings`).
   Where a flag makes (1) meaningless, f0 and the error are NaN; the order
   that was observed is kept (negative when the differences grow under
   refinement, on three grids), NaN when none was (oscillation, no root
@@ -187,9 +191,31 @@ def phi_varies(phi: np.ndarray) -> bool:
     return phi_spread(phi) > PHI_SPREAD_FLAG
 
 
+#: Numeric settings within this factor of each other count as one: a protocol's
+#: rtol is scaled per curve by its pillars' stiffness span, which moves a
+#: little with the grid (9.89e-5 to 9.91e-5 over 128-256^2 for one brush).
+SETTINGS_FACTOR = 2.0
+
+
+def settings_differ(values: Sequence[str]) -> bool:
+    """Whether recorded setting values (text) differ: numbers by more than
+    `SETTINGS_FACTOR` (or in sign, or one of them 0), anything else at all."""
+    if len(set(values)) < 2:
+        return False
+    try:
+        numbers = np.array([float(v) for v in values])
+    except ValueError:
+        return True  # text ("local", "global"), or a bool's "True"/"False"
+    low, high = np.abs(numbers).min(), np.abs(numbers).max()
+    if low == 0 or np.any(np.sign(numbers) != np.sign(numbers[0])):
+        return bool(high > 0)
+    return bool(high / low > SETTINGS_FACTOR)
+
+
 def mixed_settings(sweep: xr.Dataset, values: xr.DataArray) -> xr.DataArray | None:
     """Per case, the `ACCURACY_SETTINGS` whose recorded values differ between
-    the grids where ``values`` is finite, space-separated ("" where none do).
+    the grids where ``values`` is finite (`settings_differ`), space-separated
+    ("" where none do).
 
     Parameters
     ----------
@@ -212,7 +238,7 @@ def mixed_settings(sweep: xr.Dataset, values: xr.DataArray) -> xr.DataArray | No
     for name in names:
         text = sweep[f"run_{name}"].broadcast_like(values).transpose(*cases, GRID_DIM).values
         rows = text.reshape(-1, text.shape[-1])
-        differ.append([len({str(v) for v, r in zip(row, run) if r}) > 1
+        differ.append([settings_differ([str(v) for v, r in zip(row, run) if r])
                        for row, run in zip(rows, ran.reshape(rows.shape))])
     out = [" ".join(n for n, d in zip(names, differ) if d[i]) for i in range(len(differ[0]))]
     case = values.isel({GRID_DIM: 0}, drop=True).transpose(*cases)
@@ -261,6 +287,14 @@ class ConvergenceOptions:
     max_relative_residual: float = 0.1
     order_bounds: tuple[float, float] = (0.02, 12.0)
     flat_rtol: float = 1e-12
+
+    def trusts(self, order: float | np.ndarray) -> np.ndarray:
+        """Whether observed orders lie in `trusted_order` (its low end observed
+        to rounding counts: p = 0.5 on exact data), elementwise; NaN is not."""
+        low, high = self.trusted_order
+        order = np.asarray(order, dtype=float)
+        with np.errstate(invalid="ignore"):
+            return (low * (1 - 1e-9) <= order) & (order <= high)
 
     def __post_init__(self) -> None:
         normalise(self, ("min_grids",), ("safety_factor", "scattered_safety_factor",
@@ -498,8 +532,8 @@ def extrapolate(
     lo, hi = opts.order_range
     scale = float(f.max() - f.min())
     poor = not (lo < p <= hi) or resid > opts.max_relative_residual * scale
+    trusted = bool(opts.trusts(p))
     t_lo, t_hi = opts.trusted_order
-    trusted = t_lo * (1 - 1e-9) <= p <= t_hi  # p = 0.5 observed to rounding counts
     orders = (p,) if trusted else (p, min(max(p, t_lo), t_hi))
     fs = (opts.safety_factor if trusted and monotone and not fine_end
           else opts.scattered_safety_factor)
@@ -663,15 +697,16 @@ def extrapolate_sweep(
             else:
                 attrs["units"] = units  # h = 1/n is dimensionless, so C has q's units
             out[f"{q}_{suffix}"] = da.assign_attrs(attrs)
-        # Fs 3 for an order outside the trusted range alone (poor fits have no
-        # error, and the other flags name their own cause)
+        # The scattered safety factor for an untrusted order alone: poor fits
+        # have no error, and the other flags name their own cause.
         order = out[f"{q}_order"]
-        t_lo, t_hi = opts.trusted_order
-        untrusted = (np.isfinite(order) & (out[f"{q}_poor_fit"] == 0)
-                     & ~((order >= t_lo * (1 - 1e-9)) & (order <= t_hi)))
+        others = sum(out[f"{q}_{f}"] for f in ("poor_fit", "non_monotone", "not_asymptotic"))
+        trusted = order.copy(data=opts.trusts(order.values))
+        untrusted = np.isfinite(order) & (others == 0) & ~trusted
         out[f"{q}_{ORDER_FLAG}"] = untrusted.astype(np.int8).assign_attrs(
-            long_name=f"observed order of {q} outside the trusted range, so its error "
-                      "carries Fs 3 (1 = yes)", units="1",
+            long_name=f"observed order of {q} outside the trusted range "
+                      f"{list(opts.trusted_order)} and no other flag raised, so its error "
+                      f"carries Fs {opts.scattered_safety_factor:g} (1 = yes)", units="1",
             flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="no yes")
         out[q] = raw.copy()
         # {q}_finest comes from here: NaN on a grid where the other quantity

@@ -126,9 +126,11 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "brushes, not one refined (only allow_coarse lets a grid's phi be more "
               "than 5 % off): the fit is no h -> 0 limit of one brush; "
               "untrusted_order: the observed order lies outside "
-              f"{conv.attrs.get('trusted_order', 'the trusted range')}, so the "
-              "error carries Fs 3; mixed_settings(rtol+...): the grids' curves ran "
-              "with different solver settings among "
+              f"{conv.attrs.get('trusted_order', 'the trusted range')} and no other flag "
+              "is raised, so the error carries Fs "
+              f"{conv.attrs.get('scattered_safety_factor', 3):g} for that alone; "
+              "mixed_settings(rtol+...): the grids' curves ran with different solver "
+              "settings (numbers more than 2x apart) among "
               f"{', '.join(ACCURACY_SETTINGS)} (sweep.nc's run_* give the values), so "
               "their solver errors differ and mix into the fit.\n\n")
     Path(md_path).write_text(header + to_markdown(table))

@@ -408,7 +408,9 @@ def check_cases(config, main=True):
             )
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
-                + _also_refused(makes, (layout, n, seed, grid, phi, rough, shape))
+                + _also_refused(
+                    makes, (layout, n, seed, grid, phi, rough, shape), keys["grid"]
+                )
                 + _inherited_note(config, layout, only_fig5)
             ) from None
     if main:  # a plan that stands: what it leaves out
@@ -416,20 +418,23 @@ def check_cases(config, main=True):
         _warn_coarse_study(config, makes)
 
 
-def _also_refused(makes, refused):
+def _also_refused(makes, refused, key):
     """The other grids of a refused brush that refuse it too, as a clause of
-    its error: one edit of a grid list fixes them all, not one per run."""
+    its error in the config's words (``key``: grid or grid_by_n.grid), so
+    that one edit of its grid list deals with them all, not one per run."""
     brush = refused[:3] + refused[4:]  # all but the grid
     more = []
-    for key, make in makes.items():
-        if key[:3] + key[4:] != brush or key[3] == refused[3]:
+    for case, make in makes.items():
+        if case[:3] + case[4:] != brush or case[3] == refused[3]:
             continue
-        g2 = key[3]
+        g2 = case[3]
         try:
             build_labels(make(g2))
         except ParameterError:
             more.append(g2)
-    return f"; grid = {sorted(more)} refuse it too" if more else ""
+    if not more:
+        return ""
+    return f"; {key} = {sorted(more)} refuse{'s' * (len(more) == 1)} it too"
 
 
 def _warn_first_touch(config, brushes):
