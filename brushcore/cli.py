@@ -372,7 +372,8 @@ def _missing_flags(args: argparse.Namespace) -> str:
     if args.layout == "file":
         if args.layout_file is None:
             parts.append("--layout-file is required for --layout file")
-        elif is_table(args.layout_file) and "grid" not in getattr(args, "given", set()):
+        elif (is_table(args.layout_file) and "grid" not in getattr(args, "given", set())
+              and Path(args.layout_file).is_file()):  # a missing file: its own error first
             parts.append("--grid is required for a pillar table (.csv): it is drawn on any "
                          "grid")
     else:

@@ -179,6 +179,11 @@ def test_the_cli_runs_a_table_on_the_grid_it_is_given(tmp_path: Path) -> None:
                              text=True)
     assert missing.returncode == 2
     assert "--grid is required for a pillar table" in missing.stderr
+    # a table that is not there: that first, not a --grid it could not use
+    absent = [a if a != str(path) else str(tmp_path / "none.csv") for a in cli]
+    gone = subprocess.run(absent + ["--out", str(tmp_path / "c.nc")], capture_output=True,
+                          text=True)
+    assert gone.returncode == 2 and "none.csv is invalid (no such file)" in gone.stderr
     done = subprocess.run(cli + ["--grid", "48", "--out", str(tmp_path / "b.nc")],
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
