@@ -700,3 +700,30 @@ def test_paper_figures_of_a_rough_only_sweep_say_no_flat_runs() -> None:
                        (figures.fig8, "no flat regular runs"), (figures.fig7, "no flat runs")):
         texts = [t.get_text() for ax in draw(sweep).axes for t in ax.texts]
         assert said in texts, (draw.__name__, texts)
+
+
+def test_a_coarse_study_is_said_by_the_narrowest_disc_and_only_where_refined(
+        repo_copy: Path, tmp_path: Path) -> None:  # noqa: F811
+    """Planning warns by the pillar the study's flags read: a table's smallest
+    disc (radius 0.05 L: 2.4 elements on 48^2, where the mean radius has 4.4),
+    and never for a label map, which runs on its own grid only."""
+    from brushcore.model.pillar_table import PillarTable, save_pillar_table
+
+    (repo_copy / "arrays").mkdir(exist_ok=True)
+    save_pillar_table(PillarTable(np.array([[0.25, 0.25], [0.25, 0.75], [0.75, 0.25],
+                                            [0.75, 0.75]]),
+                                  np.array([0.1, 0.1, 0.1, 0.05])),
+                      repo_copy / "arrays" / "small_disc")
+    _own_array(repo_copy)
+    config = tmp_path / "coarse.yaml"
+    config.write_text(yaml.safe_dump({
+        "regular": [], "random": [], "kbar": [0.01], "grid": [48, 64, 96],
+        "layout_files": ["arrays/small_disc.csv", "arrays/my_array.npy"],
+        "fig5": {"kbar": []}}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config))
+    text = output(proc)
+    assert proc.returncode == 0, text
+    assert re.search(r"radius under 4 elements, .*\(N = 4 on 48: 2\.4 elements "
+                     r"\(coarsest_under_resolved; n = 80 gives 4\)\)", text), text
+    assert "N = 16" not in text, text  # the map: one grid, no study of it

@@ -1013,6 +1013,15 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
 
     assert sweep.attrs["references"] == f"{REFERENCES}; {ROUGH_REFERENCE}"
     assert sweep.attrs["simulation_software_versions"] == software_versions()
+    # beside a file of older code (the rough reference without its doi, no versions)
+    older = xr.open_dataset(files[1]).load()
+    older.attrs["references"] = f"{REFERENCES}; He, Li & Popov, J. Adhesion (2021)"
+    del older.attrs["software_versions"]
+    write_curve(older, tmp_path / "older.nc")
+    mixed = build_sweep([files[0], tmp_path / "older.nc", files[2]], keep_snapshots=[])
+    assert mixed.attrs["references"] == f"{REFERENCES}; {ROUGH_REFERENCE}"
+    assert mixed.attrs["simulation_software_versions"] == \
+        f"not recorded; {software_versions()}"
     write_sweep(sweep, tmp_path / "sweep.nc")
     assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
     flat = flat_slice(sweep)  # today's four dimensions, the flat case's numbers

@@ -440,7 +440,8 @@ def build_sweep(
     if heights_sd is not None:
         data[HEIGHT_SD] = xr.DataArray(heights_sd, dims=dims, attrs={
             "units": "1", "long_name": "standard deviation of the brush's pillar heights / d_K "
-                                       "as drawn or given (population SD; 0 for a flat brush)"})
+                                       "as drawn or given (population SD; 0 where the heights "
+                                       "are equal, a gap map's offsets aside)"})
     for name, (units, long_name) in ATTRIBUTE_SCALARS.items():
         data[name] = xr.DataArray(
             scalars[name], dims=dims, attrs={"units": units, "long_name": long_name}
@@ -680,23 +681,27 @@ def _provenance(
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
     commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
     versions = sorted({str(c.attrs.get("brushcore_version", "unknown")) for _, c in curves.values()})
-    software = sorted({str(c.attrs["software_versions"]) for _, c in curves.values()
-                       if "software_versions" in c.attrs})  # files written before: none
-    # every paper any curve cites, in the order first met (rough curves cite one more)
-    cited = [ref for _, c in curves.values()
-             for ref in str(c.attrs.get("references", "")).split("; ") if ref]
+    # files written before it was recorded are said, not left out
+    software = sorted({str(c.attrs.get("software_versions", "not recorded"))
+                       for _, c in curves.values()})
+    # every paper any curve cites, in the order first met (rough curves cite one
+    # more), each once: an older file's shorter form of a reference gives way
+    cited = list(dict.fromkeys(ref for _, c in curves.values()
+                               for ref in str(c.attrs.get("references", "")).split("; ")
+                               if ref))
+    cited = [ref for ref in cited if not any(o != ref and o.startswith(ref) for o in cited)]
     now = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     return {
         "title": "brushcore sweep: adhesive pull-off of spring-mounted brushes",
         "Conventions": "CF-1.10",
-        "references": "; ".join(dict.fromkeys(cited)) or "He, Li & Popov, Lubricants 8 (2020) 94",
+        "references": "; ".join(cited) or "He, Li & Popov, Lubricants 8 (2020) 94",
         "history": f"{now} aggregated {len(files)} curve files by brushcore.data.aggregate",
         "date_created": now,
         "brushcore_version": provenance.version(),
         "git_commit": provenance.git_commit(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
-        **({"simulation_software_versions": "; ".join(software)} if software else {}),
+        "simulation_software_versions": "; ".join(software),
         "grid": np.array(sorted({k.grid for k in curves}), dtype=np.int64),  # every grid run
         "phi": float(phi) if phi is not None else math.nan,
         "source_files": "\n".join(files),

@@ -348,7 +348,8 @@ def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
 #: The papers every curve file cites.
 REFERENCES = ("He, Li & Popov, Lubricants 8 (2020) 94; Pohrt & Popov, "
               "Facta Univ. Mech. Eng. 13 (2015) 3")
-#: What a rough, graded or preloaded curve cites besides (DESIGN.md's follow-up work).
+#: What a rough, graded or preloaded curve cites besides: the group's follow-up
+#: work the project's design notes name for these brushes.
 ROUGH_REFERENCE = "He, Li & Popov, J. Adhesion (2021), doi:10.1080/00218464.2021.1939017"
 
 

@@ -34,8 +34,10 @@ def git_commit() -> str:
     return sha + ("+dirty" if dirty else "")
 
 
-#: The libraries a curve's numbers pass through (MKL's FFT and spmv where installed).
-SOFTWARE = ("numpy", "scipy", "pyfftw", "mkl_fft", "mkl", "xarray", "netCDF4", "cupy")
+#: The libraries a curve's numbers pass through (MKL's FFT and spmv where
+#: installed; CuPy under the name of the wheel the gpu extra installs).
+SOFTWARE = ("numpy", "scipy", "pyfftw", "mkl_fft", "mkl", "xarray", "netCDF4", "cupy",
+            "cupy-cuda12x", "cupy-cuda11x", "cupy-cuda13x")
 
 
 @lru_cache(maxsize=1)

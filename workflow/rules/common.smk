@@ -19,7 +19,7 @@ from brushcore.model.inputs import (
 )
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams, ParameterError
-from brushcore.model.layout import build_labels, grid_hint
+from brushcore.model.layout import build_labels, grid_hint, smallest_radius_elements
 from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.backend import resolve_backend
@@ -728,33 +728,43 @@ def _warn_two_grids(config):
 
 
 def _warn_coarse_study(config, makes):
-    """Warn where a brush of the refinement study starts on a grid that gives
-    its narrowest pillar under `UNDER_RESOLVED_RADIUS` elements a radius: the
-    study flags those fits coarsest_under_resolved, known before any job."""
-    if not wants_convergence(config):
-        return
-    coarse = {}
+    """Warn where a brush of the refinement study runs on a grid that gives its
+    narrowest pillar under `UNDER_RESOLVED_RADIUS` elements a radius: the study
+    flags its fits coarsest_under_resolved (or under_resolved, where the finest
+    grid is too), known before any job.  The grids are those the brush runs
+    on (a label map keeps its own), the radius what the flags read."""
+    runs = {}  # brush (all but the grid) -> {grid: make}
     for key, make in makes.items():
-        n, grid = key[1], key[3]
-        grids = case_grids(config, n)
-        if len(grids) < 3 or grid != min(grids):
+        runs.setdefault(key[:3] + key[4:], {})[key[3]] = make
+    coarse = {}
+    for brush, grids in runs.items():
+        if len(grids) < 3:  # no study of this brush
             continue
-        radius = make(grid).narrowest_radius_elements
-        if radius < UNDER_RESOLVED_RADIUS and radius < coarse.get(n, (math.inf,))[0]:
-            coarse[n] = (radius, grid)
+        radius = {}
+        for g in (min(grids), max(grids)):
+            params = grids[g](g)
+            radius[g] = smallest_radius_elements(params, build_labels(params))
+        low, high = min(grids), max(grids)
+        if (
+            radius[low] < UNDER_RESOLVED_RADIUS
+            and radius[low] < coarse.get(brush[1], (math.inf,))[0]
+        ):
+            flag = (
+                "under_resolved"
+                if radius[high] < UNDER_RESOLVED_RADIUS
+                else "coarsest_under_resolved"
+            )
+            need = math.ceil(low * UNDER_RESOLVED_RADIUS / radius[low])
+            coarse[brush[1]] = (radius[low], low, need, flag)
     if coarse:
-        need = {
-            n: math.ceil(g * UNDER_RESOLVED_RADIUS / r) for n, (r, g) in coarse.items()
-        }
         text = "; ".join(
-            f"N = {n} on {g}: {r:.2g} elements, {need[n]} resolves it"
-            for n, (r, g) in sorted(coarse.items())
+            f"N = {n} on {g}: {r:.2g} elements ({flag}; n = {need} gives 4)"
+            for n, (r, g, need, flag) in sorted(coarse.items())
         )
         logger.warning(
             f"config: the convergence study's coarsest grid gives pillars a radius under "
-            f"{UNDER_RESOLVED_RADIUS:g} elements ({text}): their fits will be flagged "
-            "coarsest_under_resolved, as they rest on a grid whose own mesh error is a few "
-            "per cent"
+            f"{UNDER_RESOLVED_RADIUS:g} elements, so their fits will be flagged as it "
+            f"says ({text}): they rest on a grid whose own mesh error is a few per cent"
         )
 
 
