@@ -316,6 +316,9 @@ def test_table_gives_how_far_the_realised_phi_moves_over_the_grids_run():
     assert table.loc[(256, 1e-6, "F_ad"), "phi_spread"] == pytest.approx(
         0.005 / np.mean([0.125, 0.12, 0.12]), rel=1e-12)
     assert "phi_spread" not in convergence_table(extrapolate_sweep(sweep)).columns
+    varies = conv["phi_varies"].sel(layout="regular", seed=0)
+    assert int(varies.sel(n_pillars=64, kbar=1e-6)) == 1  # 0.29 of the mean, 1024 run
+    assert int(varies.sel(n_pillars=256, kbar=1e-6)) == 0  # 0.04: 1024 not run
 
 
 def test_each_quantity_names_its_own_finest_grid():
@@ -343,6 +346,9 @@ def test_table_flags_touching_pillars():
     assert set(zip(flagged["n_pillars"], flagged["kbar"])) == {(64, 1e-6)}
     assert len(flagged) == 2  # both quantities
     assert "touching_pillars" not in convergence_table(extrapolate_sweep(sweep))["flags"].sum()
+    assert conv["touching_pillars"].sel(layout="regular", seed=0).values.tolist() == \
+        [[1, 0], [0, 0]]  # (n_pillars, kbar): 64 at 1e-6 only
+    assert "touching_pillars" not in extrapolate_sweep(sweep)
 
     from brushcore.data import figures
     fig = figures.convergence(conv)
@@ -663,8 +669,13 @@ def test_table_says_when_the_fit_rests_on_an_under_resolved_grid(radii, flag):
                         ("adhesive_force_normalized", "work_of_separation_normalized")}
                        | {"pillar_radius_elements": (dims, np.reshape(radii, (1, 1, 1, 1, 3)))},
                        coords=coords)
-    table = convergence_table(extrapolate_sweep(sweep))
+    conv = extrapolate_sweep(sweep)
+    table = convergence_table(conv)
     assert set(table["flags"]) == {flag}, table
+    # the same flags in convergence.nc, for a reader of the netCDF alone
+    for name in ("under_resolved", "coarsest_under_resolved"):
+        assert int(conv[name].squeeze()) == (name == flag), name
+    assert conv["under_resolved"].dtype == np.int8
 
 
 @pytest.mark.parametrize(("smallest", "flag"), [((1.5, 3.0, 6.0), "coarsest_under_resolved"),

@@ -249,6 +249,43 @@ def mixed_settings(sweep: xr.Dataset, values: xr.DataArray) -> xr.DataArray | No
     return text
 
 
+#: The case's flags beyond the fit's, as int8 variables of `extrapolate_sweep`
+#: (the tables' and the figure's words for the same tests).
+CASE_FLAGS = {
+    "under_resolved": "the narrowest pillar's radius on the finest grid run is under "
+                      f"{UNDER_RESOLVED_RADIUS:g} elements",
+    "coarsest_under_resolved": "the finest grid resolves the pillars but the fit's coarsest "
+                               f"grid gives them under {UNDER_RESOLVED_RADIUS:g} elements",
+    "touching_pillars": "two pillars' footprints share an element edge on some grid run",
+    "phi_varies": f"the realised filling factors of the grids run spread by more than "
+                  f"{PHI_SPREAD_FLAG:g} of their mean: different brushes, not one refined",
+}
+
+
+def case_flags(conv: xr.Dataset, values: xr.DataArray) -> dict[str, xr.DataArray]:
+    """`CASE_FLAGS` of each case of a study (``values``: a result on
+    (cases..., grid), NaN where a grid was not run), int8 on the case
+    dimensions; a flag whose input the study lacks (touching counts, the
+    realised phi) is left out."""
+    finest, coarsest = flag_radii(conv)
+    named = xr.apply_ufunc(lambda f, c: (resolution_flag(f, c) or ("",))[0], finest, coarsest,
+                           vectorize=True, output_dtypes=[object])
+    tests = {"under_resolved": named == "under_resolved",
+             "coarsest_under_resolved": named == "coarsest_under_resolved"}
+    ran = values.notnull()
+    if TOUCHING in conv:
+        tests["touching_pillars"] = (xr.apply_ufunc(touching_grids, conv[TOUCHING])
+                                     & ran).any(GRID_DIM)
+    if PHI_ACTUAL in conv:
+        tests["phi_varies"] = xr.apply_ufunc(
+            lambda phi: phi_varies(phi), conv[PHI_ACTUAL].where(ran),
+            input_core_dims=[[GRID_DIM]], vectorize=True, output_dtypes=[bool])
+    return {name: test.astype(np.int8).assign_attrs(
+        long_name=f"{CASE_FLAGS[name]} (1 = yes)", units="1",
+        flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="no yes")
+        for name, test in tests.items()}
+
+
 @dataclass(frozen=True)
 class ConvergenceOptions:
     """Settings of the extrapolation.
@@ -660,7 +697,8 @@ def extrapolate_sweep(
         on ``grid``; ``touching_pillar_pairs`` and ``phi_actual`` on
         (cases..., grid) where the sweep has them; ``{q}_untrusted_order``
         (`ORDER_FLAG`); ``mixed_settings`` (`mixed_settings`) where the
-        sweep's curves differ in an accuracy setting.
+        sweep's curves differ in an accuracy setting; the int8 case flags
+        of `case_flags`.
 
     Raises
     ------
@@ -744,6 +782,7 @@ def extrapolate_sweep(
     if mixed is not None:  # e.g. one grid at rtol 1e-3: its solver error joins the mesh's
         out[MIXED] = mixed
     ds = xr.Dataset(out).assign_coords(h=h)
+    ds = ds.assign(case_flags(ds, anyq))
     ds.attrs = {
         "title": "brushcore mesh-refinement study: results extrapolated to h -> 0",
         "Conventions": "CF-1.10",
