@@ -557,8 +557,10 @@ def _converge(args: argparse.Namespace) -> int:
         return 0
     write_study(sweep, out / "convergence.nc", out / "convergence.csv", out / "convergence.md",
                 (out / "convergence.png",))
-    print((out / "convergence.md").read_text(), end="")
-    print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}, {study}")
+    # the table; its legend (a paragraph on every column and flag) stays in the file
+    print((out / "convergence.md").read_text().split("\n\n", 1)[-1], end="")
+    print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}, {study} "
+          f"(the columns and flags are explained at the top of convergence.md)")
     return 0
 
 

@@ -433,6 +433,8 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     assert main(["converge", *paths, "--out-dir", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "3 curves on grids [48, 64, 96]" in printed and "| F_ad |" in printed
+    assert "Results extrapolated" not in printed  # the legend stays in the file
+    assert (out / "convergence.md").read_text().startswith("Results extrapolated")
     for name in ("sweep.nc", "convergence.nc", "convergence.csv", "convergence.md",
                  "convergence.png"):
         assert (out / name).is_file(), name
