@@ -1060,6 +1060,7 @@ def test_a_sweep_of_cycles_keeps_every_pull(tmp_path):
     sweep = build_sweep(files, keep_snapshots=[])
     assert sweep.attrs["protocol_normalized"] == "force:-1.0, displacement:25.0, force:-1.0, " \
         "separation"
+    assert sweep.pull.values.tolist() == [0, 1] and "0 = the first" in sweep.pull.long_name
     for path in files:
         curve = xr.open_dataset(path)
         at = sweep.sel(kbar=float(curve.attrs["kbar"])).squeeze()

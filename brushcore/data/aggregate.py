@@ -462,6 +462,10 @@ def build_sweep(
     data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb, dims))
 
     sweep = xr.Dataset(data, coords=_coordinate_arrays(coords, dims))
+    if pull_names:  # as the curve files have it: which retraction, in order
+        index = np.arange(n_pulls, dtype=np.int32)
+        sweep = sweep.assign_coords(pull=xr.Variable("pull", index, {
+            "units": "1", "long_name": "retraction branch index, in order (0 = the first)"}))
     # The stacked snapshot cases are labels, not data: make them coordinates.
     sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
     sweep.attrs = _provenance(curves, phi=phi)
