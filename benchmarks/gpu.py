@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
+from brushcore.cli import DefaultsShown
 from brushcore.model.solve import grid_convolver, spring_compliance
 from brushcore.model.layout import build_labels
 from brushcore.numerics.platform.backend import Backend, resolve_backend
@@ -68,7 +69,7 @@ def application_ms(params: BrushParams, backend: Backend, repeats: int = 20) -> 
     return _timed(backend, lambda: op.apply(x), repeats)
 
 
-class _HelpFormat(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+class _HelpFormat(argparse.RawDescriptionHelpFormatter, DefaultsShown):
     """The module docstring as written (its examples), and each option's default."""
 
 

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from brushcore import BrushParams, simulate, theory
+from brushcore.cli import DefaultsShown
 from brushcore.model.lattices import hexagonal_fill
 from brushcore.model.layout import build_labels
 
@@ -108,7 +109,7 @@ def plot(rows, n_pillars: int, grid: int, phi: float, shape: str, path: Path) ->
     fig.savefig(path, dpi=130)
 
 
-class _HelpFormat(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+class _HelpFormat(argparse.RawDescriptionHelpFormatter, DefaultsShown):
     """The module docstring as written (its examples), and each option's default."""
 
 

@@ -125,9 +125,10 @@ class _Given(argparse.Action):
         namespace.given = getattr(namespace, "given", set()) | {self.dest}
 
 
-class _DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows defaults, except for required flags and on/off switches (whose
-    default is a bool: a zero default, ``0 == False``, is still shown)."""
+class DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows defaults, except for required flags, flags without one (None) and
+    on/off switches (whose default is a bool: a zero default, ``0 == False``,
+    is still shown); the benchmark scripts' help uses it too."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         if action.required or action.default is None or isinstance(action.default, bool):
@@ -159,7 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "Units: E*, dgamma and h in one consistent system "
                                      "(the file states SI).",
                          allow_abbrev=False,
-                         formatter_class=_DefaultsShown)
+                         formatter_class=DefaultsShown)
     conv = sub.add_parser(
         "converge", help="gather curve files into a sweep and extrapolate each case run on "
                          "three or more grids to h -> 0",
@@ -167,7 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "DIR/sweep.nc and, for every case run on three or more grids, extrapolate "
                     "F_ad and W to h -> 0 with the observed order: DIR/convergence.nc, .csv, "
                     ".md and .png, as the workflow writes them.",
-        allow_abbrev=False, formatter_class=_DefaultsShown)
+        allow_abbrev=False, formatter_class=DefaultsShown)
     conv.add_argument("curves", nargs="+", type=_path, metavar="CURVE",
                       help="curve files (.nc), one per (case, grid)")
     conv.add_argument("--out-dir", type=_path, required=True, metavar="DIR",
