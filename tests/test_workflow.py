@@ -644,7 +644,7 @@ def test_time_and_memory_requests_follow_the_measured_curves(repo_copy: Path,
                                                              tmp_path: Path) -> None:
     """3 x the slowest curve measured at each grid and kind, plus 5 min: the
     flat regular brushes (mirror quadrant) ask for far less than the random
-    ones at 1024^2 and 2048^2 (12 and 52 min against 39 and 575), and memory
+    ones at 1024^2 and 2048^2 (12 and 66 min against 39 and 785), and memory
     keeps a margin over the measured 2.7 GiB at 2048^2 without asking for 17 GB."""
     text, planned = _plan_resources(repo_copy, tmp_path, {
         "regular": [16], "random": [16], "kbar": [0.01], "grid": [512, 1024, 2048],
@@ -653,17 +653,17 @@ def test_time_and_memory_requests_follow_the_measured_curves(repo_copy: Path,
     assert asked == {
         "regular/N16_kbar0.01_seed0_grid512_phi0.12": (7, 1150),
         "regular/N16_kbar0.01_seed0_grid1024_phi0.12": (12, 5600),
-        "regular/N16_kbar0.01_seed0_grid2048_phi0.12": (52, 7400),
+        "regular/N16_kbar0.01_seed0_grid2048_phi0.12": (66, 7400),
         "random/N16_kbar0.01_seed0_grid512_phi0.12": (10, 1150),
         "random/N16_kbar0.01_seed0_grid1024_phi0.12": (39, 5600),
-        "random/N16_kbar0.01_seed0_grid2048_phi0.12": (575, 7400),
+        "random/N16_kbar0.01_seed0_grid2048_phi0.12": (785, 7400),
     }, asked
     assert "slurm_max_runtime_min" not in text  # no cap, no warning
 
 
 def test_runtime_cap_clips_every_request_and_says_so(repo_copy: Path, tmp_path: Path) -> None:
     """slurm_max_runtime_min clips each request above it (random 2048^2:
-    575 -> 300 min), leaves the others and warns at plan time."""
+    785 -> 300 min), leaves the others and warns at plan time."""
     text, planned = _plan_resources(repo_copy, tmp_path, {
         "regular": [], "random": [16], "kbar": [0.01], "grid": [1024, 2048],
         "slurm_max_runtime_min": 300, "fig5": {"n_pillars": 16, "kbar": [0.01]}})
@@ -671,9 +671,9 @@ def test_runtime_cap_clips_every_request_and_says_so(repo_copy: Path, tmp_path: 
     assert limits == {"random/N16_kbar0.01_seed0_grid1024_phi0.12": "39",
                       "random/N16_kbar0.01_seed0_grid2048_phi0.12": "300",
                       "regular/N16_kbar0.01_seed0_grid1024_phi0.12": "12",
-                      "regular/N16_kbar0.01_seed0_grid2048_phi0.12": "52"}, limits
+                      "regular/N16_kbar0.01_seed0_grid2048_phi0.12": "66"}, limits
     assert ("slurm_max_runtime_min = 300 clips the time limit of 1 of 4 simulations (the "
-            "largest: 575 min for results/curves/random/N16_kbar0.01_seed0_grid2048_phi0.12"
+            "largest: 785 min for results/curves/random/N16_kbar0.01_seed0_grid2048_phi0.12"
             ".nc)") in text, text
 
 
@@ -731,16 +731,16 @@ def test_outputs_of_an_earlier_sweep_are_named(tmp_path: Path) -> None:
 def test_time_requests_follow_the_solver_settings() -> None:
     """symmetry: false solves a regular brush on the whole grid, exact mode's
     global cascades run 4-6x longer, double transforms 1.5x on a random
-    brush: the requests follow (2048^2: regular 52 min by default)."""
+    brush: the requests follow (2048^2: regular 66 min by default)."""
     runtime = _common_rules()["simulate_runtime"]
     regular = type("Wildcards", (), {"layout": "regular", "shape": "", "rough": "",
                                      "grid": "2048"})()
     random = type("Wildcards", (), {"layout": "random", "shape": "", "rough": "",
                                     "grid": "1024"})()
-    assert runtime({})(regular, 1) == 52  # 5 + 3 x 922 s
-    assert runtime({"solver": {"symmetry": False}})(regular, 1) == 575  # 5 + 3 x 11,400 s
+    assert runtime({})(regular, 1) == 66  # 5 + 3 x 1,218 s
+    assert runtime({"solver": {"symmetry": False}})(regular, 1) == 785  # 5 + 3 x 15,600 s
     exact = {"solver": {"rtol": 1e-8, "cascade": "global", "precision": "double"}}
-    assert runtime(exact)(regular, 1) == 282  # 5 + 6 x 3 x 922 s
+    assert runtime(exact)(regular, 1) == 371  # 5 + 6 x 3 x 1,218 s
     assert runtime(exact)(random, 1) == 307  # 5 + 6 x 1.5 x 3 x 670 s
     assert runtime({"solver": {"precision": "double"}})(random, 1) == 56  # 5 + 1.5 x 3 x 670 s
 

@@ -894,18 +894,19 @@ def simulate_gres(config):
 #: "Rough, graded and preloaded brushes"; docs/SPEED.md).  Where only a
 #: two-thread time exists (2048^2) the one-thread bound is twice it.
 #: "mirror": flat regular brushes of discs, solved on one quadrant; 1024:
-#: 8 x 8 rigid 123 s; 2048: 531 s on one thread (48 x 48), 461 s on two
-#: (16 x 16, k 1e-4).  "whole": every other flat brush (random, hexagonal,
-#: other shapes, a flat preload or a stiffness spread) on the whole grid; 512:
-#: the paper sweep's slowest, 1.6 min; 1024: random 64 at k 1e-6 666 s
-#: (hexagonal 8 x 8 622 s); 2048: random 1620 at k 1e-5, about 95 min on two
-#: threads (extrapolated from 15 min).  "rough": roughness > 0, contact made
+#: 8 x 8 rigid 123 s; 2048: 531 s on one thread (48 x 48), 8 x 8 rigid 609 s
+#: on two on a slow afternoon.  "whole": every other flat brush (random,
+#: hexagonal, other shapes, a flat preload or a stiffness spread) on the whole
+#: grid; 512: the paper sweep's slowest, 1.6 min; 1024: random 64 at k 1e-6
+#: 666 s (hexagonal 8 x 8 622 s); 2048: random 1620 at k 1e-5, about 130 min
+#: on two threads (a straight line through its 11.6 % detached in 15 min;
+#: its applications alone about 95 min).  "rough": roughness > 0, contact made
 #: element by element on the approach; 256: 116.5 s (config/rough.yaml);
 #: 512: the rough 8 x 8 brush 416.5 s; 1024: about 6 h (estimated from the
 #: rate of its first 12 min, not run).
 SLOWEST_CURVE_S = {
-    "mirror": {512: 30, 1024: 125, 2048: 922},
-    "whole": {512: 100, 1024: 670, 2048: 11400},
+    "mirror": {512: 30, 1024: 125, 2048: 1218},
+    "whole": {512: 100, 1024: 670, 2048: 15600},
     "rough": {256: 120, 512: 420, 1024: 21600},
 }
 #: Beyond the measured grids a curve's time grows as n^3 (solves ~ n, each
@@ -976,7 +977,7 @@ def curve_minutes(layout, shape, rough, grid, solver=None):
     the config's ``solver`` settings, plus `RUNTIME_OVERHEAD_MIN`.
 
     With the default solver: 1024^2 12 min regular, 39 min random, 18 h
-    rough; 2048^2 52 min regular, 9.6 h random.  The time does not shrink
+    rough; 2048^2 66 min regular, 13.1 h random.  The time does not shrink
     with `threads`: the measurements are on one thread, and a second gains
     at most 2x.
     """
