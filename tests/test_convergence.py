@@ -432,11 +432,11 @@ def opts_trusts(order: float) -> bool:
     return bool(ConvergenceOptions().trusts(order))
 
 
-def test_settings_differ_by_more_than_a_factor_of_two_or_in_kind():
+def test_settings_differ_by_more_than_half_again_or_in_kind():
     from brushcore.data.convergence import settings_differ
 
     assert not settings_differ(["9.8996e-05", "9.9084e-05"])
-    assert settings_differ(["0.0001", "0.001"])
+    assert settings_differ(["0.0001", "0.001"]) and settings_differ(["0.0001", "0.0002"])
     assert settings_differ(["0.0", "0.01"])  # lookahead off and on
     assert settings_differ(["local", "global"]) and settings_differ(["True", "False"])
     assert not settings_differ(["inf", "inf"]) and not settings_differ(["local"])

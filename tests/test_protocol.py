@@ -1022,6 +1022,9 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert mixed.attrs["references"] == f"{REFERENCES}; {ROUGH_REFERENCE}"
     assert mixed.attrs["simulation_software_versions"] == \
         f"not recorded; {software_versions()}"
+    per_case = mixed.run_software_versions.squeeze()  # which case ran on which
+    assert str(per_case.sel(roughness=0.2, preload=1.0).values) == ""
+    assert str(per_case.sel(roughness=0.0, preload=0.0).values) == software_versions()
     write_sweep(sweep, tmp_path / "sweep.nc")
     assert cf_errors(tmp_path / "sweep.nc", tmp_path) == []
     flat = flat_slice(sweep)  # today's four dimensions, the flat case's numbers

@@ -531,13 +531,14 @@ def _given_inputs(given: dict[CaseKey, str], coords: dict[str, np.ndarray],
 
 def _varying_settings(curves: dict, coords: dict[str, np.ndarray],
                       dims: Sequence[str]) -> dict[str, xr.DataArray]:
-    """``run_{name}`` per case for each solver setting and the commit that
-    differ between curves (a protocol's rtol shrinks with its load; regular
-    brushes run double and random ones float32; a resumed sweep may mix
-    versions): the joined attribute says that they differ, this says where.
+    """``run_{name}`` per case for each solver setting, the commit and the
+    libraries that differ between curves (a protocol's rtol shrinks with its
+    load; regular brushes run double and random ones float32; a resumed sweep
+    may mix versions or machines): the joined attribute says that they
+    differ, this says where.
     Text, "" where no curve ran."""
     out = {}
-    for name in (*SOLVER_ATTRIBUTES, "git_commit"):
+    for name in (*SOLVER_ATTRIBUTES, "git_commit", "software_versions"):
         if len({str(c.attrs.get(name, "")) for _, c in curves.values()}) < 2:
             continue
         values = np.full(tuple(len(coords[d]) for d in dims), "", dtype=object)

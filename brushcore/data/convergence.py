@@ -194,7 +194,7 @@ def phi_varies(phi: np.ndarray) -> bool:
 #: Numeric settings within this factor of each other count as one: a protocol's
 #: rtol is scaled per curve by its pillars' stiffness span, which moves a
 #: little with the grid (9.89e-5 to 9.91e-5 over 128-256^2 for one brush).
-SETTINGS_FACTOR = 2.0
+SETTINGS_FACTOR = 1.5
 
 
 def settings_differ(values: Sequence[str]) -> bool:

@@ -130,7 +130,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "is raised, so the error carries Fs "
               f"{conv.attrs.get('scattered_safety_factor', 3):g} for that alone; "
               "mixed_settings(rtol+...): the grids' curves ran with different solver "
-              "settings (numbers more than 2x apart) among "
+              "settings (numbers more than 1.5x apart) among "
               f"{', '.join(ACCURACY_SETTINGS)} (sweep.nc's run_* give the values), so "
               "their solver errors differ and mix into the fit.\n\n")
     Path(md_path).write_text(header + to_markdown(table))
