@@ -24,7 +24,7 @@ from brushcore.numerics.linear.cg import ConvergenceError
 from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTED, Terminated,
                                    on_sigterm, terminate)
 from brushcore.model.inputs import PROTOCOL_SYNTAX
-from brushcore.model.labelmap import count_touching_pairs
+from brushcore.model.labelmap import count_touching_pairs, touching_note
 from brushcore.model.params import (LAYOUTS, MAX_ASPECT, MAX_GRID, MAX_KBAR_SPREAD, MAX_PHI_ERROR,
                                     MAX_ROUGH, MAX_SEED, MIN_GRID, MIN_KBAR, RANDOM_GAP_GRID,
                                     UNIT_RANGE, BrushParams)
@@ -458,9 +458,7 @@ def _simulate(args: argparse.Namespace) -> int:
                  if abs(area / labels.size / params.phi - 1) > MAX_PHI_ERROR else "") + "), "
               f"{n_built} pillar{'s' * (n_built != 1)}"
               + ("" if backend.on_host else f", on {backend.device_name}")
-              + (f"; {touching} pillar pair{'s' * (touching != 1)} share"
-                 f"{'s' * (touching == 1)} an element edge (their gap is under "
-                 f"an element on this grid; a finer grid separates them)" if touching else ""),
+              + (f"; {touching_note(touching)}" if touching else ""),
               file=sys.stderr)
         if options.lookahead:  # opt-in and documented, but a number could be quoted unread
             warnings.warn(f"--lookahead {options.lookahead:g} batches the events within "

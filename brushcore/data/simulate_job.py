@@ -77,6 +77,7 @@ def log_lines(curve) -> list[str]:
     resolution, touching pillars (as the command says them) and how far an
     approach pressed, in the config's words."""
     from brushcore.model.curve import preload_contact
+    from brushcore.model.labelmap import touching_note
     from brushcore.model.layout import pillars_differ
 
     mean, narrowest = (float(curve.attrs[f"{which}_radius_elements"])
@@ -90,11 +91,9 @@ def log_lines(curve) -> list[str]:
         + (f" (the narrowest {narrowest:.3g})" if pillars_differ(narrowest, mean) else "")
         + f", phi realised {curve.attrs['phi_actual']:.4g}"
     ]
-    touching = int(curve.attrs.get("touching_pillar_pairs", 0))
+    touching = touching_note(int(curve.attrs.get("touching_pillar_pairs", 0)))
     if touching:  # random discs on grids coarser than 512
-        lines.append(f"{touching} pillar pair{'s' * (touching != 1)} share"
-                     f"{'s' * (touching == 1)} an element edge (their gap is under an element "
-                     "on this grid; a finer grid separates them)")
+        lines.append(touching)
     pressed = preload_contact(curve, "preload", "add a load to the config's 'preload' list "
                                                 "to press the brush on")
     if pressed:

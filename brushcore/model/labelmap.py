@@ -49,6 +49,15 @@ def count_touching_pairs(labels: np.ndarray) -> int:
     return int(np.unique(np.concatenate(keys)).size)
 
 
+def touching_note(pairs: int) -> str:
+    """What a run says of `count_touching_pairs` (the command's discretisation
+    line, a workflow job's log): "" for none."""
+    if not pairs:
+        return ""
+    return (f"{pairs} pillar pair{'s' * (pairs != 1)} share{'s' * (pairs == 1)} an element "
+            "edge (their gap is under an element on this grid; a finer grid separates them)")
+
+
 def check_not_touching(labels: np.ndarray, name: str, value: object) -> None:
     """Refuse a label map whose pillars touch, naming pillars and elements.
 
