@@ -373,9 +373,14 @@ def check_cases(config, main=True):
         key: functools.partial(_case_params, config, key, kbar)
         for key, kbar in softest.items()
     }
-    for (layout, n, seed, grid, phi, rough, shape), make in makes.items():
+    # the narrowest pillar's radius of each case on each grid, as the study's flags read it
+    radii = {}
+    for at, make in makes.items():
+        layout, n, seed, grid, phi, rough, shape = at
         try:
-            build_labels(make(grid))  # hinted below, with the brushes sharing the grid
+            # hinted below, with the brushes sharing the grid
+            params = make(grid)
+            radii[at] = smallest_radius_elements(params, build_labels(params))
         except ParameterError as exc:
             # A grid to suggest must run every brush the same grid key sets.
             key = n if n in by_n else None
@@ -408,26 +413,32 @@ def check_cases(config, main=True):
             )
             raise ConfigError(
                 f"config: {exc.in_terms_of(keys, sep=' = ')} (case {case})"
-                + _also_refused(
-                    makes, (layout, n, seed, grid, phi, rough, shape), keys["grid"]
-                )
+                + _also_refused(makes, at, keys["grid"])
                 + _inherited_note(config, layout, only_fig5)
             ) from None
     if main:  # a plan that stands: what it leaves out
         _warn_two_grids(config)
-        _warn_coarse_study(config, makes)
+        _warn_coarse_study(radii)
+
+
+def _brush_grids(cases):
+    """{brush: {grid: value}} of a {(layout, n, seed, grid, phi, rough, shape):
+    value} mapping: each brush (its case but the grid) with the grids it runs on."""
+    out = {}
+    for case, value in cases.items():
+        out.setdefault(case[:3] + case[4:], {})[case[3]] = value
+    return out
 
 
 def _also_refused(makes, refused, key):
     """The other grids of a refused brush that refuse it too, as a clause of
     its error in the config's words (``key``: grid or grid_by_n.grid), so
     that one edit of its grid list deals with them all, not one per run."""
-    brush = refused[:3] + refused[4:]  # all but the grid
+    grids = _brush_grids(makes)[refused[:3] + refused[4:]]
     more = []
-    for case, make in makes.items():
-        if case[:3] + case[4:] != brush or case[3] == refused[3]:
+    for g2, make in grids.items():
+        if g2 == refused[3]:
             continue
-        g2 = case[3]
         try:
             build_labels(make(g2))
         except ParameterError:
@@ -727,24 +738,18 @@ def _warn_two_grids(config):
         )
 
 
-def _warn_coarse_study(config, makes):
+def _warn_coarse_study(radii):
     """Warn where a brush of the refinement study runs on a grid that gives its
     narrowest pillar under `UNDER_RESOLVED_RADIUS` elements a radius: the study
     flags its fits coarsest_under_resolved (or under_resolved, where the finest
-    grid is too), known before any job.  The grids are those the brush runs
-    on (a label map keeps its own), the radius what the flags read."""
-    runs = {}  # brush (all but the grid) -> {grid: make}
-    for key, make in makes.items():
-        runs.setdefault(key[:3] + key[4:], {})[key[3]] = make
+    grid is too), known before any job.  ``radii``: the narrowest pillar's
+    radius [elements] of each case on each grid it runs on (a label map keeps
+    its own), as `check_cases` found it."""
     coarse = {}
-    for brush, grids in runs.items():
-        if len(grids) < 3:  # no study of this brush
+    for brush, radius in _brush_grids(radii).items():
+        if len(radius) < 3:  # no study of this brush
             continue
-        radius = {}
-        for g in (min(grids), max(grids)):
-            params = grids[g](g)
-            radius[g] = smallest_radius_elements(params, build_labels(params))
-        low, high = min(grids), max(grids)
+        low, high = min(radius), max(radius)
         if (
             radius[low] < UNDER_RESOLVED_RADIUS
             and radius[low] < coarse.get(brush[1], (math.inf,))[0]
