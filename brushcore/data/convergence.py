@@ -264,21 +264,20 @@ CASE_FLAGS = {
 
 def case_flags(conv: xr.Dataset, values: xr.DataArray) -> dict[str, xr.DataArray]:
     """`CASE_FLAGS` of each case of a study (``values``: a result on
-    (cases..., grid), NaN where a grid was not run), int8 on the case
-    dimensions; a flag whose input the study lacks (touching counts, the
-    realised phi) is left out."""
+    (cases..., grid), NaN where a grid was not run: phi_varies reads its
+    grids), int8 on the case dimensions; a flag whose input the study lacks
+    (touching counts, the realised phi) is left out.  The tables read them
+    per quantity."""
     finest, coarsest = flag_radii(conv)
     named = xr.apply_ufunc(lambda f, c: (resolution_flag(f, c) or ("",))[0], finest, coarsest,
                            vectorize=True, output_dtypes=[object])
     tests = {"under_resolved": named == "under_resolved",
              "coarsest_under_resolved": named == "coarsest_under_resolved"}
-    ran = values.notnull()
-    if TOUCHING in conv:
-        tests["touching_pillars"] = (xr.apply_ufunc(touching_grids, conv[TOUCHING])
-                                     & ran).any(GRID_DIM)
-    if PHI_ACTUAL in conv:
+    if TOUCHING in conv:  # a count exists only where a curve ran (NaN elsewhere)
+        tests["touching_pillars"] = xr.apply_ufunc(touching_grids, conv[TOUCHING]).any(GRID_DIM)
+    if PHI_ACTUAL in conv:  # over the grids where ``values`` has a value
         tests["phi_varies"] = xr.apply_ufunc(
-            lambda phi: phi_varies(phi), conv[PHI_ACTUAL].where(ran),
+            lambda phi: phi_varies(phi), conv[PHI_ACTUAL].where(values.notnull()),
             input_core_dims=[[GRID_DIM]], vectorize=True, output_dtypes=[bool])
     return {name: test.astype(np.int8).assign_attrs(
         long_name=f"{CASE_FLAGS[name]} (1 = yes)", units="1",

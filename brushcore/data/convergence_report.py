@@ -11,11 +11,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.data.convergence import (ACCURACY_SETTINGS, GRID_DIM, MIXED, PHI_ACTUAL,
-                                        PHI_SPREAD_FLAG, QUANTITIES, SMALLEST,
-                                        STUDY_FLAGS, TOUCHING,
-                                        UNDER_RESOLVED_RADIUS, flag_radii, phi_spread,
-                                        phi_varies, resolution_flag, touching_grids)
+from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, GRID_DIM, MIXED,
+                                        PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SMALLEST,
+                                        STUDY_FLAGS, UNDER_RESOLVED_RADIUS, case_flags,
+                                        flag_radii, phi_spread)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
 
@@ -43,7 +42,13 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
     case_dims = [d for d in conv[f"{quantities[0]}_extrapolated"].dims]
     grids = [int(g) for g in conv[GRID_DIM].values]
     rows = []
-    stacked = conv.stack(case=case_dims) if case_dims else conv.expand_dims(case=[0])
+
+    def by_case(ds: xr.Dataset) -> xr.Dataset:
+        return ds.stack(case=case_dims) if case_dims else ds.expand_dims(case=[0])
+
+    stacked = by_case(conv)
+    # convergence.nc's case flags, each quantity on its own grids (phi_varies)
+    case = {q: by_case(xr.Dataset(case_flags(conv, conv[q]))) for q in quantities}
     for i in range(stacked.sizes["case"]):
         one = stacked.isel(case=i)
         for q in quantities:
@@ -55,23 +60,15 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             for g, v in zip(grids, raw):
                 row[f"n={g}"] = float(v)
             row["radius_elements_finest"] = float(one["pillar_radius_elements_finest"])
-            finest, coarsest = (float(r) for r in flag_radii(one))
             if f"{SMALLEST}_finest" in one:  # a study of curves that record it
-                row["smallest_radius_elements_finest"] = finest
-            phi = one[PHI_ACTUAL].values[np.isfinite(raw)] if PHI_ACTUAL in one else None
-            if phi is not None:  # how far the staircase's phi moves between the grids
-                row["phi_spread"] = phi_spread(phi)
+                row["smallest_radius_elements_finest"] = float(flag_radii(one)[0])
+            if PHI_ACTUAL in one:  # how far the staircase's phi moves between the grids
+                row["phi_spread"] = phi_spread(one[PHI_ACTUAL].values[np.isfinite(raw)])
             # spread: half the range over the grids, what a flagged row still says
             for s in ("extrapolated", "error", "order", "safety_factor", "spread"):
                 row[s] = float(one[f"{q}_{s}"])
             flags = [f for f in STUDY_FLAGS if f"{q}_{f}" in one and int(one[f"{q}_{f}"])]
-            resolution = resolution_flag(finest, coarsest)
-            if resolution:
-                flags.append(resolution[0])
-            if TOUCHING in one and touching_grids(one[TOUCHING].values).any():
-                flags.append("touching_pillars")
-            if phi is not None and phi_varies(phi):
-                flags.append("phi_varies")
+            flags += [f for f in CASE_FLAGS if f in case[q] and int(case[q][f].isel(case=i))]
             if MIXED in one and str(one[MIXED].values):
                 flags.append(f"{MIXED}({str(one[MIXED].values).replace(' ', '+')})")
             row["flags"] = ",".join(flags)
