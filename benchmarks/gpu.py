@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from brushcore import BrushParams, ParameterError, SolverOptions, simulate
-from brushcore.cli import DefaultsShown
+from brushcore.cli import ScriptHelp
 from brushcore.model.solve import grid_convolver, spring_compliance
 from brushcore.model.layout import build_labels
 from brushcore.numerics.platform.backend import Backend, resolve_backend
@@ -69,13 +69,9 @@ def application_ms(params: BrushParams, backend: Backend, repeats: int = 20) -> 
     return _timed(backend, lambda: op.apply(x), repeats)
 
 
-class _HelpFormat(argparse.RawDescriptionHelpFormatter, DefaultsShown):
-    """The module docstring as written (its examples), and each option's default."""
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False,
-                                     formatter_class=_HelpFormat)
+                                     formatter_class=ScriptHelp)
     parser.add_argument("--backend", choices=("gpu", "cpu"), default="gpu")
     parser.add_argument("--grid", type=int, nargs="+", action="extend",
                         help="grid(s) for every case instead of the issue's "

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from brushcore import BrushParams, simulate, theory
-from brushcore.cli import DefaultsShown
+from brushcore.cli import ScriptHelp
 from brushcore.model.lattices import hexagonal_fill
 from brushcore.model.layout import build_labels
 
@@ -109,13 +109,9 @@ def plot(rows, n_pillars: int, grid: int, phi: float, shape: str, path: Path) ->
     fig.savefig(path, dpi=130)
 
 
-class _HelpFormat(argparse.RawDescriptionHelpFormatter, DefaultsShown):
-    """The module docstring as written (its examples), and each option's default."""
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, allow_abbrev=False,
-                                     formatter_class=_HelpFormat)
+                                     formatter_class=ScriptHelp)
     parser.add_argument("--pillars", type=int, default=64, help="N (a perfect square)")
     parser.add_argument("--grid", type=int, default=256, help="elements per side")
     parser.add_argument("--phi", type=float, default=0.12, help="filling factor")

@@ -125,15 +125,20 @@ class _Given(argparse.Action):
         namespace.given = getattr(namespace, "given", set()) | {self.dest}
 
 
-class DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
+class _DefaultsShown(argparse.ArgumentDefaultsHelpFormatter):
     """Shows defaults, except for required flags, flags without one (None) and
     on/off switches (whose default is a bool: a zero default, ``0 == False``,
-    is still shown); the benchmark scripts' help uses it too."""
+    is still shown); the benchmark scripts' help too (`ScriptHelp`)."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
         if action.required or action.default is None or isinstance(action.default, bool):
             return action.help
         return super()._get_help_string(action)
+
+
+class ScriptHelp(argparse.RawDescriptionHelpFormatter, _DefaultsShown):
+    """A benchmark script's help: its module docstring as written (the
+    examples) and each option's default, as `_DefaultsShown` shows them."""
 
 
 class _Version(argparse.Action):
@@ -160,7 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
                                      "Units: E*, dgamma and h in one consistent system "
                                      "(the file states SI).",
                          allow_abbrev=False,
-                         formatter_class=DefaultsShown)
+                         formatter_class=_DefaultsShown)
     conv = sub.add_parser(
         "converge", help="gather curve files into a sweep and extrapolate each case run on "
                          "three or more grids to h -> 0",
@@ -168,7 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "DIR/sweep.nc and, for every case run on three or more grids, extrapolate "
                     "F_ad and W to h -> 0 with the observed order: DIR/convergence.nc, .csv, "
                     ".md and .png, as the workflow writes them.",
-        allow_abbrev=False, formatter_class=DefaultsShown)
+        allow_abbrev=False, formatter_class=_DefaultsShown)
     conv.add_argument("curves", nargs="+", type=_path, metavar="CURVE",
                       help="curve files (.nc), one per (case, grid)")
     conv.add_argument("--out-dir", type=_path, required=True, metavar="DIR",
