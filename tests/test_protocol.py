@@ -405,6 +405,32 @@ def test_cli_refuses_bad_protocols_before_any_work(tmp_path, capsys, text, messa
     assert "allowed" in err and not out.exists()
 
 
+@pytest.mark.parametrize("first,message", [
+    ("force:2", "waypoint 0 is a tensile force of 2 F_K, which nothing in contact can carry"),
+    ("displacement:3", "waypoint 0, displacement 3 d_K, lies above the first touch at d = "
+                       "0.3 d_K and pulls away from no contact"),
+])
+def test_a_first_waypoint_that_pulls_from_first_touch_is_refused(tmp_path, capsys, first,
+                                                                 message):
+    """A brush with heights touches with its highest pillar first: a tensile
+    first waypoint, or a displacement above that touch, ran to F_ad NaN with
+    exit status 0; it is refused before any solve.  A flat brush, in full
+    contact at first touch, may be pulled from there."""
+    from brushcore.cli import main
+
+    heights = tmp_path / "h.txt"
+    heights.write_text("0.3\n0\n-0.1\n0.1\n")
+    out = tmp_path / "curve.nc"
+    args = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.1", "--grid",
+            "41", "--out", str(out), "--quiet", "--protocol", f"{first}, separation"]
+    assert main([*args, "--heights", str(heights)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "allowed a first waypoint that presses" in err, err
+    assert not out.exists()
+    assert main(args) == 0, capsys.readouterr().err  # flat: in full contact at once
+    assert float(xr.open_dataset(out).adhesive_force_normalized) > 0
+
+
 def test_waypoint_kinds_read_in_any_case_and_separation_takes_no_value():
     """"Force:-1, Separation" is the protocol in lower case; Python's
     Waypoint("separation", 3) is refused as the CLI's 'separation:3' is."""

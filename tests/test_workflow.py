@@ -363,6 +363,10 @@ def test_snakefmt_clean() -> None:
         ({"protocol": ""}, r"config key 'protocol': '' should be non-empty"),  # was null
         ({"protocol": "force:-5000, separation"},
          r"waypoint 0 is a force of -5000 F_K\): allowed force waypoints in \[-1000, 1000\]"),
+        # a tensile first waypoint: nothing of a rough brush touches to carry it
+        ({"protocol": "force:2, displacement:1, force:-1, separation", "roughness": [0.3]},
+         r"config key 'protocol': .* starts with a tensile force of 2 F_K, which the "
+         r"brushes of roughness = 0.3 cannot carry at first touch"),
         ({"protocol": "force:-1, separation", "preload": [0.0, 1.0]},
          r"config key 'preload': \[0.0, 1.0\] must be \[0.0\] when 'protocol' is given"),
         ({"colour": "red"}, "config key 'colour' is unknown"),

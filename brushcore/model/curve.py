@@ -23,8 +23,9 @@ from brushcore.model.layout import build_labels, random_gap, smallest_radius_ele
 from brushcore.model.params import BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, software_versions, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
-from brushcore.model.solve import (fft_library_used, load_options, run, run_protocol_curve,
-                                   single_transforms, spring_options, stiffness_span)
+from brushcore.model.solve import (element_offsets, fft_library_used, load_options, run,
+                                   run_protocol_curve, single_transforms, spring_options,
+                                   stiffness_span)
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import (APPROACH, RETRACT, START, Waypoint, loop_energy,
@@ -287,6 +288,33 @@ def preload_contact(ds: xr.Dataset, preload: str, press_hint: str) -> str | None
                if touching < n_pillars and not pressed else ""))
 
 
+def check_first_waypoint(protocol: Sequence[Waypoint], offsets: np.ndarray) -> None:
+    """Refuse a protocol (normalised) whose first waypoint pulls away from the
+    first touch of a brush that touches there with part of its face only.
+
+    A protocol starts where the highest element touches, d = max z (offsets
+    z_i [d_K], `element_offsets`).  A flat brush touches everywhere at once
+    and may be pulled from there; any other has nothing in contact yet, so
+    a tensile force cannot be reached and a displacement above the first
+    touch pulls away from no contact (the run would end with F_ad NaN).
+    """
+    if not len(protocol) or not offsets.size or np.ptp(offsets) == 0:
+        return
+    first, touch = protocol[0], float(np.max(offsets))
+    why = ""
+    if first.kind == "force" and first.value > 0:
+        why = (f"waypoint 0 is a tensile force of {first.value:g} F_K, which nothing in "
+               "contact can carry at the first touch (a preload P is force:-P)")
+    elif first.kind == "displacement" and first.value > touch:
+        why = (f"waypoint 0, displacement {first.value:g} d_K, lies above the first touch "
+               f"at d = {touch:.4g} d_K and pulls away from no contact (d is measured from "
+               "the plane where a pillar of height 0 touches; a smaller d presses)")
+    if why:
+        raise ParameterError("protocol", protocol_text(protocol),
+                             "a first waypoint that presses the brush on (force:-P, or a "
+                             "displacement below the first touch) or 'separation'", why)
+
+
 class FirstTouchWarning(UserWarning):
     """An approach at preload 0 stopped at first touch with pillars out of
     contact (heights, roughness or a gap map): a pull-off of the few that
@@ -476,6 +504,8 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         waypoints = preload_protocol(inputs.preload)
     else:
         check_protocol_preload(params.preload, protocol)
+        check_first_waypoint(protocol, element_offsets(labels, inputs.heights,
+                                                       inputs.gap_map) / ds_)
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
                           for w in protocol)
     # How far loads and height scatter reach, in F_K and d_K (a displacement

@@ -304,7 +304,8 @@ def _load_npy(path: Path, name: str) -> np.ndarray:
 
 #: How a protocol is written on a command line or in a config file.
 PROTOCOL_SYNTAX = ("waypoints separated by commas, each 'force:F' (total force F in F_K, "
-                   "tensile positive, so a preload P is force:-P), 'displacement:D' (d in d_K) "
+                   "tensile positive, so a preload P is force:-P), 'displacement:D' (d in d_K, "
+                   "absolute: 0 where a pillar of height 0 touches, larger pulls away) "
                    "or 'separation', e.g. 'force:-1, displacement:0.5, force:-1, separation'")
 
 

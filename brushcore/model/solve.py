@@ -211,14 +211,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     before = conv.applications
     if compliance is None:
         compliance = spring_compliance(params, n_pillars)
-    # Element offsets in operator order (`BrushOperator.elements`).
-    flat_labels = labels.ravel()
-    elements = np.flatnonzero(flat_labels >= 0)
-    z = np.zeros(elements.size)
-    if heights is not None:
-        z += np.asarray(heights, dtype=float)[flat_labels[elements]]
-    if gap_map is not None:
-        z -= np.asarray(gap_map, dtype=float).ravel()[elements]
+    z = element_offsets(labels, heights, gap_map)
     # A run that goes to the pull-off solver takes its block limit: its
     # cascades are local, where the tiles win from 1,500 elements a pillar.
     max_block = (BlockInverse.MAX_BLOCK if dispatch and dispatches(z, protocol)
@@ -235,6 +228,21 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     except (ConvergenceError, SolverError) as exc:
         raise type(exc)(f"{exc}; problem: {brief(params)}; options: {brief(options)}") from None
     return labels, op, curve, conv.applications - before + op.refined_applications
+
+
+def element_offsets(labels: np.ndarray, heights: np.ndarray | None,
+                    gap_map: np.ndarray | None) -> np.ndarray:
+    """Each pillar element's offset z_i = z_p - gap_i [length] in operator
+    order (`BrushOperator.elements`: the label map's pillar elements, row by
+    row); the first touch is at d = max z."""
+    flat_labels = labels.ravel()
+    elements = np.flatnonzero(flat_labels >= 0)
+    z = np.zeros(elements.size)
+    if heights is not None:
+        z += np.asarray(heights, dtype=float)[flat_labels[elements]]
+    if gap_map is not None:
+        z -= np.asarray(gap_map, dtype=float).ravel()[elements]
+    return z
 
 
 #: Loads (preload, force waypoints, in F_K) and height scatter (roughness,
