@@ -426,6 +426,11 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.min_gap != 1.0 and args.layout != "random":  # it would seem to count
             warnings.warn(f"--min-gap applies to random layouts only: the {params.layout} "
                           f"layout ignores --min-gap {args.min_gap:g}")
+        drawn = params.layout == "random" or params.roughness > 0 or params.kbar_spread > 0
+        if args.seed != 0 and not drawn:  # it would seem to count
+            warnings.warn(f"--seed {args.seed} draws nothing here (it picks a random layout, "
+                          "--roughness heights or a --kbar-spread draw): the brush is the "
+                          "same for every seed")
         if args.kbar is None:  # as a --kbar-spread draw's mean is its --kbar
             kbar = recorded_kbar(params.kbar_values)
             if kbar is None:
@@ -517,10 +522,12 @@ def _simulate(args: argparse.Namespace) -> int:
         area = float(ds.attrs["real_contact_area"])
         for k in range(ds.sizes["pull"]):
             pull = ds.isel(pull=k)
+            left = float(pull.pull_contact_area_at_end) / area
             print(f"retraction {k}: F_ad/F_K = {float(pull.pull_adhesive_force_normalized):.4f}"
                   f"  W/W_K = {float(pull.pull_work_of_separation_normalized):.4f}"
-                  f"  in contact at its end: {float(pull.pull_contact_area_at_end) / area:.1%}"
-                  " of the pillar area")
+                  f"  in contact at its end: {left:.1%} of the pillar area"
+                  + ("  (a partial retraction: F_ad is the largest force it reached, "
+                     "not a pull-off)" if left > 0 else ""))
     return 0
 
 

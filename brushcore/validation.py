@@ -43,10 +43,11 @@ class ParameterError(ValueError):
         def translate(text: str) -> str:
             # A name with an underscore is always a parameter; a plain word
             # ("layout", "shape", "grid") only where a value or a verb
-            # follows it, so that "an array of shape (5,)" stays prose.
+            # follows it, so that "an array of shape (5,)" stays prose.  A
+            # quoted word is the user's own text (a table's column 'kbar').
             for api, user in names.items():
                 after = "" if "_" in api else _REFERENCE
-                text = re.sub(rf"(?<![\w-]){re.escape(api)}(?![\w-]){after}", user, text)
+                text = re.sub(rf"(?<![\w'\"-]){re.escape(api)}(?![\w-]){after}", user, text)
             return text
 
         reason = f" ({translate(self.reason)})" if self.reason else ""

@@ -520,6 +520,23 @@ def test_min_gap_on_a_lattice_is_said_to_be_ignored(tmp_path) -> None:
     assert gap.attrs["parameter_hash"] == plain.attrs["parameter_hash"]
 
 
+def test_a_seed_that_draws_nothing_is_said_to(tmp_path, recwarn) -> None:
+    """--seed picks a random layout, drawn heights or a stiffness draw; on a
+    lattice with given heights it drew nothing without a word."""
+    heights = tmp_path / "h.txt"
+    heights.write_text("0.1 0 -0.1 0\n")
+    argv = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+            "--grid", "48", "--quiet", "--preload", "1", "--heights", str(heights)]
+    with pytest.warns(UserWarning, match=r"--seed 3 draws nothing here \(it picks a random "
+                      r"layout, --roughness heights or a --kbar-spread draw\)"):
+        assert main([*argv, "--seed", "3", "--out", str(tmp_path / "s.nc")]) == 0
+    recwarn.clear()
+    assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                 "--grid", "48", "--quiet", "--roughness", "0.2", "--preload", "1",
+                 "--seed", "3", "--out", str(tmp_path / "r.nc")]) == 0
+    assert not [w for w in recwarn if "--seed" in str(w.message)]
+
+
 def test_converge_keeps_two_files_of_one_name_apart(tmp_path, capsys) -> None:
     """Two folders' brush.csv (different discs) are two brushes: refused, not
     extrapolated as one; and three brushes on three different grids make no

@@ -368,6 +368,7 @@ def test_cli_runs_a_protocol_and_reports_every_pull(tmp_path, capsys):
                "--protocol", text])
     printed = capsys.readouterr().out
     assert rc == 0 and "retraction 0: F_ad/F_K" in printed and "retraction 1:" in printed
+    assert "partial retraction" not in printed  # both pull off
     ds = read_curve(out)
     assert ds.sizes["pull"] == 2 and ds.attrs["protocol"].count("separation") == 2
     pytest.importorskip("compliance_checker")
@@ -380,6 +381,22 @@ def test_cli_runs_a_protocol_and_reports_every_pull(tmp_path, capsys):
     marked = [t.get_text() for t in legend if t.get_text().startswith("retraction ")]
     assert marked == [rf"retraction {k}: $\bar F_{{ad}}$ = {f:.3g}"
                       for k, f in enumerate(ds.pull_adhesive_force_normalized.values)]
+
+
+def test_cli_marks_a_retraction_that_ends_in_contact(tmp_path, capsys):
+    """A retraction to a displacement that leaves the soft brush in contact
+    never reached a peak: its F_ad line says it is not a pull-off."""
+    from brushcore.cli import main
+
+    rc = main(["simulate", "--layout", "regular", "--pillars", "9", "--kbar", "1e-3",
+               "--grid", "48", "--out", str(tmp_path / "p.nc"), "--quiet", "--protocol",
+               "force:-1, displacement:25, force:-1, separation"])
+    lines = capsys.readouterr().out.splitlines()
+    first = next(line for line in lines if line.startswith("retraction 0:"))
+    last = next(line for line in lines if line.startswith("retraction 1:"))
+    assert rc == 0 and "in contact at its end: 100.0%" in first
+    assert "(a partial retraction: F_ad is the largest force it reached" in first
+    assert "partial" not in last and "in contact at its end: 0.0%" in last
 
 
 @pytest.mark.parametrize("text,message", [
