@@ -268,6 +268,11 @@ def case_flags(conv: xr.Dataset, values: xr.DataArray) -> dict[str, xr.DataArray
     grids), int8 on the case dimensions; a flag whose input the study lacks
     (touching counts, the realised phi) is left out.  The tables read them
     per quantity."""
+    with np.errstate(invalid="ignore"):  # NaN where a case never ran: no flag
+        return _case_flags(conv, values)
+
+
+def _case_flags(conv: xr.Dataset, values: xr.DataArray) -> dict[str, xr.DataArray]:
     finest, coarsest = flag_radii(conv)
     named = xr.apply_ufunc(lambda f, c: (resolution_flag(f, c) or ("",))[0], finest, coarsest,
                            vectorize=True, output_dtypes=[object])

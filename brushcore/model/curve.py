@@ -684,7 +684,9 @@ def _pull_variables(d: np.ndarray, f: np.ndarray, area: np.ndarray, pulls: np.nd
                                          "branch's last step", "m2"),
         "pull_cycle_energy": _var("pull", cycle, "integral of F dd from the end of the "
                                   "previous retraction branch (first touch) to the end of "
-                                  "this one", "J"),
+                                  "this one", "J",
+                                  comment="sums to dissipated_energy; a branch that ends "
+                                  "under load also holds the elastic energy stored there"),
         "pull_cycle_energy_normalized": _var("pull", cycle / w_unit, "cycle energy / W_K", "1"),
     }
 
