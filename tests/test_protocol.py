@@ -1146,6 +1146,15 @@ def test_a_sweep_of_cycles_keeps_every_pull(tmp_path):
             assert np.array_equal(at[name].values, curve[name].values), name
         assert float(at.dissipated_energy_normalized) == float(
             curve.dissipated_energy_normalized)
+    # preload 0 is a label here: the coordinate and the preload figure say so
+    assert "the protocol gives the loads" in sweep.preload.attrs["comment"]
+    from brushcore.data import figures
+
+    ax = figures.rough_preload(sweep, "regular", 9).axes[0]
+    assert ax.get_xlabel() == "load of the protocol's first waypoint [$F_K$]"
+    assert "last retraction of" in ax.get_title()
+    xs = {float(x) for line in ax.get_lines() for x in np.ravel(line.get_xdata())}
+    assert xs == {1.0}, xs  # the first waypoint's 1 F_K, not preload 0
     write_sweep(sweep, tmp_path / "sweep.nc")
     pytest.importorskip("compliance_checker")
     from test_cf import cf_errors

@@ -462,6 +462,9 @@ def build_sweep(
     data.update(_snapshots(curves, keep_snapshots, all_snapshots_below_mb, dims))
 
     sweep = xr.Dataset(data, coords=_coordinate_arrays(coords, dims))
+    if protocol and "preload" in sweep.coords:  # it read as an unloaded brush
+        sweep["preload"].attrs["comment"] = ("0: the protocol gives the loads (attribute "
+                                             "protocol_normalized)")
     if pull_names:  # as the curve files have it: which retraction, in order
         index = np.arange(n_pulls, dtype=np.int32)
         sweep = sweep.assign_coords(pull=xr.Variable("pull", index, {

@@ -28,6 +28,7 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_lattice
+from brushcore.model.inputs import parse_protocol
 from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, curve_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
@@ -545,11 +546,17 @@ def _given(sweep: xr.Dataset, layout: str) -> str:
     return " ".join(sorted({name for v in values for name in str(v).split()}))
 
 
+#: A brush's given arrays (`BrushParams.given_inputs`) in a title's words:
+#: kbar_values stand for --kbar-file and --kbar-factors alike.
+GIVEN_WORDS = {"kbar_values": "pillar stiffnesses", "gap_map": "gap map"}
+
+
 def _rough_brush_title(what: str, layout: str, n_pillars: int, given: str,
                        width: float) -> str:
     """A rough figure's title, wrapped to its ``width`` [in]: a rough brush,
     or a brush as made with what it was given."""
-    brush = (f"the {layout} brush as made ({given.replace(' ', ', ')} given)" if given
+    words = ", ".join(GIVEN_WORDS.get(name, name) for name in given.split())
+    brush = (f"the {layout} brush as made ({words} given)" if given
              else f"a rough {layout} brush")
     return textwrap.fill(f"{what} {brush}, N = {n_pillars}", max(30, int(11 * width)))
 
@@ -649,6 +656,10 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
     axes = fig.subplots(1, len(roughs), squeeze=False)[0]
     kbars = [float(k) for k in sweep.kbar.values]
     p_axis = np.asarray(sweep.preload.values, dtype=float)
+    protocol = sweep.attrs.get("protocol_normalized")  # one protocol: preload 0 alone
+    first = _first_load(protocol)
+    if first is not None:  # the load its first waypoint presses to, not "preload 0"
+        p_axis = np.full_like(p_axis, first)
     for ax, rough in zip(axes, roughs):
         for i, kbar in enumerate(kbars):
             mean, low, high = _rough_series(sweep, "adhesive_force_normalized", layout,
@@ -657,14 +668,27 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
                 continue
             ax.errorbar(p_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
                         capsize=2, color=f"C{i}", label=rf"$\bar k$ = {_kbar_text(kbar)}")
-        ax.set_title(_heights_text(rough, given), fontsize=9)
-        ax.set_xlabel(r"preload [$F_K$]")
+        ax.set_title(_heights_text(rough, given) if protocol is None else
+                     _heights_text(rough, given) + ", last retraction of\n"
+                     + textwrap.fill(protocol, 36), fontsize=8 if protocol else 9)
+        ax.set_xlabel(r"preload [$F_K$]" if protocol is None else
+                      r"load of the protocol's first waypoint [$F_K$]")
         ax.set_ylabel(FAD_LABEL)
         _no_false_zoom(ax)
     _side_legend(fig, axes)
     fig.suptitle(_rough_brush_title("Adhesive force against preload of", layout, n_pillars,
                                     given, fig.get_figwidth()))
     return fig
+
+
+def _first_load(protocol: str | None) -> float | None:
+    """The preload [F_K] a protocol's first waypoint presses to
+    ("force:-2.0, ..." gives 2), or None (no protocol, or it starts
+    otherwise)."""
+    if not protocol:
+        return None
+    first = parse_protocol(protocol)[0]
+    return -first.value if first.kind == "force" else None
 
 
 def _pull_ranges(curve: xr.Dataset) -> list[tuple[int, int]]:
