@@ -370,6 +370,8 @@ def test_snakefmt_clean() -> None:
         ({"protocol": "force:-1, separation", "preload": [0.0, 1.0]},
          r"config key 'preload': \[0.0, 1.0\] must be \[0.0\] when 'protocol' is given"),
         ({"colour": "red"}, "config key 'colour' is unknown"),
+        ({"kbar": 0.01}, r"config key 'kbar': 0.01 is not of type 'array'; write a list, "
+                         r"even of one value: \[0.01\]"),
         ({"grid": 64.5}, "config key 'grid': 64.5 fits none of its forms: 64.5 is not of type "
                          "'integer'; 64.5 is not of type 'array'"),
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),

@@ -67,6 +67,13 @@ def check_config(config, schema_path):
         message = f"{error.instance!r} fits none of its forms: " + "; ".join(
             forms.values()
         )
+    if (
+        error.validator == "type"
+        and error.validator_value == "array"
+        and not isinstance(error.instance, (list, dict))
+    ):
+        # kbar: 0.01 for kbar: [0.01]
+        message += f"; write a list, even of one value: [{error.instance!r}]"
     raise ConfigError(f"config key '{where}': {message}")
 
 
