@@ -311,6 +311,12 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
     rows = headline_rows(sweep, fig5_layout="file_plain", fig5_n_pillars=16,
                          fig5_kbar=math.nan)
     assert not any("Fig. 5a" in row.quantity for row in rows)
+    # tables request no phi: the theory row takes the realised one; no 2304 row
+    phi = float(np.nanmean(flat.phi_actual.values))
+    theory_row = rows[0]
+    assert theory_row.quantity.startswith("rigid limit") and theory_row.value == \
+        f"{phi ** -0.25:.3g}" and f"phi = {phi:.3g} realised" in theory_row.note, theory_row
+    assert not any("2304" in row.quantity for row in rows)
 
 
 @pytest.mark.slow
