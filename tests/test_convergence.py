@@ -536,6 +536,7 @@ def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
     from brushcore.data.aggregate import build_sweep
     from brushcore.data.views import finest_grid
     from brushcore.data.summary import headline_rows, value_at
+    from brushcore.model import theory
 
     sweep = build_sweep(refinement_curves)
     # Text per case and grid, as `run_*` where settings differ (preconditioner
@@ -555,6 +556,14 @@ def test_summary_and_figures_take_the_finest_grid(refinement_curves, tmp_path):
     assert "UNDER-RESOLVED" not in radius_rows[0].note and "grid 64" in radius_rows[0].note
     for draw in (figures.fig6, figures.fig7, figures.fig8):
         draw(sweep)
+    # Fig. 8's soft-work line takes the brush's phi as its data are normalised
+    phi = float(one["phi_actual"].sel(layout="regular", n_pillars=4).mean())
+    assert abs(phi / 0.12 - 1) > 1e-3  # realised, not requested
+    dashed = [line for line in figures.fig8(sweep).axes[0].get_lines()
+              if line.get_linestyle() == "--"]
+    assert dashed, "no soft-work line"
+    kbar = np.asarray(dashed[0].get_xdata(), dtype=float)
+    assert np.allclose(dashed[0].get_ydata(), theory.soft_work(4, phi, kbar), rtol=1e-12)
     figures.fig5(sweep, n_pillars=4, kbar=(1e-3,))
     # Rigid is a kbar like any other (its tolerance was infinite: no curve).
     both = figures.fig5(sweep, n_pillars=4, kbar=(math.inf, 1e-3))
