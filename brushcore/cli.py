@@ -456,7 +456,7 @@ def _simulate(args: argparse.Namespace) -> int:
         area = int((labels >= 0).sum())
         touching = count_touching_pairs(labels)  # random discs on grids coarser than 512
         asked = ("requested" if not params.layout_file else
-                 "the discs'" if is_table(params.layout_file) else "the file's")
+                 "the table's" if is_table(params.layout_file) else "the file's")
         n_built = int(labels.max()) + 1
         narrowest = smallest_radius_elements(params, labels)  # what the flags read
         print(f"grid {params.grid}: pillar radius {params.pillar_radius_elements:.3g} elements"

@@ -165,9 +165,63 @@ def test_discs_closer_than_an_element_share_its_edges_and_are_counted(tmp_path: 
         file_params(path, 0.01, grid=128, n_pillars=3)
 
 
-def test_non_disc_layouts_have_no_table() -> None:
+def test_square_pillars_have_no_table() -> None:
     with pytest.raises(ParameterError, match="shape='square' is invalid"):
         generated_table(BrushParams("regular", 16, 0.01, 64, shape="square"))
+
+
+@pytest.mark.parametrize("layout,grid", [("regular", 96), ("hexagonal", 96)])
+def test_a_table_of_ellipses_is_the_generated_brush(tmp_path: Path, layout: str,
+                                                    grid: int) -> None:
+    """Columns aspect and orientation make a table's pillars ellipses of the
+    radius's area, drawn as generated ellipses are: the table of a generated
+    ellipse brush draws its label map element for element, and pulls off
+    with the same F_ad and W to the last bit."""
+    params = BrushParams(layout, 16, 0.01, grid, shape="ellipse", aspect=2.0,
+                         orientation=30.0)
+    path = save_pillar_table(generated_table(params), tmp_path / "ellipses")
+    assert path.read_text().splitlines()[1] == "x, y, radius, aspect, orientation"
+    table = file_params(path, 0.01, grid=grid)
+    assert np.array_equal(build_labels(table), build_labels(params))
+    made, read = simulate(params), simulate(table)
+    for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+        assert float(read[name]) == float(made[name]), name
+    # the radius rule reads the semi-minor axis: r / sqrt(2)
+    from brushcore.model.layout import smallest_disc
+
+    assert smallest_disc(table) == pytest.approx(params.narrowest_radius_elements, rel=1e-12)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("x, y, radius, aspect\n0.3, 0.3, 0.1, 0.5\n",
+     r"line 2: aspect = 0.5\): allowed aspect >= 1"),
+    ("x, y, radius, orientation\n0.3, 0.3, 0.1, 30\n", r"line 1: no column 'aspect'"),
+    # inside the square as a disc, not as an ellipse of aspect 4 along x
+    ("x, y, radius, aspect, orientation\n0.15, 0.5, 0.1, 4, 0\n",
+     r"line 2: x = 0.15, y = 0.5, radius = 0.1, aspect = 4.0, orientation = 0.0\): "
+     r"allowed discs inside the square.* \(an ellipse's half extents in place of r\)"),
+    # side by side along x: apart as upright ellipses, overlapping when turned to x
+    ("x, y, radius, aspect, orientation\n0.37, 0.5, 0.07, 4, 0\n0.63, 0.5, 0.07, 4, 0\n",
+     r"pillars of lines 2 and 3 \(pillars 0 and 1\) overlap or touch \(an ellipse"),
+], ids=["aspect below 1", "orientation alone", "ellipse outside", "ellipses overlap"])
+def test_a_table_of_ellipses_that_does_not_fit_is_refused(tmp_path: Path, text: str,
+                                                          message: str) -> None:
+    with pytest.raises(ParameterError, match=message):
+        file_params(_table(tmp_path, text), 0.01, grid=128)
+
+
+def test_upright_ellipses_whose_circles_meet_stand_apart(tmp_path: Path) -> None:
+    """Two ellipses whose circumscribed discs overlap but whose faces do not
+    are accepted, and drawn apart; turned towards each other, refused."""
+    apart = _table(tmp_path, "x, y, radius, aspect, orientation\n"
+                   "0.37, 0.5, 0.07, 4, 90\n0.63, 0.5, 0.07, 4, 90\n")
+    labels = build_labels(file_params(apart, 0.01, grid=128))
+    assert set(np.unique(labels)) == {-1, 0, 1}
+    counts = np.bincount(labels[labels >= 0])
+    assert np.allclose(counts / (math.pi * (0.07 * 128) ** 2), 1.0, atol=0.05), counts
+    # their bounding boxes: 4.5 elements across x (the minor axis), 18 along y
+    rows, cols = np.nonzero(labels == 0)
+    assert np.ptp(cols) < np.ptp(rows) / 3
 
 
 def test_the_cli_runs_a_table_on_the_grid_it_is_given(tmp_path: Path) -> None:
@@ -306,7 +360,8 @@ def test_exactly_tangent_discs_are_refused_whatever_their_angle(tmp_path: Path) 
             continue  # not tangent to the last bit
         found += 1
         with pytest.raises(ParameterError, match="neither overlap nor touch"):
-            _check_apart(tmp_path / "t.csv", np.array([2, 3]), centres, np.full(2, r))
+            _check_apart(tmp_path / "t.csv", np.array([2, 3]),
+                         PillarTable(centres, np.full(2, r)))
     assert found > 100
 
 

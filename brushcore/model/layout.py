@@ -202,10 +202,18 @@ def shape_label_map(centres: np.ndarray, shape: PillarShape, area: float, n: int
         If two pillars claim the same element, or a pillar reaches beyond
         the L x L square (naming the pillars).
     """
+    return shapes_label_map(centres, [shape] * len(centres), np.full(len(centres), area), n, h)
+
+
+def shapes_label_map(centres: np.ndarray, shapes, areas: np.ndarray, n: int, h: float
+                     ) -> np.ndarray:
+    """`shape_label_map` with a shape and an area [length^2] for each pillar
+    (a pillar table's discs and ellipses)."""
     labels = np.full((n, n), -1, dtype=np.int32)
-    ey, ex = (e / h for e in shape.half_extents(area))
     side = n * h
     for p, (cy, cx) in enumerate(centres / h):
+        shape, area = shapes[p], float(areas[p])
+        ey, ex = (e / h for e in shape.half_extents(area))
         if cy - ey < 0 or cx - ex < 0 or cy + ey > n or cx + ex > n:
             raise LayoutError(f"pillar {p} at ({cy * h:.4g}, {cx * h:.4g}) reaches beyond "
                               f"the {side:.4g} x {side:.4g} square")
@@ -450,8 +458,16 @@ def _check_file_matches(params: BrushParams, n_file: int, phi_file: float) -> No
 def table_labels(table: PillarTable, grid: int) -> np.ndarray:
     """A pillar table's label map on ``grid`` x ``grid`` elements (the table
     is in units of L, so the element size is 1 / grid), drawn as
-    generated discs are (`label_map`)."""
-    return label_map(table.centres, table.radii, grid, 1.0 / grid)
+    generated discs (`label_map`) and ellipses (`shapes_label_map`) are."""
+    if not table.has_ellipses:
+        return label_map(table.centres, table.radii, grid, 1.0 / grid)
+    shapes = [table.shape(p) for p in range(table.n_pillars)]
+    try:
+        return shapes_label_map(table.centres, shapes, math.pi * table.radii**2, grid,
+                                1.0 / grid)
+    except LayoutError as exc:  # inside the square and apart: pillars meet on this grid
+        raise ParameterError("grid", grid, "a grid whose element centres no two pillars "
+                             "share", str(exc)) from None
 
 
 def generated_table(params: BrushParams) -> PillarTable:
@@ -461,15 +477,19 @@ def generated_table(params: BrushParams) -> PillarTable:
     Raises
     ------
     ParameterError
-        For ``shape`` other than discs (a table holds discs) and for file
+        For square pillars (a table holds discs and ellipses) and for file
         layouts.
     """
     require(params.layout != "file", "layout", params.layout,
             "a generated layout (regular, hexagonal, random): a file brush is its file")
-    require(params.shape == "disc", "shape", params.shape, "disc: a pillar table holds discs")
+    require(params.shape != "square", "shape", params.shape,
+            "disc or ellipse: a pillar table holds discs and ellipses")
     centres = generated_centres(params) / params.side
     radii = np.full(params.n_pillars, params.pillar_radius / params.side)
-    return PillarTable(centres, radii)
+    if params.shape == "disc":
+        return PillarTable(centres, radii)
+    return PillarTable(centres, radii, np.full(params.n_pillars, float(params.aspect)),
+                       np.full(params.n_pillars, float(params.orientation)))
 
 
 #: A disc of this radius [elements] holds an element whose four edge neighbours
@@ -479,11 +499,12 @@ WIDE_RADIUS_ELEMENTS = 1.0 + math.sqrt(0.5)
 
 
 def smallest_disc(params: BrushParams) -> float | None:
-    """A pillar table's smallest disc radius in elements on ``params.grid``,
-    None for other layouts (whose pillars the radius rule reads alike)."""
+    """A pillar table's narrowest pillar half-width in elements on
+    ``params.grid`` (a disc's radius, an ellipse's semi-minor axis), None
+    for other layouts (whose pillars the radius rule reads alike)."""
     if params.layout != "file" or not is_table(params.layout_file):
         return None
-    return float(read_pillar_table(params.layout_file).radii.min()) * params.grid
+    return float(read_pillar_table(params.layout_file).narrowest.min()) * params.grid
 
 
 def smallest_radius_elements(params: BrushParams, labels: np.ndarray) -> float:
@@ -515,7 +536,7 @@ def _table_grid_floor(params: BrushParams) -> int:
     """The grid from which a table's smallest disc covers an element centre
     (allow_coarse) or is three elements across (`WIDE_RADIUS_ELEMENTS`)
     wherever it sits: where `build_labels` searches a grid to suggest."""
-    smallest = float(read_pillar_table(params.layout_file).radii.min())  # [L]
+    smallest = float(read_pillar_table(params.layout_file).narrowest.min())  # [L]
     floor = FLOOR_RADIUS_ELEMENTS if params.allow_coarse else WIDE_RADIUS_ELEMENTS
     return math.ceil(floor / smallest)
 

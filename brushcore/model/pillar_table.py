@@ -1,16 +1,21 @@
-"""Layouts given as a table of disc pillars, drawn on any grid.
+"""Layouts given as a table of disc or elliptic pillars, drawn on any grid.
 
 A label map or image fits one grid; a lab's array is usually known as a
-list of pillars (a mask design, a micrograph's fitted circles).  A pillar
-table is a ``.csv`` text file: a header naming the columns ``x``, ``y``
-and ``radius`` (any order), then one pillar a line, in label order (the
-first pillar is pillar 0), every value in units of the square's side L:
-centres inside (0, 1), x along the grid's second axis and y along its
-first (a label map's row index is y), discs inside the square and apart.
+list of pillars (a mask design, a micrograph's fitted circles or
+ellipses).  A pillar table is a ``.csv`` text file: a header naming the
+columns ``x``, ``y`` and ``radius`` (any order), then one pillar a line, in
+label order (the first pillar is pillar 0), every length in units of the
+square's side L: centres inside (0, 1), x along the grid's second axis and
+y along its first (a label map's row index is y), pillars inside the
+square and apart.  Optional columns ``aspect`` (semi-major / semi-minor
+axis, >= 1) and ``orientation`` (degrees from the x axis to the major
+axis) make a pillar an ellipse of the disc's area: ``radius`` is then its
+equal-area radius, its semi-axes radius sqrt(aspect) and radius /
+sqrt(aspect), as the generated ellipses' (`brushcore.model.shapes`).
 '#' starts a comment; commas or white space separate values.
 
 The same table runs on every grid, so its brush can be refined like a
-generated one (its phi is the discs' own, pi sum r^2, on every grid), and
+generated one (its phi is the pillars' own, pi sum r^2, on every grid), and
 per-pillar inputs (heights, stiffness) follow its rows.  An element belongs
 to a pillar when its centre lies in the disc, as generated layouts are
 drawn (`brushcore.model.layout.table_labels`): a table written from a
@@ -28,10 +33,17 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from brushcore.model.inputs import header_names, table_rows
+from brushcore.model.shapes import PillarShape
 from brushcore.validation import ParameterError
 
 SUFFIX = ".csv"
 COLUMNS = ("x", "y", "radius")
+#: Columns a table may add: an elliptic pillar's aspect and orientation.
+SHAPE_COLUMNS = ("aspect", "orientation")
+#: What the header must name, in the refusals' words.
+HEADER = "a header line naming the columns x, y and radius [L] (and aspect, orientation)"
+#: Points on each ellipse's boundary that the overlap check tries.
+BOUNDARY_POINTS = 720
 _NAME = "layout_file"
 #: The most pillars a table may hold (a brush of 2304 pillars is the paper's largest).
 MAX_PILLARS = 1_000_000
@@ -44,16 +56,22 @@ def is_table(path: str | Path) -> bool:
 
 @dataclass(frozen=True)
 class PillarTable:
-    """The disc pillars of a table, in label order.
+    """The pillars of a table, in label order.
 
     Attributes
     ----------
     centres : (N, 2) pillar centres (y, x) [L]
-    radii : (N,) pillar radii [L]
+    radii : (N,) pillar radii, an ellipse's equal-area one [L]
+    aspects : (N,) semi-major / semi-minor axis (1: a disc), or None for
+        discs alone
+    orientations : (N,) angle of the major axis from the x axis [degrees],
+        or None
     """
 
     centres: np.ndarray
     radii: np.ndarray
+    aspects: np.ndarray | None = None
+    orientations: np.ndarray | None = None
 
     @property
     def n_pillars(self) -> int:
@@ -62,8 +80,35 @@ class PillarTable:
 
     @property
     def phi(self) -> float:
-        """Filling factor pi sum r^2 (of the discs, not of any grid's elements)."""
+        """Filling factor pi sum r^2 (of the pillars, not of any grid's elements)."""
         return float(math.pi * np.sum(self.radii**2))
+
+    @property
+    def has_ellipses(self) -> bool:
+        """Whether some pillar is not a disc."""
+        return self.aspects is not None and bool(np.any(self.aspects != 1.0))
+
+    @property
+    def narrowest(self) -> np.ndarray:
+        """Each pillar's half-width across its narrowest direction [L]: a
+        disc's radius, an ellipse's semi-minor axis (the radius rule's)."""
+        return self.radii if self.aspects is None else self.radii / np.sqrt(self.aspects)
+
+    def shape(self, p: int) -> PillarShape:
+        """Pillar p's cross-section (its area is pi radii[p]^2)."""
+        if self.aspects is None or self.aspects[p] == 1.0:
+            return PillarShape()
+        return PillarShape("ellipse", float(self.aspects[p]), float(self.orientations[p]))
+
+    def half_extents(self) -> np.ndarray:
+        """(N, 2) half widths of each pillar's bounding box along y and x [L]."""
+        if self.aspects is None:
+            return np.column_stack([self.radii, self.radii])
+        a = self.radii * np.sqrt(self.aspects)
+        b = self.radii / np.sqrt(self.aspects)
+        t = np.radians(self.orientations)
+        c, s = np.abs(np.cos(t)), np.abs(np.sin(t))
+        return np.column_stack([np.hypot(a * s, b * c), np.hypot(a * c, b * s)])
 
 
 def _refuse(path: Path, allowed: str, reason: str) -> ParameterError:
@@ -74,24 +119,25 @@ def _refuse(path: Path, allowed: str, reason: str) -> ParameterError:
 _VALUES = ("height", "kbar", "k", "stiff", "factor")
 
 
-def _columns(path: Path, names: list[str], number: int) -> list[int]:
-    """Positions of x, y and radius in the header line ``names``."""
+def _columns(path: Path, names: list[str], number: int) -> dict[str, int]:
+    """Positions of x, y, radius and the shape columns given, in the header
+    line ``names``."""
     lowered = [name.lower() for name in names]
     if "" in lowered:
-        raise _refuse(path, "a header line naming the columns x, y and radius [L]",
-                      f"line {number}: column {lowered.index('') + 1} has no name (an index "
-                      "column? leave it out)")
-    unknown = [n for n in lowered if n not in COLUMNS]
+        raise _refuse(path, HEADER, f"line {number}: column {lowered.index('') + 1} has no "
+                      "name (an index column? leave it out)")
+    unknown = [n for n in lowered if n not in COLUMNS + SHAPE_COLUMNS]
     missing = [c for c in COLUMNS if c not in lowered]
     twice = sorted({n for n in lowered if lowered.count(n) > 1})
+    if "orientation" in lowered and "aspect" not in lowered:
+        missing = ["aspect"]  # an orientation turns nothing without it
     if unknown or missing or twice:
         what = (f"unknown column {unknown[0]!r}" if unknown else
                 f"column {twice[0]!r} given twice" if twice else f"no column {missing[0]!r}")
         more = (" (heights and stiffness go in their own files, one value per pillar "
                 "in the table's order)" if unknown and unknown[0].startswith(_VALUES) else "")
-        raise _refuse(path, "a header line naming the columns x, y and radius [L]",
-                      f"line {number}: {what}{more}")
-    return [lowered.index(c) for c in COLUMNS]
+        raise _refuse(path, HEADER, f"line {number}: {what}{more}")
+    return {name: lowered.index(name) for name in COLUMNS + SHAPE_COLUMNS if name in lowered}
 
 
 @functools.lru_cache(maxsize=16)
@@ -107,9 +153,9 @@ def read_pillar_table(path: str | Path) -> PillarTable:
     ParameterError
         For ``layout_file``, naming the file and the line: no header or
         an unknown, missing or repeated column, a row of another length,
-        a value that is not a finite number, a radius <= 0, a disc that
-        reaches beyond the square, two discs that overlap or touch, a
-        filling factor above 0.5.
+        a value that is not a finite number, a radius <= 0, an aspect < 1,
+        a pillar that reaches beyond the square, two pillars that overlap
+        or touch, a filling factor above 0.5.
     """
     path = Path(path)
     if not path.is_file():
@@ -128,7 +174,8 @@ def _commented_header(path: Path) -> tuple[int, list[str]] | None:
         if text.strip():
             return None  # the first row: no header before it
         found = header_names(number, comment.strip())
-        if sorted(n.lower() for n in found[1]) == sorted(COLUMNS):
+        names = {n.lower() for n in found[1]}
+        if set(COLUMNS) <= names <= set(COLUMNS + SHAPE_COLUMNS):
             return found
     return None
 
@@ -138,53 +185,93 @@ def _read(path: Path) -> PillarTable:
     header, rows, comma_hint = table_rows(path, _NAME, comma_warning=False)
     header = header or (_commented_header(path) if rows else None)
     if header is None:
-        raise _refuse(path, "a header line naming the columns x, y and radius [L]",
-                      "its first line holds numbers" if rows else "it holds no pillar")
+        raise _refuse(path, HEADER, "its first line holds numbers" if rows else
+                      "it holds no pillar")
     order = _columns(path, header[1], header[0])
     if not rows:
         raise _refuse(path, "one pillar a line after the header", "it holds no pillar")
     if len(rows) > MAX_PILLARS:
         raise _refuse(path, f"at most {MAX_PILLARS} pillars", f"it holds {len(rows)}")
     for number, row in rows:
-        if len(row) != len(COLUMNS):
-            raise _refuse(path, "three values a line: x, y and radius [L]",
-                          f"line {number} holds {len(row)} values{comma_hint}")
+        if len(row) != len(order):
+            values = ("three values a line: x, y and radius [L]" if len(order) == 3 else
+                      f"{len(order)} values a line: {', '.join(order)}")
+            raise _refuse(path, values, f"line {number} holds {len(row)} values{comma_hint}")
     lines = np.array([number for number, _ in rows])
-    data = np.array([[row[i] for i in order] for _, row in rows])
-    x, y, r = data.T
-    for column, values in zip(COLUMNS, data.T):
+    data = {name: np.array([row[i] for _, row in rows]) for name, i in order.items()}
+    for column, values in data.items():
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             raise _refuse(path, "finite numbers",
                           f"line {lines[bad[0]]}: {column} = {float(values[bad[0]])!r}")
+    x, y, r = (data[name] for name in COLUMNS)
     bad = np.flatnonzero(r <= 0)
     if bad.size:
         raise _refuse(path, "radii > 0 [L]",
                       f"line {lines[bad[0]]}: radius = {float(r[bad[0]])!r}")
-    outside = np.flatnonzero((x - r < 0) | (y - r < 0) | (x + r > 1) | (y + r > 1))
+    aspects = data.get("aspect")
+    if aspects is not None:
+        bad = np.flatnonzero(aspects < 1.0)
+        if bad.size:
+            raise _refuse(path, "aspect >= 1 (semi-major over semi-minor axis; 1 for a disc)",
+                          f"line {lines[bad[0]]}: aspect = {float(aspects[bad[0]])!r}")
+    orientations = data.get("orientation", None if aspects is None else np.zeros_like(r))
+    table = PillarTable(np.column_stack([y, x]), r, aspects, orientations)
+    half = table.half_extents()  # (y, x)
+    outside = np.flatnonzero((x - half[:, 1] < 0) | (y - half[:, 0] < 0)
+                             | (x + half[:, 1] > 1) | (y + half[:, 0] > 1))
     if outside.size:
         i = outside[0]
         # every radius beyond L: lengths in another unit (um, elements), likely
         units = ("; every radius exceeds 1: write lengths in units of L (divide by the "
                  "square's side)" if np.all(r > 1) else "")
+        shape = "" if aspects is None else (f", aspect = {float(aspects[i])!r}, orientation = "
+                                            f"{float(orientations[i])!r}")
         raise _refuse(path, "discs inside the square: r <= x <= 1 - r and r <= y <= 1 - r, "
-                      "in units of its side L",
+                      "in units of its side L" + ("" if aspects is None else
+                                                  " (an ellipse's half extents in place of r)"),
                       f"line {lines[i]}: x = {float(x[i])!r}, y = {float(y[i])!r}, "
-                      f"radius = {float(r[i])!r}{units}")
-    centres = np.column_stack([y, x])
-    _check_apart(path, lines, centres, r)
-    for array in (centres, r):  # a cached reading: what callers get must not be changed
-        array.setflags(write=False)
-    table = PillarTable(centres, r)
+                      f"radius = {float(r[i])!r}{shape}{units}")
+    _check_apart(path, lines, table)
+    for array in (table.centres, r, aspects, orientations):  # a cached reading: callers
+        if array is not None:  # must not change what the next one gets
+            array.setflags(write=False)
     if table.phi > 0.5 * (1.0 + 1e-12):  # a generated brush at 0.5 sums to 0.5000000000000001
         raise _refuse(path, "discs covering at most half the square (phi <= 0.5)",
                       f"pi sum r^2 = {table.phi:.4g}")
     return table
 
 
-def _check_apart(path: Path, lines: np.ndarray, centres: np.ndarray, r: np.ndarray) -> None:
-    """Refuse two discs that overlap or touch (no closer than the sum of their
-    radii: tangent discs share element edges on every grid)."""
+def _ellipse_points(table: PillarTable, p: int) -> np.ndarray:
+    """`BOUNDARY_POINTS` points (y, x) on pillar p's boundary [L]."""
+    a, b = (table.radii[p] * math.sqrt(table.aspects[p]) ** k for k in (1, -1))
+    t = np.linspace(0.0, 2.0 * math.pi, BOUNDARY_POINTS, endpoint=False)
+    u, v = a * np.cos(t), b * np.sin(t)
+    o = math.radians(table.orientations[p])
+    return table.centres[p] + np.column_stack([u * math.sin(o) + v * math.cos(o),
+                                               u * math.cos(o) - v * math.sin(o)])
+
+
+def _ellipses_meet(table: PillarTable, p: int, q: int) -> bool:
+    """Whether pillars p and q (one an ellipse at least) overlap or touch:
+    some boundary point of either lies in or on the other.  A sampled test:
+    a sliver of overlap between two samples can pass, and is then refused
+    on the grid, where the two share an element or an element edge."""
+    for one, other in ((p, q), (q, p)):
+        dy, dx = (_ellipse_points(table, one) - table.centres[other]).T
+        area = math.pi * table.radii[other] ** 2
+        if np.any(table.shape(other).contains(dy, dx, area)):
+            return True
+    return False
+
+
+def _check_apart(path: Path, lines: np.ndarray, table: PillarTable) -> None:
+    """Refuse two pillars that overlap or touch (discs no closer than the sum
+    of their radii: tangent discs share element edges on every grid;
+    ellipses by `_ellipses_meet`)."""
+    centres = table.centres
+    # an ellipse's circumscribed disc for the search, a disc's own radius
+    r = table.radii if table.aspects is None else table.radii * np.sqrt(table.aspects)
     # Each disc looks for the discs no larger than itself within twice its own
     # radius (d <= r_p + r_q <= 2 r_p): one large disc among many small ones
     # costs its own neighbourhood, not every pair within twice the largest.
@@ -200,10 +287,19 @@ def _check_apart(path: Path, lines: np.ndarray, centres: np.ndarray, r: np.ndarr
     if not p.size:
         return
     distance = np.hypot(*(centres[p] - centres[q]).T)
-    overlap = np.flatnonzero(distance <= r[p] + r[q])  # touching: no grid parts them
+    overlap = distance <= r[p] + r[q]  # touching: no grid parts them
+    if table.has_ellipses:  # circumscribed discs that meet: ask the ellipses
+        round_pair = (table.aspects[p] == 1.0) & (table.aspects[q] == 1.0)
+        for i in np.flatnonzero(overlap & ~round_pair):
+            overlap[i] = _ellipses_meet(table, int(p[i]), int(q[i]))
+    overlap = np.flatnonzero(overlap)
     if overlap.size:
         i = overlap[np.lexsort((q[overlap], p[overlap]))[0]]
         a, b = sorted((int(p[i]), int(q[i])))
+        if table.has_ellipses and not (table.aspects[a] == table.aspects[b] == 1.0):
+            raise _refuse(path, "pillars that neither overlap nor touch",
+                          f"the pillars of lines {lines[a]} and {lines[b]} (pillars {a} and "
+                          f"{b}) overlap or touch (an ellipse among them)")
         raise _refuse(path, "discs that neither overlap nor touch (centres farther apart "
                       "than the sum of the radii)",
                       f"the pillars of lines {lines[a]} and {lines[b]} (pillars {a} and {b}) "
@@ -227,9 +323,17 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     path = Path(path)
     if path.suffix.lower() != SUFFIX:
         path = path.with_name(path.name + SUFFIX)
-    lines = ["# pillar table: one disc a line, in label order; x, y, radius in units of L",
-             ", ".join(COLUMNS)]
-    lines += [f"{float(x)!r}, {float(y)!r}, {float(r)!r}"
-              for (y, x), r in zip(table.centres, table.radii)]
+    if table.aspects is None:
+        lines = ["# pillar table: one disc a line, in label order; x, y, radius in units of L",
+                 ", ".join(COLUMNS)]
+        lines += [f"{float(x)!r}, {float(y)!r}, {float(r)!r}"
+                  for (y, x), r in zip(table.centres, table.radii)]
+    else:
+        lines = ["# pillar table: one pillar a line, in label order; x, y, radius in units "
+                 "of L (an ellipse's equal-area radius), orientation in degrees",
+                 ", ".join(COLUMNS + SHAPE_COLUMNS)]
+        lines += [f"{float(x)!r}, {float(y)!r}, {float(r)!r}, {float(a)!r}, {float(o)!r}"
+                  for (y, x), r, a, o in zip(table.centres, table.radii, table.aspects,
+                                             table.orientations)]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
