@@ -913,6 +913,12 @@ def test_rough_figures_pick_the_brush_with_the_axis_they_draw() -> None:
     config["roughness"] = [0.0, 0.3]
     assert scope["rough_brush"](config) == ("regular", 16)
     assert scope["rough_brush"](config, axes=False) == ("file_mine", 9)
+    # tables alone: the one that roughness draws heights for, not the one given them
+    plain = SimpleNamespace(inputs=("kbar_values",), n_pillars=12)
+    scope["file_brushes"] = lambda config: {"file_mine": made, "file_plain": plain}
+    config["regular"] = []
+    assert scope["rough_brush"](config) == ("file_plain", 12)
+    assert scope["rough_brush"](config, axes=False) == ("file_mine", 9)
 
 
 def test_a_jobs_log_says_what_the_command_says_of_its_curve() -> None:

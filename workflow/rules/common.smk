@@ -1075,8 +1075,10 @@ def rough_brush(config, axes=True):
     `layout_files` entry given heights, stiffness or a gap map: the paper's
     figures leave it out, so these show it), else the first regular brush,
     else the first hexagonal, else the first random, else the first file.
-    For the figures with a roughness axis (`axes`) the generated brushes
-    come first where `roughness` draws heights: a brush as made has none."""
+    For the figures with a roughness axis (`axes`) the brushes whose heights
+    `roughness` draws come first where it draws any: generated ones, then
+    tables and maps given no heights or gap map (a brush given heights has
+    no roughness axis)."""
     files = file_brushes(config)
     made = [(layout, b.n_pillars) for layout, b in files.items() if b.inputs]
     generated = [
@@ -1085,7 +1087,12 @@ def rough_brush(config, axes=True):
         if config[layout]
     ]
     drawn = axes and any(float(s) > 0 for s in config["roughness"])
-    for brush in (generated + made) if drawn else (made + generated):
+    roughened = [
+        (layout, b.n_pillars)
+        for layout, b in files.items()
+        if not {"heights", "gap_map"} & set(b.inputs)
+    ]
+    for brush in (generated + roughened + made) if drawn else (made + generated):
         return brush
     for layout, brush in files.items():
         return layout, brush.n_pillars
