@@ -435,7 +435,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         ``options``, ``protocol``, ``progress``: `check_arguments`), a
         force waypoint beyond 1e3 F_K, a layout or
         discretisation that cannot run, ``labels`` other than the
-        parameters' own map, an empty protocol or a missing GPU.
+        parameters' own map, an empty protocol, a protocol whose first
+        waypoint pulls from the first touch of a brush not flat
+        (`check_first_waypoint`) or a missing GPU.
     """
     check_arguments(params, options, protocol, progress)
     if backend is not None:
