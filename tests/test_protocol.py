@@ -423,29 +423,43 @@ def test_cli_refuses_bad_protocols_before_any_work(tmp_path, capsys, text, messa
 
 
 @pytest.mark.parametrize("first,message", [
-    ("force:2", "waypoint 0 is a tensile force of 2 F_K, which nothing in contact can carry"),
+    ("force:2", "waypoint 0 is a tensile force of 2 F_K: from the first touch, where only "
+                "the highest pillars touch, it pulls off the pillars that touch there"),
     ("displacement:3", "waypoint 0, displacement 3 d_K, lies above the first touch at d = "
-                       "0.3 d_K and pulls away from no contact"),
+                       "0.3 d_K and pulls off the pillars that touch there"),
 ])
-def test_a_first_waypoint_that_pulls_from_first_touch_is_refused(tmp_path, capsys, first,
-                                                                 message):
+def test_a_first_waypoint_that_pulls_from_first_touch_is_said_to(tmp_path, capsys, first,
+                                                                  message):
     """A brush with heights touches with its highest pillar first: a tensile
-    first waypoint, or a displacement above that touch, ran to F_ad NaN with
-    exit status 0; it is refused before any solve.  A flat brush, in full
-    contact at first touch, may be pulled from there."""
+    first waypoint (a preload of the wrong sign, say) or a displacement above
+    that touch pulls that pillar off, as 'separation' first does, and is said
+    to; a later retraction from no contact at all is said to have no F_ad.
+    A flat brush, in full contact at first touch, may be pulled from there
+    without a word."""
     from brushcore.cli import main
 
     heights = tmp_path / "h.txt"
     heights.write_text("0.3\n0\n-0.1\n0.1\n")
     out = tmp_path / "curve.nc"
     args = ["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.1", "--grid",
-            "41", "--out", str(out), "--quiet", "--protocol", f"{first}, separation"]
-    assert main([*args, "--heights", str(heights)]) == 2
-    err = capsys.readouterr().err
-    assert message in err and "allowed a first waypoint that presses" in err, err
-    assert not out.exists()
-    assert main(args) == 0, capsys.readouterr().err  # flat: in full contact at once
-    assert float(xr.open_dataset(out).adhesive_force_normalized) > 0
+            "41", "--quiet", "--protocol"]
+    with pytest.warns(UserWarning) as caught:
+        assert main([*args, f"{first}, separation", "--heights", str(heights),
+                     "--out", str(out)]) == 0
+    said = " ".join(str(w.message) for w in caught)
+    assert message in said and "(a preload P is force:-P)" in said, said
+    alone = tmp_path / "sep.nc"
+    assert main([*args, "separation", "--heights", str(heights), "--out", str(alone)]) == 0
+    assert float(xr.open_dataset(out).adhesive_force_normalized) == pytest.approx(
+        float(xr.open_dataset(alone).adhesive_force_normalized), rel=1e-9)
+    with pytest.warns(UserWarning, match=r"retraction 1 starts with no pillar in contact: "
+                      r"its adhesive_force is NaN"):
+        assert main([*args, "separation, displacement:0.31, force:1, separation", "--heights",
+                     str(heights), "--out", str(tmp_path / "twice.nc")]) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # flat: in full contact at once, nothing to say
+        assert main([*args, f"{first}, separation", "--out", str(tmp_path / "f.nc")]) == 0
+    assert float(xr.open_dataset(tmp_path / "f.nc").adhesive_force_normalized) > 0
 
 
 def test_waypoint_kinds_read_in_any_case_and_separation_takes_no_value():

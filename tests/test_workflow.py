@@ -243,6 +243,16 @@ def test_values_no_brush_reads_are_said_at_plan_time(repo_copy: Path, tmp_path: 
     text = output(snakemake(repo_copy, "-n", "--cores", "2", "--configfile",
                             "config/test.yaml", str(config)))
     assert "'seeds' holds [3], which no brush of the sweep draws from" in text, text
+    # a tensile first waypoint (a preload of the wrong sign?) pulls off the first touch
+    config.write_text(yaml.safe_dump({
+        "regular": [4], "random": [], "kbar": [0.01], "roughness": [0.0, 0.3],
+        "protocol": "force:2, displacement:1, force:-1, separation", "fig5": {"kbar": []}}))
+    proc = snakemake(repo_copy, "-n", "--cores", "2", "--configfile", "config/test.yaml",
+                     str(config))
+    text = output(proc)
+    assert proc.returncode == 0, text
+    assert ("'protocol' starts with a tensile force of 2 F_K: the brushes of roughness = "
+            "0.3 touch with their highest pillars only at first") in text, text
 
 
 def test_a_default_shape_setting_beside_discs_plans(repo_copy: Path, tmp_path: Path) -> None:
@@ -363,10 +373,6 @@ def test_snakefmt_clean() -> None:
         ({"protocol": ""}, r"config key 'protocol': '' should be non-empty"),  # was null
         ({"protocol": "force:-5000, separation"},
          r"waypoint 0 is a force of -5000 F_K\): allowed force waypoints in \[-1000, 1000\]"),
-        # a tensile first waypoint: nothing of a rough brush touches to carry it
-        ({"protocol": "force:2, displacement:1, force:-1, separation", "roughness": [0.3]},
-         r"config key 'protocol': .* starts with a tensile force of 2 F_K, which the "
-         r"brushes of roughness = 0.3 cannot carry at first touch"),
         ({"protocol": "force:-1, separation", "preload": [0.0, 1.0]},
          r"config key 'preload': \[0.0, 1.0\] must be \[0.0\] when 'protocol' is given"),
         ({"colour": "red"}, "config key 'colour' is unknown"),

@@ -288,31 +288,31 @@ def preload_contact(ds: xr.Dataset, preload: str, press_hint: str) -> str | None
                if touching < n_pillars and not pressed else ""))
 
 
-def check_first_waypoint(protocol: Sequence[Waypoint], offsets: np.ndarray) -> None:
-    """Refuse a protocol (normalised) whose first waypoint pulls away from the
-    first touch of a brush that touches there with part of its face only.
+def first_waypoint_note(protocol: Sequence[Waypoint], offsets: np.ndarray) -> str:
+    """Why a protocol (normalised) may not be what was meant, or "": its first
+    waypoint pulls from the first touch of a brush that touches there with
+    its highest pillars only.
 
     A protocol starts where the highest element touches, d = max z (offsets
     z_i [d_K], `element_offsets`).  A flat brush touches everywhere at once
-    and may be pulled from there; any other has nothing in contact yet, so
-    a tensile force cannot be reached and a displacement above the first
-    touch pulls away from no contact (the run would end with F_ad NaN).
+    and may be pulled from there; any other pulls off what touched, the same
+    as 'separation' first: meant so or a preload of the wrong sign (a lab's
+    ``force:2`` for ``force:-2``), which `simulate` warns about.
     """
     if not len(protocol) or not offsets.size or np.ptp(offsets) == 0:
-        return
+        return ""
     first, touch = protocol[0], float(np.max(offsets))
-    why = ""
+    hint = ("pulls off the pillars that touch there, as 'separation' would (a preload P "
+            "is force:-P)")
     if first.kind == "force" and first.value > 0:
-        why = (f"waypoint 0 is a tensile force of {first.value:g} F_K, which nothing in "
-               "contact can carry at the first touch (a preload P is force:-P)")
-    elif first.kind == "displacement" and first.value > touch:
-        why = (f"waypoint 0, displacement {first.value:g} d_K, lies above the first touch "
-               f"at d = {touch:.4g} d_K and pulls away from no contact (d is measured from "
-               "the plane where a pillar of height 0 touches; a smaller d presses)")
-    if why:
-        raise ParameterError("protocol", protocol_text(protocol),
-                             "a first waypoint that presses the brush on (force:-P, or a "
-                             "displacement below the first touch) or 'separation'", why)
+        return (f"waypoint 0 is a tensile force of {first.value:g} F_K: from the first "
+                f"touch, where only the highest pillars touch, it {hint}")
+    # the offsets passed through metres: a d given as the first touch itself is no pull
+    if first.kind == "displacement" and first.value > touch + 1e-9 * max(1.0, abs(touch)):
+        return (f"waypoint 0, displacement {first.value:g} d_K, lies above the first touch "
+                f"at d = {touch:.4g} d_K and {hint}; d is measured from the plane where a "
+                "pillar of height 0 touches, and a smaller d presses")
+    return ""
 
 
 class FirstTouchWarning(UserWarning):
@@ -435,9 +435,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         ``options``, ``protocol``, ``progress``: `check_arguments`), a
         force waypoint beyond 1e3 F_K, a layout or
         discretisation that cannot run, ``labels`` other than the
-        parameters' own map, an empty protocol, a protocol whose first
-        waypoint pulls from the first touch of a brush not flat
-        (`check_first_waypoint`) or a missing GPU.
+        parameters' own map, an empty protocol or a missing GPU.
     """
     check_arguments(params, options, protocol, progress)
     if backend is not None:
@@ -506,8 +504,10 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         waypoints = preload_protocol(inputs.preload)
     else:
         check_protocol_preload(params.preload, protocol)
-        check_first_waypoint(protocol, element_offsets(labels, inputs.heights,
-                                                       inputs.gap_map) / ds_)
+        note = first_waypoint_note(protocol, element_offsets(labels, inputs.heights,
+                                                             inputs.gap_map) / ds_)
+        if note:
+            warnings.warn(note, stacklevel=3)
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
                           for w in protocol)
     # How far loads and height scatter reach, in F_K and d_K (a displacement
@@ -533,7 +533,13 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                       "Waypoint('separation'), or 'separation' in --protocol or a config's "
                       "protocol)",
                       stacklevel=3)
-    elif curve.attached_elements[curve.pulls[-1][1]] > 0:
+    empty = [k for k, (first, _) in enumerate(curve.pulls)
+             if curve.attached_elements[first] == 0]
+    if empty:  # e.g. force:2 after a complete pull-off: nothing to pull on
+        warnings.warn(f"retraction {', '.join(map(str, empty))} starts with no pillar in "
+                      "contact: its adhesive_force is NaN and its work 0 (a force:-P waypoint "
+                      "before it presses the brush on again)", stacklevel=3)
+    if peaks and curve.attached_elements[curve.pulls[-1][1]] > 0:
         warnings.warn("the last retraction ends in contact: adhesive_force is the largest "
                       "force it reached, not a pull-off (end the protocol with a "
                       "separation waypoint for one: Waypoint('separation'), or "

@@ -347,7 +347,6 @@ def check_cases(config, main=True):
         raise ConfigError(f"config: {exc.in_terms_of(keys, sep=' = ')}") from None
     config_protocol(config)
     brushes = file_brushes(config)  # every layout file read once, and refused here
-    _check_first_waypoint(config, brushes)
     cases = sweep_cases(config)
     if not cases:
         raise ConfigError(
@@ -356,6 +355,7 @@ def check_cases(config, main=True):
         )
     if main:
         _warn_first_touch(config, brushes)
+        _warn_first_waypoint(config, brushes)
         _warn_unused(config, cases)
     named = [int(e["n_pillars"]) for e in config.get("grid_by_n", [])]
     twice = sorted({n for n in named if named.count(n) > 1})
@@ -456,12 +456,13 @@ def _also_refused(makes, refused, key):
     return f"; {key} = {sorted(more)} refuse{'s' * (len(more) == 1)} it too"
 
 
-def _check_first_waypoint(config, brushes):
-    """Refuse a protocol that starts with a tensile force where a brush touches
-    with part of its face at first (drawn heights, a table's heights or gap
-    map): nothing in contact can carry it, and its curves would end with F_ad
-    NaN (`check_first_waypoint` refuses it in a job, and a displacement
-    above the first touch, which needs the drawn heights)."""
+def _warn_first_waypoint(config, brushes):
+    """Warn where a protocol starts with a tensile force and a brush touches
+    with its highest pillars only at first (drawn heights, a table's heights
+    or gap map): it pulls those off, as 'separation' first would, which a
+    preload of the wrong sign does too (`first_waypoint_note` says it in a
+    job, and of a displacement above the first touch, which needs the
+    drawn heights)."""
     protocol = config_protocol(config)
     if protocol is None or protocol[0].kind != "force" or protocol[0].value <= 0:
         return
@@ -471,11 +472,11 @@ def _check_first_waypoint(config, brushes):
         if {"heights", "gap_map"} & set(brush.inputs)
     ] + [f"roughness = {float(s)!r}" for s in config["roughness"] if float(s) > 0]
     if uneven:
-        raise ConfigError(
-            f"config key 'protocol': {config['protocol']!r} starts with a tensile force "
-            f"of {protocol[0].value:g} F_K, which the brushes of {', '.join(uneven)} "
-            "cannot carry at first touch (only their highest pillars touch there); "
-            "allowed a first waypoint that presses them on: a preload P is force:-P"
+        logger.warning(
+            f"config: 'protocol' starts with a tensile force of {protocol[0].value:g} F_K: "
+            f"the brushes of {', '.join(uneven)} touch with their highest pillars only "
+            "at first, and it pulls those off, as 'separation' would (a preload P is "
+            "force:-P)"
         )
 
 
