@@ -215,7 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--layout-file", type=_path,
                      help="label map (.npy: -1 no pillar, 0..N-1 pillar) or image (.png: "
                           "dark pillars on white), of the grid's size, or a pillar table "
-                          "(.csv: columns x, y, radius in units of L, one disc a line; "
+                          "(.csv: columns x, y, radius in units of L, one pillar a line, "
+                          "optionally aspect and orientation for ellipses; "
                           "with --grid) for --layout file")
     rough = sim.add_argument_group(
         "rough, graded and preloaded brushes",
@@ -527,7 +528,8 @@ def _simulate(args: argparse.Namespace) -> int:
                   f"  W/W_K = {float(pull.pull_work_of_separation_normalized):.4f}"
                   f"  in contact at its end: {left:.1%} of the pillar area"
                   + ("  (a partial retraction: F_ad is the largest force it reached, "
-                     "not a pull-off)" if left > 0 else ""))
+                     "not a pull-off)" if left > 0 and math.isfinite(
+                         float(pull.pull_adhesive_force_normalized)) else ""))
     return 0
 
 

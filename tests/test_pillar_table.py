@@ -194,16 +194,21 @@ def test_a_table_of_ellipses_is_the_generated_brush(tmp_path: Path, layout: str,
 
 @pytest.mark.parametrize("text, message", [
     ("x, y, radius, aspect\n0.3, 0.3, 0.1, 0.5\n",
-     r"line 2: aspect = 0.5\): allowed aspect >= 1"),
+     r"line 2: 'aspect' 0.5\): allowed 'aspect' >= 1"),
     ("x, y, radius, orientation\n0.3, 0.3, 0.1, 30\n", r"line 1: no column 'aspect'"),
     # inside the square as a disc, not as an ellipse of aspect 4 along x
     ("x, y, radius, aspect, orientation\n0.15, 0.5, 0.1, 4, 0\n",
-     r"line 2: x = 0.15, y = 0.5, radius = 0.1, aspect = 4.0, orientation = 0.0\): "
+     r"line 2: x = 0.15, y = 0.5, radius = 0.1, 'aspect' 4.0, 'orientation' 0.0\): "
      r"allowed discs inside the square.* \(an ellipse's half extents in place of r\)"),
     # side by side along x: apart as upright ellipses, overlapping when turned to x
     ("x, y, radius, aspect, orientation\n0.37, 0.5, 0.07, 4, 0\n0.63, 0.5, 0.07, 4, 0\n",
      r"pillars of lines 2 and 3 \(pillars 0 and 1\) overlap or touch \(an ellipse"),
-], ids=["aspect below 1", "orientation alone", "ellipse outside", "ellipses overlap"])
+    # a disc on an ellipse's flank, 1e-7 L into it, between two boundary samples
+    ("x, y, radius, aspect, orientation\n0.5, 0.5, 0.06, 8.0, 0\n"
+     "0.5071454877102651, 0.5411945646687565, 0.02, 1, 0\n",
+     r"pillars of lines 2 and 3 \(pillars 0 and 1\) overlap or touch"),
+], ids=["aspect below 1", "orientation alone", "ellipse outside", "ellipses overlap",
+        "a sliver of overlap"])
 def test_a_table_of_ellipses_that_does_not_fit_is_refused(tmp_path: Path, text: str,
                                                           message: str) -> None:
     with pytest.raises(ParameterError, match=message):
@@ -219,6 +224,10 @@ def test_upright_ellipses_whose_circles_meet_stand_apart(tmp_path: Path) -> None
     assert set(np.unique(labels)) == {-1, 0, 1}
     counts = np.bincount(labels[labels >= 0])
     assert np.allclose(counts / (math.pi * (0.07 * 128) ** 2), 1.0, atol=0.05), counts
+    # an ellipse that touches the square's edge (x = its half extent) is drawn
+    edge = _table(tmp_path, "x, y, radius, aspect, orientation\n"
+                  f"{0.05 * math.sqrt(1.5)!r}, 0.5, 0.05, 1.5, 0\n", "edge.csv")
+    assert (build_labels(file_params(edge, 0.01, grid=128)) == 0).any()
     # their bounding boxes: 4.5 elements across x (the minor axis), 18 along y
     rows, cols = np.nonzero(labels == 0)
     assert np.ptp(cols) < np.ptp(rows) / 3

@@ -205,6 +205,10 @@ def shape_label_map(centres: np.ndarray, shape: PillarShape, area: float, n: int
     return shapes_label_map(centres, [shape] * len(centres), np.full(len(centres), area), n, h)
 
 
+#: Relative slack of `shapes_label_map`'s check that pillars lie inside the square.
+EDGE_SLACK = 1e-12
+
+
 def shapes_label_map(centres: np.ndarray, shapes, areas: np.ndarray, n: int, h: float
                      ) -> np.ndarray:
     """`shape_label_map` with a shape and an area [length^2] for each pillar
@@ -214,7 +218,10 @@ def shapes_label_map(centres: np.ndarray, shapes, areas: np.ndarray, n: int, h: 
     for p, (cy, cx) in enumerate(centres / h):
         shape, area = shapes[p], float(areas[p])
         ey, ex = (e / h for e in shape.half_extents(area))
-        if cy - ey < 0 or cx - ex < 0 or cy + ey > n or cx + ex > n:
+        # a hair of slack: a pillar that touches the edge (a table's, checked in
+        # units of L) must not be refused by rounding in units of elements
+        slack = EDGE_SLACK * n
+        if cy - ey < -slack or cx - ex < -slack or cy + ey > n + slack or cx + ex > n + slack:
             raise LayoutError(f"pillar {p} at ({cy * h:.4g}, {cx * h:.4g}) reaches beyond "
                               f"the {side:.4g} x {side:.4g} square")
         i0, i1 = max(0, int(math.floor(cy - ey)) - 1), min(n, int(math.ceil(cy + ey)) + 1)

@@ -165,7 +165,8 @@ class DeviceBlocks(BlockInverse):
         if not ok:  # see BlockInverse._factorise: the blocks alone remain valid
             self.coarse = False
             return
-        self._e_inverse = xp.linalg.inv(e)
+        # zero where a pillar has no elements, whatever the units (`coarse_inverse`)
+        self._e_inverse = xp.linalg.inv(e) * live[:, None] * live[None, :]
         self._c_factor = self.backend.to_host(c)
         self._c_inverse = xp.where(dead, 0.0, 1.0 / xp.where(dead, 1.0, c))
         self.factorisations += 1
