@@ -462,6 +462,23 @@ def test_a_first_waypoint_that_pulls_from_first_touch_is_said_to(tmp_path, capsy
     assert float(xr.open_dataset(tmp_path / "f.nc").adhesive_force_normalized) > 0
 
 
+def test_heights_with_a_common_offset_beside_displacement_waypoints_are_said_to():
+    """A displacement waypoint is absolute: heights given as measured (7.6 d_K
+    each, a lab's) moved it by their mean.  Said where a displacement
+    waypoint reads it, not where forces alone do, nor for offsets."""
+    offsets = np.array([0.2, -0.1, 0.0, -0.1])
+    cycle = [Waypoint("force", -1.0), Waypoint("displacement", 1.0), Waypoint("separation")]
+    base = BrushParams("regular", 4, 0.1, 41)
+    with pytest.warns(UserWarning, match=r"the heights given have a mean of 7\.5 d_K against "
+                      r"a spread of 0\.122: displacement waypoints are absolute"):
+        simulate(replace(base, heights=offsets + 7.5), protocol=cycle)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        simulate(replace(base, heights=offsets), protocol=cycle)
+        simulate(replace(base, heights=offsets + 7.5),
+                 protocol=[Waypoint("force", -1.0), Waypoint("separation")])
+
+
 def test_waypoint_kinds_read_in_any_case_and_separation_takes_no_value():
     """"Force:-1, Separation" is the protocol in lower case; Python's
     Waypoint("separation", 3) is refused as the CLI's 'separation:3' is."""

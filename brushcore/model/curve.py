@@ -315,6 +315,23 @@ def first_waypoint_note(protocol: Sequence[Waypoint], offsets: np.ndarray) -> st
     return ""
 
 
+def common_height_note(protocol: Sequence[Waypoint], heights: np.ndarray | None) -> str:
+    """Why given heights [d_K] may not be what a protocol's displacement
+    waypoints assume, or "": their mean lies beyond 1 d_K and three times
+    their spread.  A common height only moves where d = 0 lies, which the
+    forces ignore but an absolute displacement does not (a lab's heights of
+    7.6 d_K made "displacement:1.7" a press to 8 F_K)."""
+    if heights is None or not any(w.kind == "displacement" for w in protocol):
+        return ""
+    mean, spread = float(np.mean(heights)), float(np.std(heights))
+    if abs(mean) <= max(1.0, 3.0 * spread):
+        return ""
+    return (f"the heights given have a mean of {mean:.4g} d_K against a spread of "
+            f"{spread:.3g}: displacement waypoints are absolute, from the plane where a "
+            "pillar of height 0 touches, so a common height moves them (give heights as "
+            "offsets from their mean)")
+
+
 class FirstTouchWarning(UserWarning):
     """An approach at preload 0 stopped at first touch with pillars out of
     contact (heights, roughness or a gap map): a pull-off of the few that
@@ -506,6 +523,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         check_protocol_preload(params.preload, protocol)
         note = first_waypoint_note(protocol, element_offsets(labels, inputs.heights,
                                                              inputs.gap_map) / ds_)
+        note = note or common_height_note(protocol, params.heights)
         if note:
             warnings.warn(note, stacklevel=3)
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
