@@ -209,10 +209,16 @@ def shape_label_map(centres: np.ndarray, shape: PillarShape, area: float, n: int
 EDGE_SLACK = 1e-12
 
 
-def shapes_label_map(centres: np.ndarray, shapes, areas: np.ndarray, n: int, h: float
-                     ) -> np.ndarray:
+def shapes_label_map(centres: np.ndarray, shapes: Sequence[PillarShape], areas: np.ndarray,
+                     n: int, h: float) -> np.ndarray:
     """`shape_label_map` with a shape and an area [length^2] for each pillar
-    (a pillar table's discs and ellipses)."""
+    (a pillar table's discs and ellipses).
+
+    Raises
+    ------
+    LayoutError
+        As `shape_label_map`.
+    """
     labels = np.full((n, n), -1, dtype=np.int32)
     side = n * h
     for p, (cy, cx) in enumerate(centres / h):
