@@ -194,11 +194,11 @@ def test_a_table_of_ellipses_is_the_generated_brush(tmp_path: Path, layout: str,
 
 @pytest.mark.parametrize("text, message", [
     ("x, y, radius, aspect\n0.3, 0.3, 0.1, 0.5\n",
-     r"line 2: 'aspect' 0.5\): allowed 'aspect' >= 1"),
+     r"line 2: 'aspect' = 0.5\): allowed 'aspect' >= 1"),
     ("x, y, radius, orientation\n0.3, 0.3, 0.1, 30\n", r"line 1: no column 'aspect'"),
     # inside the square as a disc, not as an ellipse of aspect 4 along x
     ("x, y, radius, aspect, orientation\n0.15, 0.5, 0.1, 4, 0\n",
-     r"line 2: x = 0.15, y = 0.5, radius = 0.1, 'aspect' 4.0, 'orientation' 0.0\): "
+     r"line 2: x = 0.15, y = 0.5, radius = 0.1, 'aspect' = 4.0, 'orientation' = 0.0\): "
      r"allowed discs inside the square.* \(an ellipse's half extents in place of r\)"),
     # side by side along x: apart as upright ellipses, overlapping when turned to x
     ("x, y, radius, aspect, orientation\n0.37, 0.5, 0.07, 4, 0\n0.63, 0.5, 0.07, 4, 0\n",

@@ -424,15 +424,15 @@ def test_cli_refuses_bad_protocols_before_any_work(tmp_path, capsys, text, messa
 
 @pytest.mark.parametrize("first,message", [
     ("force:2", "waypoint 0 is a tensile force of 2 F_K: from the first touch, where only "
-                "the highest pillars touch, it pulls off the pillars that touch there"),
+                "the highest pillars touch, it pulls on the pillars that touch there"),
     ("displacement:3", "waypoint 0, displacement 3 d_K, lies above the first touch at d = "
-                       "0.3 d_K and pulls off the pillars that touch there"),
+                       "0.3 d_K and pulls on the pillars that touch there"),
 ])
 def test_a_first_waypoint_that_pulls_from_first_touch_is_said_to(tmp_path, capsys, first,
                                                                   message):
     """A brush with heights touches with its highest pillar first: a tensile
     first waypoint (a preload of the wrong sign, say) or a displacement above
-    that touch pulls that pillar off, as 'separation' first does, and is said
+    that touch pulls that pillar off (as 'separation' first does here), and is said
     to; a later retraction from no contact at all is said to have no F_ad.
     A flat brush, in full contact at first touch, may be pulled from there
     without a word."""
@@ -561,8 +561,13 @@ def test_protocol_that_never_retracts_reports_no_pull_off(tmp_path):
     assert np.isnan(float(read_curve(tmp_path / "approach.nc").adhesive_force))
     # Back from -1 to -0.5 F_K: a retraction, but never in tension (it gave
     # F_ad = -0.5, the least compressive force, as a "maximum tensile force").
-    ds = simulate(BrushParams("regular", 9, 0.003, 48, heights=heights),
-                  protocol=[Waypoint("force", -1.0), Waypoint("force", -0.5)])
+    with pytest.warns(UserWarning) as caught:
+        ds = simulate(BrushParams("regular", 9, 0.003, 48, heights=heights),
+                      protocol=[Waypoint("force", -1.0), Waypoint("force", -0.5)])
+    said = [str(w.message) for w in caught]
+    assert any("retraction 0 stays compressive: its adhesive_force is NaN" in m
+               for m in said), said
+    assert not any("the largest force it reached" in m for m in said), said  # F_ad NaN
     assert ds.retraction.values.any() and float(ds.force.max()) <= 0
     assert np.isnan(float(ds.adhesive_force_normalized))
     assert float(ds.work_of_separation_normalized) == 0.0

@@ -683,7 +683,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
                      + textwrap.fill(protocol, 36), fontsize=8 if protocol else 9)
         ax.set_xlabel(r"preload [$F_K$]" if protocol is None else
                       r"load of the protocol's first waypoint [$F_K$]" if first is not None
-                      else r"preload [$F_K$] (0: the protocol starts with no load)")
+                      else r"preload [$F_K$] (0: the protocol starts with a displacement)")
         ax.set_ylabel(FAD_LABEL)
         _no_false_zoom(ax)
     _side_legend(fig, axes)

@@ -295,15 +295,16 @@ def first_waypoint_note(protocol: Sequence[Waypoint], offsets: np.ndarray) -> st
 
     A protocol starts where the highest element touches, d = max z (offsets
     z_i [d_K], `element_offsets`).  A flat brush touches everywhere at once
-    and may be pulled from there; any other pulls off what touched, the same
-    as 'separation' first: meant so or a preload of the wrong sign (a lab's
-    ``force:2`` for ``force:-2``), which `simulate` warns about.
+    and may be pulled from there; any other pulls on what touched (off it,
+    where the load exceeds what those pillars hold): meant so, or a preload
+    of the wrong sign (a lab's ``force:2`` for ``force:-2``), which
+    `simulate` warns about.
     """
     if not len(protocol) or not offsets.size or np.ptp(offsets) == 0:
         return ""
     first, touch = protocol[0], float(np.max(offsets))
-    hint = ("pulls off the pillars that touch there, as 'separation' would (a preload P "
-            "is force:-P)")
+    hint = ("pulls on the pillars that touch there, not on the brush pressed on (a "
+            "preload P is force:-P)")
     if first.kind == "force" and first.value > 0:
         return (f"waypoint 0 is a tensile force of {first.value:g} F_K: from the first "
                 f"touch, where only the highest pillars touch, it {hint}")
@@ -557,7 +558,13 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         warnings.warn(f"retraction {', '.join(map(str, empty))} starts with no pillar in "
                       "contact: its adhesive_force is NaN and its work 0 (a force:-P waypoint "
                       "before it presses the brush on again)", stacklevel=3)
-    if peaks and curve.attached_elements[curve.pulls[-1][1]] > 0:
+    compressive = [k for k, peak in enumerate(peaks)
+                   if not math.isfinite(peak[1]) and k not in empty]
+    if compressive:  # an unloading that never pulls: no F_ad to speak of
+        warnings.warn(f"retraction {', '.join(map(str, compressive))} stays compressive: "
+                      "its adhesive_force is NaN and its work 0 (it unloads without "
+                      "pulling)", stacklevel=3)
+    if peaks and math.isfinite(f_ad) and curve.attached_elements[curve.pulls[-1][1]] > 0:
         warnings.warn("the last retraction ends in contact: adhesive_force is the largest "
                       "force it reached, not a pull-off (end the protocol with a "
                       "separation waypoint for one: Waypoint('separation'), or "

@@ -217,7 +217,7 @@ def _read(path: Path) -> PillarTable:
         if bad.size:
             # column names quoted: the command would read aspect as its --aspect
             raise _refuse(path, "'aspect' >= 1 (semi-major over semi-minor axis; 1 for a "
-                          "disc)", f"line {lines[bad[0]]}: 'aspect' {float(aspects[bad[0]])!r}")
+                          "disc)", f"line {lines[bad[0]]}: 'aspect' = {float(aspects[bad[0]])!r}")
     orientations = data.get("orientation", None if aspects is None else np.zeros_like(r))
     table = PillarTable(np.column_stack([y, x]), r, aspects, orientations)
     half = table.half_extents()  # (y, x)
@@ -228,8 +228,8 @@ def _read(path: Path) -> PillarTable:
         # every radius beyond L: lengths in another unit (um, elements), likely
         units = ("; every radius exceeds 1: write lengths in units of L (divide by the "
                  "square's side)" if np.all(r > 1) else "")
-        shape = "" if aspects is None else (f", 'aspect' {float(aspects[i])!r}, 'orientation' "
-                                            f"{float(orientations[i])!r}")
+        shape = "" if aspects is None else (f", 'aspect' = {float(aspects[i])!r}, "
+                                            f"'orientation' = {float(orientations[i])!r}")
         raise _refuse(path, "discs inside the square: r <= x <= 1 - r and r <= y <= 1 - r, "
                       "in units of its side L" + ("" if aspects is None else
                                                   " (an ellipse's half extents in place of r)"),
@@ -267,20 +267,37 @@ def _level(table: PillarTable, q: int, points: np.ndarray) -> np.ndarray:
 
 def _ellipses_meet(table: PillarTable, p: int, q: int) -> bool:
     """Whether pillars p and q (one an ellipse at least) overlap or touch:
-    the lowest of the other's implicit function over either's boundary is
-    <= 1.  Found on `BOUNDARY_POINTS` samples, then refined around the
-    lowest by a bounded scalar search (an overlap of 1e-7 L between two
-    samples passed the samples alone)."""
+    the lowest of the other's implicit function f over either's boundary is
+    <= 1.  Found on `BOUNDARY_POINTS` samples, then, where the samples'
+    lowest lies within what f can dip between two samples, refined around
+    it by a bounded scalar search (an overlap of 1e-7 L between two samples
+    passed the samples alone).
+
+    f(t) = q(x(t)) with x on an ellipse of semi-major a1 and q the other's
+    (u/a2)^2 + (v/b2)^2: |f''| <= |x'|^2 |H| + |grad q| |x''| <= 2 c^2 +
+    2 sqrt(q) c, c = a1 / b2.  A minimum f(t*) <= 1 has a sample s within
+    step / 2 of it, so f(s) <= 1 + |f''| step^2 / 8 there: with y = sqrt(f(s)),
+    y^2 - k y - (1 + c k) <= 0, k = c step^2 / 4.  Samples all above its
+    root squared leave no such minimum.
+    """
     step = 2.0 * math.pi / BOUNDARY_POINTS
     t = np.arange(BOUNDARY_POINTS) * step
     for one, other in ((p, q), (q, p)):
         values = _level(table, other, _boundary(table, one, t))
+        lowest = float(values.min())
+        if lowest <= 1.0:
+            return True
+        c = (table.radii[one] * math.sqrt(table.aspects[one])
+             / (table.radii[other] / math.sqrt(table.aspects[other])))
+        k = c * step**2 / 4.0
+        if lowest > (0.5 * (k + math.sqrt(k * k + 4.0 * (1.0 + c * k)))) ** 2:
+            continue  # no dip between samples reaches the other pillar
         best = float(t[int(np.argmin(values))])
         found = optimize.minimize_scalar(
             lambda s: float(_level(table, other, _boundary(table, one, np.array([s])))[0]),
             bounds=(best - step, best + step), method="bounded",
             options={"xatol": 1e-12})
-        if min(float(values.min()), float(found.fun)) <= 1.0:
+        if float(found.fun) <= 1.0:
             return True
     return False
 

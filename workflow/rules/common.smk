@@ -459,8 +459,7 @@ def _also_refused(makes, refused, key):
 def _warn_first_waypoint(config, brushes):
     """Warn where a protocol starts with a tensile force and a brush touches
     with its highest pillars only at first (drawn heights, a table's heights
-    or gap map): it pulls those off, as 'separation' first would, which a
-    preload of the wrong sign does too (`first_waypoint_note` says it in a
+    or gap map): it pulls on those, as a preload of the wrong sign does (`first_waypoint_note` says it in a
     job, and of a displacement above the first touch, which needs the
     drawn heights)."""
     protocol = config_protocol(config)
@@ -475,8 +474,8 @@ def _warn_first_waypoint(config, brushes):
         logger.warning(
             f"config: 'protocol' starts with a tensile force of {protocol[0].value:g} F_K: "
             f"the brushes of {', '.join(uneven)} touch with their highest pillars only "
-            "at first, and it pulls those off, as 'separation' would (a preload P is "
-            "force:-P)"
+            "at first, and it pulls on those, not on the brush pressed on (a preload P "
+            "is force:-P)"
         )
 
 
