@@ -427,8 +427,7 @@ def _simulate(args: argparse.Namespace) -> int:
         if args.min_gap != 1.0 and args.layout != "random":  # it would seem to count
             warnings.warn(f"--min-gap applies to random layouts only: the {params.layout} "
                           f"layout ignores --min-gap {args.min_gap:g}")
-        drawn = params.layout == "random" or params.roughness > 0 or params.kbar_spread > 0
-        if args.seed != 0 and not drawn:  # it would seem to count
+        if args.seed != 0 and not params.draws_from_seed:  # it would seem to count
             warnings.warn(f"--seed {args.seed} draws nothing here (it picks a random layout, "
                           "--roughness heights or a --kbar-spread draw): the brush is the "
                           "same for every seed")

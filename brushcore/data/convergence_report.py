@@ -12,8 +12,8 @@ import numpy as np
 import xarray as xr
 
 from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, GRID_DIM, MIXED,
-                                        PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SMALLEST,
-                                        STUDY_FLAGS, UNDER_RESOLVED_RADIUS, case_flags,
+                                        PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SETTINGS_FACTOR,
+                                        SMALLEST, STUDY_FLAGS, UNDER_RESOLVED_RADIUS, case_flags,
                                         flag_radii, phi_spread)
 
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
@@ -127,7 +127,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "is raised, so the error carries Fs "
               f"{conv.attrs.get('scattered_safety_factor', 3):g} for that alone; "
               "mixed_settings(rtol+...): the grids' curves ran with different solver "
-              "settings (numbers more than 1.5x apart) among "
+              f"settings (numbers more than {SETTINGS_FACTOR:g}x apart) among "
               f"{', '.join(ACCURACY_SETTINGS)} (sweep.nc's run_* give the values), so "
               "their solver errors differ and mix into the fit.\n\n")
     Path(md_path).write_text(header + to_markdown(table))

@@ -221,12 +221,12 @@ def shapes_label_map(centres: np.ndarray, shapes: Sequence[PillarShape], areas: 
     """
     labels = np.full((n, n), -1, dtype=np.int32)
     side = n * h
+    # a hair of slack: a pillar that touches the edge (a table's, checked in
+    # units of L) must not be refused by rounding in units of elements
+    slack = EDGE_SLACK * n
     for p, (cy, cx) in enumerate(centres / h):
         shape, area = shapes[p], float(areas[p])
         ey, ex = (e / h for e in shape.half_extents(area))
-        # a hair of slack: a pillar that touches the edge (a table's, checked in
-        # units of L) must not be refused by rounding in units of elements
-        slack = EDGE_SLACK * n
         if cy - ey < -slack or cx - ex < -slack or cy + ey > n + slack or cx + ex > n + slack:
             raise LayoutError(f"pillar {p} at ({cy * h:.4g}, {cx * h:.4g}) reaches beyond "
                               f"the {side:.4g} x {side:.4g} square")

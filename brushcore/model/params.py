@@ -386,6 +386,12 @@ class BrushParams:
         return type(self), tuple(getattr(self, f.name) for f in fields(self) if f.init)
 
     @property
+    def draws_from_seed(self) -> bool:
+        """Whether ``seed`` picks anything: a random layout, drawn heights
+        (roughness) or drawn stiffnesses (kbar_spread)."""
+        return self.layout == "random" or self.roughness > 0 or self.kbar_spread > 0
+
+    @property
     def is_flat(self) -> bool:
         """The flat problem: equal heights and springs, pulled from full contact."""
         return (self.roughness == 0 and self.preload == 0 and self.kbar_spread == 0

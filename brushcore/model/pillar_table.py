@@ -89,11 +89,21 @@ class PillarTable:
         """Whether some pillar is not a disc."""
         return self.aspects is not None and bool(np.any(self.aspects != 1.0))
 
+    @functools.cached_property
+    def semi_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) semi-major and semi-minor axes [L]: r sqrt(aspect) and r /
+        sqrt(aspect), a disc's radius twice (once per table: the overlap
+        test reads them for every boundary point it tries)."""
+        if self.aspects is None:
+            return self.radii, self.radii
+        root = np.sqrt(self.aspects)
+        return self.radii * root, self.radii / root
+
     @property
     def narrowest(self) -> np.ndarray:
         """Each pillar's half-width across its narrowest direction [L]: a
         disc's radius, an ellipse's semi-minor axis (the radius rule's)."""
-        return self.radii if self.aspects is None else self.radii / np.sqrt(self.aspects)
+        return self.semi_axes[1]
 
     def shape(self, p: int) -> PillarShape:
         """Pillar p's cross-section (its area is pi radii[p]^2)."""
@@ -103,10 +113,9 @@ class PillarTable:
 
     def half_extents(self) -> np.ndarray:
         """(N, 2) half widths of each pillar's bounding box along y and x [L]."""
+        a, b = self.semi_axes
         if self.aspects is None:
-            return np.column_stack([self.radii, self.radii])
-        a = self.radii * np.sqrt(self.aspects)
-        b = self.radii / np.sqrt(self.aspects)
+            return np.column_stack([a, b])
         t = np.radians(self.orientations)
         c, s = np.abs(np.cos(t)), np.abs(np.sin(t))
         return np.column_stack([np.hypot(a * s, b * c), np.hypot(a * c, b * s)])
@@ -247,7 +256,7 @@ def _read(path: Path) -> PillarTable:
 
 def _boundary(table: PillarTable, p: int, t: np.ndarray) -> np.ndarray:
     """Points (y, x) [L] on pillar p's boundary at parameters t [rad]."""
-    a, b = (table.radii[p] * math.sqrt(table.aspects[p]) ** k for k in (1, -1))
+    a, b = (float(axis[p]) for axis in table.semi_axes)
     u, v = a * np.cos(t), b * np.sin(t)
     o = math.radians(table.orientations[p])
     return table.centres[p] + np.column_stack([u * math.sin(o) + v * math.cos(o),
@@ -257,7 +266,7 @@ def _boundary(table: PillarTable, p: int, t: np.ndarray) -> np.ndarray:
 def _level(table: PillarTable, q: int, points: np.ndarray) -> np.ndarray:
     """Pillar q's implicit function at ``points`` (y, x): (u/a)^2 + (v/b)^2,
     <= 1 inside or on its boundary."""
-    a, b = (table.radii[q] * math.sqrt(table.aspects[q]) ** k for k in (1, -1))
+    a, b = (float(axis[q]) for axis in table.semi_axes)
     o = math.radians(table.orientations[q])
     dy, dx = (points - table.centres[q]).T
     u = dx * math.cos(o) + dy * math.sin(o)
@@ -282,13 +291,13 @@ def _ellipses_meet(table: PillarTable, p: int, q: int) -> bool:
     """
     step = 2.0 * math.pi / BOUNDARY_POINTS
     t = np.arange(BOUNDARY_POINTS) * step
+    major, minor = table.semi_axes
     for one, other in ((p, q), (q, p)):
         values = _level(table, other, _boundary(table, one, t))
         lowest = float(values.min())
         if lowest <= 1.0:
             return True
-        c = (table.radii[one] * math.sqrt(table.aspects[one])
-             / (table.radii[other] / math.sqrt(table.aspects[other])))
+        c = float(major[one] / minor[other])
         k = c * step**2 / 4.0
         if lowest > (0.5 * (k + math.sqrt(k * k + 4.0 * (1.0 + c * k)))) ** 2:
             continue  # no dip between samples reaches the other pillar
@@ -308,7 +317,7 @@ def _check_apart(path: Path, lines: np.ndarray, table: PillarTable) -> None:
     ellipses by `_ellipses_meet`)."""
     centres = table.centres
     # an ellipse's circumscribed disc for the search, a disc's own radius
-    r = table.radii if table.aspects is None else table.radii * np.sqrt(table.aspects)
+    r = table.semi_axes[0]
     # Each disc looks for the discs no larger than itself within twice its own
     # radius (d <= r_p + r_q <= 2 r_p): one large disc among many small ones
     # costs its own neighbourhood, not every pair within twice the largest.

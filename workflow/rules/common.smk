@@ -456,20 +456,33 @@ def _also_refused(makes, refused, key):
     return f"; {key} = {sorted(more)} refuse{'s' * (len(more) == 1)} it too"
 
 
+def _given_offsets(brush):
+    """Whether a `layout_files` brush is given heights or a gap map: it
+    touches with its highest pillars first, and roughness draws it none."""
+    return bool({"heights", "gap_map"} & set(brush.inputs))
+
+
+def _uneven_files(brushes):
+    """The `layout_files` keys of the brushes given heights or a gap map."""
+    return [
+        f"layout_files.{i}"
+        for i, brush in enumerate(brushes.values())
+        if _given_offsets(brush)
+    ]
+
+
 def _warn_first_waypoint(config, brushes):
     """Warn where a protocol starts with a tensile force and a brush touches
     with its highest pillars only at first (drawn heights, a table's heights
-    or gap map): it pulls on those, as a preload of the wrong sign does (`first_waypoint_note` says it in a
-    job, and of a displacement above the first touch, which needs the
-    drawn heights)."""
+    or gap map): it pulls on those, as a preload of the wrong sign does
+    (`first_waypoint_note` says it in a job, and of a displacement above the
+    first touch, which needs the drawn heights)."""
     protocol = config_protocol(config)
     if protocol is None or protocol[0].kind != "force" or protocol[0].value <= 0:
         return
-    uneven = [
-        f"layout_files.{i}"
-        for i, brush in enumerate(brushes.values())
-        if {"heights", "gap_map"} & set(brush.inputs)
-    ] + [f"roughness = {float(s)!r}" for s in config["roughness"] if float(s) > 0]
+    uneven = _uneven_files(brushes) + [
+        f"roughness = {float(s)!r}" for s in config["roughness"] if float(s) > 0
+    ]
     if uneven:
         logger.warning(
             f"config: 'protocol' starts with a tensile force of {protocol[0].value:g} F_K: "
@@ -485,11 +498,7 @@ def _warn_first_touch(config, brushes):
     off (the CLI says so after the run; a sweep should before it)."""
     if config.get("protocol") is not None or 0.0 not in map(float, config["preload"]):
         return
-    uneven = [
-        f"layout_files.{i}"
-        for i, brush in enumerate(brushes.values())
-        if {"heights", "gap_map"} & set(brush.inputs)
-    ]
+    uneven = _uneven_files(brushes)
     if uneven:
         logger.warning(
             f"config: the brush of {', '.join(uneven)} is given heights or a gap map, "
@@ -794,7 +803,8 @@ def _warn_coarse_study(radii):
             coarse[brush[1]] = (radius[low], low, need, flag)
     if coarse:
         text = "; ".join(
-            f"N = {n} on {g}: {r:.2g} elements ({flag}; n = {need} gives 4)"
+            f"N = {n} on {g}: {r:.2g} elements ({flag}; n = {need} gives "
+            f"{UNDER_RESOLVED_RADIUS:g})"
             for n, (r, g, need, flag) in sorted(coarse.items())
         )
         logger.warning(
@@ -1088,9 +1098,7 @@ def rough_brush(config, axes=True):
     ]
     drawn = axes and any(float(s) > 0 for s in config["roughness"])
     roughened = [
-        (layout, b.n_pillars)
-        for layout, b in files.items()
-        if not {"heights", "gap_map"} & set(b.inputs)
+        (layout, b.n_pillars) for layout, b in files.items() if not _given_offsets(b)
     ]
     for brush in (generated + roughened + made) if drawn else (made + generated):
         return brush

@@ -127,19 +127,15 @@ def stacked_matmul(a: np.ndarray, b: np.ndarray, threads: int,
     """
     shape = a.shape[:-1] + b.shape[-1:]
     dtype = np.result_type(a, b)
-    if runs is None:
-        out = np.empty(shape, dtype=dtype)
+    # every item written, or the skipped ones left zero
+    out = np.empty(shape, dtype=dtype) if runs is None else np.zeros(shape, dtype=dtype)
+    spans = [(0, a.shape[0])] if runs is None else runs
 
-        def work(lo: int, hi: int) -> None:
-            np.matmul(a[lo:hi], b[lo:hi], out=out[lo:hi])
-    else:
-        out = np.zeros(shape, dtype=dtype)
-
-        def work(lo: int, hi: int) -> None:
-            for start, stop in runs:
-                start, stop = max(start, lo), min(stop, hi)
-                if start < stop:
-                    np.matmul(a[start:stop], b[start:stop], out=out[start:stop])
+    def work(lo: int, hi: int) -> None:
+        for start, stop in spans:
+            start, stop = max(start, lo), min(stop, hi)
+            if start < stop:
+                np.matmul(a[start:stop], b[start:stop], out=out[start:stop])
 
     in_slabs(a.shape[0], threads, work)
     return out
