@@ -356,13 +356,20 @@ def _brush_params(args: argparse.Namespace) -> BrushParams:
     common = dict(seed=args.seed, min_gap=gap, e_star=args.e_star,
                   dgamma=args.dgamma, h=args.h, allow_coarse=args.allow_coarse,
                   shape=args.shape, aspect=args.aspect, orientation=args.orientation)
+    from brushcore.model.layout import hinted_params
+
     if args.layout == "file":
         from brushcore.model.layout_file import file_params
+        from brushcore.model.pillar_table import is_table
 
         fixed = {"n_pillars": args.pillars, "grid": args.grid, "phi": args.phi}
         fixed = {k: v for k, v in fixed.items() if {"n_pillars": "pillars"}.get(k, k) in given}
-        return file_params(args.layout_file, kbar, **common, **fixed)
-    from brushcore.model.layout import hinted_params
+        if fixed.get("grid") is None or not is_table(args.layout_file):
+            return file_params(args.layout_file, kbar, **common, **fixed)
+        # a table fits every grid: one too coarse is told the next that runs,
+        # not the mean radius's grid that the filling factor may refuse again
+        return hinted_params(lambda grid: file_params(args.layout_file, kbar, **common,
+                                                      **{**fixed, "grid": grid}), args.grid)
 
     return hinted_params(
         lambda grid: BrushParams(layout=args.layout, n_pillars=args.pillars, kbar=kbar,

@@ -258,6 +258,27 @@ def test_the_cli_runs_a_table_on_the_grid_it_is_given(tmp_path: Path) -> None:
         assert float(curve[F_AD]) == pytest.approx(float(direct[F_AD]), rel=1e-12)
 
 
+def test_the_cli_names_a_grid_that_runs_a_table_of_unequal_pillars(tmp_path: Path) -> None:
+    """A table too coarse for its mean radius is told the first grid that
+    passes every check in one step: the mean radius's grid (35 for this
+    brush of 15 discs of 0.06 L and one of 0.02 L) realises phi 5 % off up
+    to 51 and would be refused a second time."""
+    rows = [f"{0.125 + 0.25 * i}, {0.125 + 0.25 * j}, {0.02 if i == j == 0 else 0.06}"
+            for i in range(4) for j in range(4)]
+    path = _table(tmp_path, "x, y, radius\n" + "\n".join(rows) + "\n")
+    cli = [sys.executable, "-m", "brushcore", "simulate", "--layout", "file",
+           "--layout-file", str(path), "--kbar", "1", "--quiet"]
+    coarse = subprocess.run(cli + ["--grid", "16", "--out", str(tmp_path / "a.nc")],
+                            capture_output=True, text=True)
+    assert coarse.returncode == 2
+    assert "allowed --grid 52, the next that resolves the pillars" in coarse.stderr, \
+        coarse.stderr
+    for grid in (35, 51):
+        with pytest.raises(ParameterError, match="phi"):
+            build_labels(file_params(path, 1.0, grid=grid))
+    assert build_labels(file_params(path, 1.0, grid=52)).max() == 15
+
+
 def test_a_stub_among_pillars_is_judged_by_its_own_radius(tmp_path: Path) -> None:
     """A broken stub (radius 0.004 L beside two of 0.1 L) sets the grid: the
     refusal names the smallest disc.  The grid suggested is the next that
