@@ -34,7 +34,7 @@ from scipy import optimize
 from scipy.spatial import cKDTree
 
 from brushcore.model.inputs import header_names, table_rows
-from brushcore.model.shapes import PillarShape
+from brushcore.model.shapes import PillarShape, ellipse_half_extents
 from brushcore.validation import ParameterError
 
 SUFFIX = ".csv"
@@ -116,9 +116,7 @@ class PillarTable:
         a, b = self.semi_axes
         if self.aspects is None:
             return np.column_stack([a, b])
-        t = np.radians(self.orientations)
-        c, s = np.abs(np.cos(t)), np.abs(np.sin(t))
-        return np.column_stack([np.hypot(a * s, b * c), np.hypot(a * c, b * s)])
+        return np.column_stack(ellipse_half_extents(a, b, self.orientations))
 
 
 def _refuse(path: Path, allowed: str, reason: str) -> ParameterError:

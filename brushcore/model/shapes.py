@@ -24,6 +24,21 @@ import numpy as np
 SHAPES = ("disc", "square", "ellipse")
 
 
+def ellipse_half_extents(a: np.ndarray | float, b: np.ndarray | float,
+                         orientation: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """Half widths along y and x of the bounding boxes of ellipses [length of a, b].
+
+    Parameters
+    ----------
+    a, b : semi-major and semi-minor axes [length]
+    orientation : angle from the x axis to the major axis [degrees]
+    """
+    t = np.radians(orientation)
+    c, s = np.abs(np.cos(t)), np.abs(np.sin(t))
+    # the support function of the rotated ellipse along y and along x
+    return np.hypot(a * s, b * c), np.hypot(a * c, b * s)
+
+
 @dataclass(frozen=True)
 class PillarShape:
     """The cross-section of every pillar of a generated layout.
@@ -64,12 +79,12 @@ class PillarShape:
     def half_extents(self, area: float) -> tuple[float, float]:
         """Half width of the pillar's bounding box along y and x [length]."""
         a, b = self.half_axes(area)
-        c, s = abs(math.cos(math.radians(self.orientation))), abs(
-            math.sin(math.radians(self.orientation)))
         if self.kind == "square":
+            c, s = abs(math.cos(math.radians(self.orientation))), abs(
+                math.sin(math.radians(self.orientation)))
             return a * (s + c), a * (c + s)
-        # ellipse (and disc): support function of the rotated ellipse
-        return math.sqrt((a * s) ** 2 + (b * c) ** 2), math.sqrt((a * c) ** 2 + (b * s) ** 2)
+        hy, hx = ellipse_half_extents(a, b, self.orientation)
+        return float(hy), float(hx)
 
     def contains(self, dy: np.ndarray, dx: np.ndarray, area: float) -> np.ndarray:
         """Whether points at offsets (dy, dx) from the centre lie inside [bool].
