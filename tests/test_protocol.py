@@ -477,6 +477,14 @@ def test_heights_with_a_common_offset_beside_displacement_waypoints_are_said_to(
         simulate(replace(base, heights=offsets), protocol=cycle)
         simulate(replace(base, heights=offsets + 7.5),
                  protocol=[Waypoint("force", -1.0), Waypoint("separation")])
+    # a first displacement above the touch and absolute heights: each said
+    with pytest.warns(UserWarning) as caught:
+        simulate(replace(base, heights=offsets + 7.5),
+                 protocol=[Waypoint("displacement", 8.0), Waypoint("separation")])
+    said = [str(w.message) for w in caught]
+    assert any("waypoint 0, displacement 8 d_K, lies above the first touch" in m
+               for m in said), said
+    assert any("the heights given have a mean of 7.5 d_K" in m for m in said), said
 
 
 def test_waypoint_kinds_read_in_any_case_and_separation_takes_no_value():

@@ -522,11 +522,11 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         waypoints = preload_protocol(inputs.preload)
     else:
         check_protocol_preload(params.preload, protocol)
-        note = first_waypoint_note(protocol, element_offsets(labels, inputs.heights,
-                                                             inputs.gap_map) / ds_)
-        note = note or common_height_note(protocol, params.heights)
-        if note:
-            warnings.warn(note, stacklevel=3)
+        offsets = element_offsets(labels, inputs.heights, inputs.gap_map) / ds_
+        for note in (first_waypoint_note(protocol, offsets),
+                     common_height_note(protocol, params.heights)):
+            if note:  # each its own: a pull from the first touch and absolute heights
+                warnings.warn(note, stacklevel=3)
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
                           for w in protocol)
     # How far loads and height scatter reach, in F_K and d_K (a displacement
