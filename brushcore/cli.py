@@ -541,7 +541,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _converge(args: argparse.Namespace) -> int:
     from brushcore.data.aggregate import AggregationError, build_sweep, write_sweep
-    from brushcore.data.convergence import GRID_DIM
+    from brushcore.data.aggregate import GRID_DIM
     from brushcore.data.convergence_report import write_study
 
     out = args.out_dir

@@ -122,3 +122,22 @@ def test_a_forked_child_gets_its_own_team():
 def _sum_on_two_threads() -> float:
     a = np.ones((2, 64, 64))
     return float(stacked_matmul(a, np.ones((2, 64, 1)), 2).sum())
+
+
+@pytest.mark.parametrize("value", ["two", "0", "1000", "2.5"])
+def test_a_bad_thread_count_in_the_environment_is_refused(monkeypatch, value):
+    """BRUSHCORE_THREADS outside [1, MAX_THREADS] names itself, where it once
+    ran on one thread without a word; unset or empty, it means 1."""
+    from brushcore.numerics.platform.threads import fft_threads
+    from brushcore.validation import ParameterError
+
+    monkeypatch.setenv("BRUSHCORE_THREADS", value)
+    with pytest.raises(ParameterError, match=r"BRUSHCORE_THREADS=.* is invalid: allowed an "
+                                             r"integer in \[1, 256\]"):
+        fft_threads()
+    monkeypatch.setenv("BRUSHCORE_THREADS", "3")
+    assert fft_threads() == 3
+    monkeypatch.setenv("BRUSHCORE_THREADS", "")
+    assert fft_threads() == 1
+    monkeypatch.delenv("BRUSHCORE_THREADS")
+    assert fft_threads() == 1

@@ -35,7 +35,7 @@ from brushcore.model.curve import mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
-from brushcore.data.io import read_curve, write_dataset_atomic
+from brushcore.data.io import CurveFileError, read_curve, write_dataset_atomic
 from brushcore.validation import brief
 
 #: Order of the layout coordinate (others follow, sorted).
@@ -209,7 +209,9 @@ def load_curves(paths: Iterable[str | Path],
         try:
             curve = read_curve(path)
             key = case_key(curve)
-        except Exception as exc:  # CurveFileError, missing attribute, bad value
+        # the file's fault (unreadable, an attribute missing or not a number), not a
+        # bug here, which would otherwise send the user to delete good curves
+        except (CurveFileError, KeyError, ValueError) as exc:
             unreadable.append(f"{path} ({str(exc).removeprefix(f'{path}: ')})")
             continue
         if expected is not None:

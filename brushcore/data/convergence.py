@@ -105,14 +105,13 @@ import numpy as np
 import xarray as xr
 from scipy import optimize
 
+from brushcore.data.aggregate import GRID_DIM
 from brushcore.model import provenance
 from brushcore.model.params import MAX_PHI_ERROR
 from brushcore.validation import is_integer, is_real, normalise, require
 
 #: Results the workflow extrapolates.
 QUANTITIES = ("adhesive_force_normalized", "work_of_separation_normalized")
-#: Dimension of the sweep that holds the resolution n (elements per side).
-GRID_DIM = "grid"
 #: Under this many elements per pillar radius a result is marked under-resolved.
 UNDER_RESOLVED_RADIUS = 4.0
 #: The fit's flags, as `Extrapolation` fields and ``{q}_{flag}`` variables.

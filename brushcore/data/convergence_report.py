@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, GRID_DIM, MIXED,
+from brushcore.data.aggregate import GRID_DIM
+from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, MIXED,
                                         PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SETTINGS_FACTOR,
                                         SMALLEST, STUDY_FLAGS, UNDER_RESOLVED_RADIUS, case_flags,
                                         flag_radii, phi_spread)

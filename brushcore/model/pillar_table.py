@@ -55,7 +55,8 @@ def is_table(path: str | Path) -> bool:
     return Path(path).suffix.lower() == SUFFIX
 
 
-@dataclass(frozen=True)
+# eq=False: its fields are arrays, so == and hash() on them could only raise
+@dataclass(frozen=True, eq=False)
 class PillarTable:
     """The pillars of a table, in label order.
 

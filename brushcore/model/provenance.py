@@ -43,7 +43,7 @@ SOFTWARE = ("numpy", "scipy", "pyfftw", "mkl_fft", "mkl", "xarray", "netCDF4", "
 @lru_cache(maxsize=1)
 def software_versions() -> str:
     """Python's and the installed `SOFTWARE` packages' versions, as
-    "python 3.11.7, numpy 1.26.4, ..." (packages not installed are left out),
+    "python 3.11.7, numpy 2.4.6, ..." (packages not installed are left out),
     for a methods section."""
     import platform
 

@@ -18,6 +18,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from brushcore.validation import ParameterError
+
 #: Most threads a job may ask for (the workflow's schema says the same): far
 #: beyond any node, and 100,000 crashed FFTW's planner.
 MAX_THREADS = 256
@@ -44,11 +46,23 @@ def pin_threads(n: int) -> int:
 
 
 def fft_threads() -> int:
-    """Threads for FFTW plans: BRUSHCORE_THREADS if set, else 1."""
+    """Threads for FFTW plans: BRUSHCORE_THREADS if set, else 1.
+
+    Raises
+    ------
+    ParameterError
+        If BRUSHCORE_THREADS is set to anything but an integer in [1,
+        `MAX_THREADS`] or empty (a typo once ran silently on one thread).
+    """
+    text = os.environ.get("BRUSHCORE_THREADS", "").strip() or "1"  # empty: as unset
     try:
-        return max(1, int(os.environ.get("BRUSHCORE_THREADS", "1")))
+        n = int(text)
     except ValueError:
-        return 1
+        n = 0
+    if not 1 <= n <= MAX_THREADS:
+        raise ParameterError("BRUSHCORE_THREADS", text, f"an integer in [1, {MAX_THREADS}] "
+                             "(the environment variable; or leave it unset for 1)")
+    return n
 
 
 def slab(count: int, i: int, threads: int) -> tuple[int, int]:
