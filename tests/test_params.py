@@ -313,3 +313,17 @@ def test_from_curve_refuses_arrays_it_cannot_rebuild():
     shifted = ds.assign(pillar_height_normalized=ds.pillar_height_normalized * (1 + 1e-15))
     with pytest.raises(ParameterError, match=r"^inputs_digest=.*do not reproduce it"):
         BrushParams.from_curve(shifted)
+
+
+def test_a_parameter_set_reads_as_the_call_that_makes_it():
+    """repr gives the constructor call with the fields set (it once listed all
+    23, an init=False digest among them, so it could not be pasted back)."""
+    for params in (BrushParams("regular", 16, 0.1, 128),
+                   BrushParams("random", 64, math.inf, 256, seed=3, phi=0.2),
+                   BrushParams("hexagonal", 16, 1e-3, 128, shape="ellipse", aspect=2.0,
+                               orientation=30.0, roughness=0.5)):
+        assert eval(repr(params)) == params, repr(params)
+    assert repr(BrushParams("random", 64, math.inf, 256, seed=3)) == \
+        "BrushParams('random', 64, math.inf, 256, seed=3)"
+    given = BrushParams("regular", 4, 0.1, 32, heights=np.array([0.1, 0.0, -0.1, 0.0]))
+    assert repr(given) == "BrushParams('regular', 4, 0.1, 32, heights=<4 values>)"

@@ -497,6 +497,12 @@ def test_waypoint_kinds_read_in_any_case_and_separation_takes_no_value():
     with pytest.raises(ParameterError, match=r"waypoint value=3.0 is invalid: allowed none "
                                              r"for a separation waypoint"):
         Waypoint("separation", 3)
+    # a force or displacement without its target once meant a target of 0
+    for kind in ("force", "displacement"):
+        with pytest.raises(ParameterError, match=rf"waypoint value=None is invalid: allowed a "
+                                                 rf"finite number: a {kind} waypoint needs"):
+            Waypoint(kind)
+    assert Waypoint("force", 0) == Waypoint("force", 0.0)
 
 
 def test_cli_refuses_a_preload_beside_a_protocol(tmp_path, capsys):

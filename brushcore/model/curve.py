@@ -439,7 +439,11 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     ----------
     params : the brush (geometry, stiffness, heights, preload)
     options : solver tolerances and switches (default `SolverOptions()`)
-    progress : called as progress(events, attached, total) after each event
+    progress : called as progress(events, attached, total) after each event:
+        events so far, and the elements (not pillars) in contact out of all
+        pillar elements; ``attached`` falls on retraction and grows on an
+        approach.  None (default) prints nothing; the CLI's display shows
+        100 * attached / total
     labels : the label map ``params`` builds (`build_labels`), or None; any
         other map is refused: a layout of one's own goes through
         ``layout="file"``

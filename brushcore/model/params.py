@@ -91,7 +91,11 @@ class BrushParams:
         file's count for "file": `brushcore.file_params` fills it in, with grid
         and phi).
     kbar : normalised spring stiffness k / (E* L) in [1e-9, inf] (`MIN_KBAR`); inf = rigid.
-    grid : elements per side n of the square L x L holding the pillars.
+    grid : elements per side n of the square L x L holding the pillars, in
+        [4, 8192]; a pillar radius must span at least 2 elements and the
+        realised phi lie within 5 % of ``phi`` (checked here and, for the
+        filling factor, by `simulate`, which names the next grid that
+        passes), unless ``allow_coarse``.
     phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
     seed : seed of numpy's Generator for "random", and for the heights and
         stiffnesses of rough or graded lattices (roughness, kbar_spread);
@@ -384,6 +388,21 @@ class BrushParams:
         arrays read-only: pickle copies an array writeable, and a default
         dataclass unpickles without ``__post_init__``."""
         return type(self), tuple(getattr(self, f.name) for f in fields(self) if f.init)
+
+    def __repr__(self) -> str:
+        """The constructor call, fields at their defaults left out, so that it
+        reads short and pastes back (arrays by their size: pass them again)."""
+        kbar = "math.inf" if self.kbar == math.inf else repr(self.kbar)  # rigid, as typed
+        parts = [repr(self.layout), repr(self.n_pillars), kbar, repr(self.grid)]
+        for f in fields(self)[4:]:
+            value = getattr(self, f.name)
+            if not f.init or value is None:
+                continue
+            if isinstance(value, np.ndarray):
+                parts.append(f"{f.name}=<{value.size} values>")
+            elif value != f.default:
+                parts.append(f"{f.name}={value!r}")
+        return f"BrushParams({', '.join(parts)})"
 
     @property
     def draws_from_seed(self) -> bool:

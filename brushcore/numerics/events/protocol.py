@@ -63,7 +63,8 @@ class Waypoint:
         `brushcore.simulate(..., protocol=...)` (forces in F_K,
         displacements in d_K, as the curve's ``*_normalized`` variables),
         dimensional [force or length] in this module's engine
-        (`run_protocol`, `preload_protocol`)
+        (`run_protocol`, `preload_protocol`); required for "force" and
+        "displacement"
 
     The direction follows from the state: towards the target.  A force
     target that cannot be reached (the brush lets go first on retraction)
@@ -71,11 +72,15 @@ class Waypoint:
     """
 
     kind: str
-    value: float = 0.0
+    value: float | None = None  # 0.0 for separation once made
 
     def __post_init__(self) -> None:
-        normalise(self, (), ("value",))  # np.float32 and 0-d arrays become floats
         require(self.kind in KINDS, "waypoint kind", self.kind, f"one of {KINDS}")
+        if self.value is None:  # a target left out is no target of 0
+            require(self.kind == "separation", "waypoint value", None,
+                    f"a finite number: a {self.kind} waypoint needs its target")
+            object.__setattr__(self, "value", 0.0)
+        normalise(self, (), ("value",))  # np.float32 and 0-d arrays become floats
         require(is_real(self.value) and np.isfinite(self.value), "waypoint value", self.value,
                 "a finite number")
         require(self.kind != "separation" or self.value == 0.0, "waypoint value", self.value,
