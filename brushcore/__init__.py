@@ -25,8 +25,9 @@ from brushcore.model.layout import generated_table
 from brushcore.model.layout_file import file_params
 from brushcore.model.params import BrushParams
 from brushcore.model.pillar_table import read_pillar_table, save_pillar_table
+from brushcore.model.scales import unit_scales
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.events.protocol import Waypoint
+from brushcore.numerics.events.protocol import Waypoint, positive_work
 from brushcore.validation import ParameterError
 from brushcore.model.provenance import version as _version
 
@@ -34,5 +35,6 @@ from brushcore.model.provenance import version as _version
 __version__ = _version()
 
 __all__ = ["BrushParams", "FirstTouchWarning", "ParameterError", "SolverOptions", "Waypoint",
-           "file_params", "generated_table", "read_curve", "read_pillar_table",
-           "save_pillar_table", "simulate", "theory", "with_input_files", "write_curve"]
+           "file_params", "generated_table", "positive_work", "read_curve",
+           "read_pillar_table", "save_pillar_table", "simulate", "theory", "unit_scales",
+           "with_input_files", "write_curve"]

@@ -265,3 +265,23 @@ def test_every_curve_names_its_units_d_k_and_f_k() -> None:
                        / curve["displacement_normalized"].values[moved], d_k, rtol=1e-14)
     assert float(curve["adhesive_force"] / curve["adhesive_force_normalized"]) == \
         pytest.approx(f_k, rel=1e-14)
+
+
+def test_a_brushs_units_are_known_before_its_run() -> None:
+    """`brushcore.unit_scales` gives the F_K, d_K, W_K and A a curve will record,
+    from the realised area (32 elements a pillar here, where phi L^2 / N asks
+    for 30.72), so measured heights can be put in d_K before a run; in SI
+    units too (the curve's attributes and its normalised columns agree)."""
+    from brushcore import unit_scales
+
+    for params in (BrushParams("regular", 64, 0.01, 128),
+                   BrushParams("random", 16, 0.1, 96, seed=2, e_star=2.6667e6, dgamma=0.05,
+                               h=2.34375e-6)):
+        scales = unit_scales(params)
+        curve = simulate(params)
+        a = curve.attrs
+        assert (scales.area, scales.force, scales.displacement) == (
+            a["real_contact_area"], a["force_unit_F_K"], a["displacement_unit_d_K"])
+        assert float(curve.work_of_separation / curve.work_of_separation_normalized) == \
+            pytest.approx(scales.work, rel=1e-14)
+    assert unit_scales(BrushParams("regular", 64, 0.01, 128)).area == 64 * 32

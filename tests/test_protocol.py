@@ -764,6 +764,27 @@ def test_positive_work_splits_zero_crossings():
     assert positive_work(d, f) == pytest.approx(0.25 + 2.25)
 
 
+def test_each_retractions_work_is_positive_work_over_its_steps():
+    """What a user integrates from a curve file, `brushcore.positive_work` over a
+    branch's steps (pull_first_step .. pull_last_step), is the file's W of
+    that branch; clipping F at 0 before a trapezoid sum is not (a retraction
+    from a preload starts with a segment through F = 0)."""
+    import brushcore
+
+    params = BrushParams("regular", 9, 0.01, 48, heights=np.linspace(-0.2, 0.2, 9))
+    curve = simulate(params, protocol=[Waypoint("force", -2.0), Waypoint("displacement", 3.0),
+                                       Waypoint("force", -2.0), Waypoint("separation")])
+    d, f = curve.displacement.values, curve.force.values
+    clipped = []
+    for pull in range(curve.sizes["pull"]):
+        a, b = int(curve.pull_first_step[pull]), int(curve.pull_last_step[pull])
+        assert brushcore.positive_work(d[a:b + 1], f[a:b + 1]) == pytest.approx(
+            float(curve.pull_work_of_separation[pull]), rel=1e-12)
+        clipped.append(np.trapezoid(np.maximum(f[a:b + 1], 0.0), d[a:b + 1])
+                       / float(curve.pull_work_of_separation[pull]))
+    assert max(clipped) > 1.01, clipped
+
+
 # --- tips, tilts and rough rigid brushes (through the Python API) --------------------
 
 def _sphere_tip(radius: float, pillar: float, kbar: float) -> tuple[float, object]:

@@ -23,6 +23,7 @@ from brushcore.model.layout import build_labels, random_gap, smallest_radius_ele
 from brushcore.model.params import BrushParams
 from brushcore.model.provenance import git_commit, parameter_hash, software_versions, version
 from brushcore.model.rough import pillar_centroids, pillar_inputs
+from brushcore.model.scales import unit_scales
 from brushcore.model.solve import (element_offsets, fft_library_used, load_options, run,
                                    run_protocol_curve, single_transforms, spring_options,
                                    stiffness_span)
@@ -469,15 +470,13 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     t0 = time.perf_counter()
     detach, curve, applications = run(params, options, progress, labels)
     wall = time.perf_counter() - t0
-    h, es, dg = params.h, params.e_star, params.dgamma
-    area_total = float(np.count_nonzero(detach >= 0)) * h * h
-    fs = theory.force_scale(area_total, es, dg)
-    ds_ = theory.displacement_scale(area_total, es, dg)
-    ws = theory.work_scale(area_total, dg)
+    h = params.h
+    scales = unit_scales(params, labels)  # the pillar elements, as detach >= 0
+    area_total, fs, ds_, ws = scales.area, scales.force, scales.displacement, scales.work
     area = curve.attached_elements * h * h
     i_max = int(np.argmax(curve.force))
     f_ad = float(curve.force[i_max])
-    work = float(np.trapezoid(curve.force, curve.displacement))  # exact: piecewise linear
+    work = positive_work(curve.displacement, curve.force)  # as a protocol's branch
     snaps = snapshot_steps(area, curve.force)
     pillar = detach >= 0
     states = np.where(pillar[None], (detach[None] > snaps[:, None, None]).astype(np.int8),
@@ -544,9 +543,9 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         params, waypoints, options, heights=inputs.heights, gap_map=inputs.gap_map,
         compliance=inputs.compliance, progress=progress, labels=labels)
     wall = time.perf_counter() - t0
-    h, dg = params.h, params.dgamma
-    area_total = float(np.count_nonzero(labels >= 0)) * h * h
-    ws = theory.work_scale(area_total, dg)
+    h = params.h
+    scales = unit_scales(params, labels)
+    area_total, ws = scales.area, scales.work
     d, f = curve.displacement, curve.force
     peaks = [_retraction_peak(d, f, first, last) for first, last in curve.pulls]
     i_max, f_ad, d_ad, work = peaks[-1] if peaks else (-1, math.nan, math.nan, math.nan)
@@ -714,7 +713,11 @@ def _pull_variables(d: np.ndarray, f: np.ndarray, area: np.ndarray, pulls: np.nd
         "pull_displacement_at_adhesive_force": _var("pull", d_ad, "d at the branch's maximum "
                                                     "tensile force", "m"),
         "pull_work_of_separation": _var("pull", work, "integral of max(F, 0) dd over the "
-                                        "retraction branch", "J"),
+                                        "retraction branch", "J",
+                                        comment="segments split where F crosses 0 "
+                                        "(brushcore.positive_work): clipping F at 0 "
+                                        "before a trapezoid sum over-counts a branch "
+                                        "that starts under load"),
         "pull_work_of_separation_normalized": _var("pull", work / w_unit, "W / W_K of the "
                                                    "retraction branch", "1"),
         "pull_contact_area_at_end": _var("pull", area[last], "real contact area at the "

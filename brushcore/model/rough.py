@@ -16,6 +16,7 @@ import numpy as np
 from brushcore.model import theory
 from brushcore.model.draws import gaussian_heights, lognormal_kbar
 from brushcore.model.params import BrushParams
+from brushcore.model.scales import unit_scales
 from brushcore.validation import ParameterError
 
 
@@ -58,9 +59,8 @@ def pillar_inputs(params: BrushParams, labels: np.ndarray) -> PillarInputs:
         if given is not None and len(given) != n:
             raise ParameterError(name, f"<{len(given)} values>",
                                  f"one value per pillar of the layout ({n})")
-    area = float(np.count_nonzero(labels >= 0)) * params.h**2
-    d_unit = theory.displacement_scale(area, params.e_star, params.dgamma)
-    f_unit = theory.force_scale(area, params.e_star, params.dgamma)
+    scales = unit_scales(params, labels)
+    d_unit, f_unit = scales.displacement, scales.force
     if params.heights is not None:
         heights = np.asarray(params.heights, dtype=float) * d_unit
     else:

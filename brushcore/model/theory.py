@@ -14,6 +14,7 @@ Pohrt & Popov, Facta Univ. Mech. Eng. 13 (2015) 3-10.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -132,6 +133,31 @@ def displacement_scale(area: float, e_star: float, dgamma: float) -> float:
 def work_scale(area: float, dgamma: float) -> float:
     """Work of separation 2 pi a0^2 dgamma of the compact punch, eq. 23 [energy]."""
     return 2.0 * math.pi * equivalent_radius(area) ** 2 * dgamma
+
+
+@dataclass(frozen=True)
+class KendallScales:
+    """The units of a brush's normalised results, those of the compact punch
+    of its real contact area A (eqs. 20-23).
+
+    Parameters
+    ----------
+    area : real contact area A, the pillar elements' [length^2]
+    force : F_K = sqrt(8 pi E* dgamma a0^3), a0 = sqrt(A / pi) [force]
+    displacement : d_K = sqrt(2 pi dgamma a0 / E*) [length]
+    work : W_K = 2 pi a0^2 dgamma [energy]
+    """
+
+    area: float
+    force: float
+    displacement: float
+    work: float
+
+
+def kendall_scales(area: float, e_star: float, dgamma: float) -> KendallScales:
+    """`KendallScales` of the real contact area ``area`` [length^2]."""
+    return KendallScales(area, force_scale(area, e_star, dgamma),
+                         displacement_scale(area, e_star, dgamma), work_scale(area, dgamma))
 
 
 def stiffness_from_kbar(kbar: float, e_star: float, side: float) -> float:
