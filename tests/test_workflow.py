@@ -944,3 +944,30 @@ def test_a_jobs_log_says_what_the_command_says_of_its_curve() -> None:
     assert log_lines(rough)[-1] == (
         "1 of 16 pillars in contact at the first touch (preload 0 stops the approach there; "
         "add a load to the config's 'preload' list to press the brush on)")
+
+
+def test_the_config_schema_bounds_are_the_solvers():
+    """Each bound the schema states is the Python constant the parameters are
+    checked against, so a config refused by the one is refused by the other
+    in the same words (the schema once bounded orientation to [-180, 180],
+    which the CLI and the API take as any finite angle)."""
+    from brushcore.model import params as p
+    from brushcore.numerics.options import SolverOptions
+    from brushcore.numerics.platform.threads import MAX_THREADS
+
+    props = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
+    grid, props = props["$defs"]["grid"], props["properties"]
+    assert (grid["minimum"], grid["maximum"]) == (p.MIN_GRID, p.MAX_GRID)
+    assert (props["phi"]["exclusiveMinimum"], props["phi"]["maximum"]) == (0, 0.5)
+    assert props["kbar"]["items"]["minimum"] == p.MIN_KBAR
+    assert props["fig5"]["properties"]["kbar"]["items"]["minimum"] == p.MIN_KBAR
+    assert (props["aspect"]["minimum"], props["aspect"]["maximum"]) == (1, p.MAX_ASPECT)
+    assert "minimum" not in props["orientation"] and "maximum" not in props["orientation"]
+    assert props["seeds"]["items"]["maximum"] == p.MAX_SEED
+    for name in ("roughness", "preload"):
+        assert props[name]["items"]["maximum"] == p.MAX_ROUGH
+    assert props["kbar_spread"]["items"]["maximum"] == p.MAX_KBAR_SPREAD
+    assert props["threads"]["maximum"] == MAX_THREADS
+    rtol = props["solver"]["properties"]["rtol"]
+    assert (rtol["minimum"], rtol["maximum"]) == (SolverOptions.MIN_RTOL,
+                                                  SolverOptions.MAX_RTOL)

@@ -92,6 +92,8 @@ class SolverOptions:
     #: grown by the operator's condition) leaves CG nothing to converge to
     #: below it (rtol 1e-300 broke CG down: p.Ap = 0).
     MIN_RTOL = 1e-12
+    #: Loosest tolerance accepted (the default is 1e-4).
+    MAX_RTOL = 1e-3
     #: Below this rtol single-precision transforms would limit the accuracy.
     MIXED_MIN_RTOL = 1e-6
 
@@ -103,8 +105,9 @@ class SolverOptions:
 
     def __post_init__(self) -> None:
         normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"))
-        require(is_real(self.rtol) and self.MIN_RTOL <= self.rtol <= 1e-3, "rtol", self.rtol,
-                 f"a number in [{self.MIN_RTOL:g}, 1e-3]")
+        require(is_real(self.rtol) and self.MIN_RTOL <= self.rtol <= self.MAX_RTOL, "rtol",
+                self.rtol, f"a number in [{self.MIN_RTOL:g}, "
+                f"{f'{self.MAX_RTOL:.0e}'.replace('e-0', 'e-')}]")  # 1e-3, as typed
         require(is_integer(self.max_iter) and self.max_iter >= 1, "max_iter",
                  self.max_iter, "an integer >= 1")
         require(is_real(self.tie_rtol) and 0 <= self.tie_rtol <= 1e-6, "tie_rtol",
