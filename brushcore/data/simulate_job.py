@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm
+
+if TYPE_CHECKING:
+    from brushcore.model.params import BrushParams
 
 
 def run_job(smk) -> None:
@@ -24,12 +28,11 @@ def run_job(smk) -> None:
 
 def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
-    from brushcore import BrushParams, SolverOptions, simulate
+    from brushcore import SolverOptions, simulate
     from brushcore.model.curve import FirstTouchWarning
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
-    from brushcore.model.inputs import parse_protocol, with_input_files
-    from brushcore.model.layout_file import file_params
+    from brushcore.model.inputs import parse_protocol
     from brushcore.numerics.platform.threads import pin_threads
 
     orphaned = parent_watch()  # Snakemake killed: stop, and write nothing later
@@ -42,23 +45,10 @@ def _simulate(smk, clock: CurveClock) -> None:
     remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
     pin_threads(smk.threads)
     w = smk.wildcards
-    fields = dict(
-        n_pillars=int(w.n_pillars),
-        grid=int(w.grid),
-        phi=float(w.phi),
-        seed=int(w.seed),
-        allow_coarse=bool(smk.config["allow_coarse"]),
-        backend=smk.config["backend"],
-        **smk.params.rough,  # roughness, preload, kbar_spread; {} for a flat brush
-        **smk.params.shape,  # shape, aspect, orientation; {} for discs
-    )
-    files = smk.params.layout_file  # "", a map's path, or {"layout": map, "heights": ...}
-    if files:  # a brush of one's own: the file's N, grid and phi checked
-        inputs = dict(files) if isinstance(files, Mapping) else {"layout": files}
-        params = file_params(inputs.pop("layout"), float(w.kbar), **fields)
-        params = with_input_files(params, inputs)  # heights, stiffness factors, gap map
-    else:
-        params = BrushParams(layout=w.layout, kbar=float(w.kbar), **fields)
+    params = case_params(w.layout, int(w.n_pillars), float(w.kbar), int(w.seed), int(w.grid),
+                         float(w.phi), files=smk.params.layout_file, rough=smk.params.rough,
+                         shape=smk.params.shape, allow_coarse=bool(smk.config["allow_coarse"]),
+                         backend=smk.config["backend"])
     print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
     text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
     protocol = None if text is None else parse_protocol(text)
@@ -70,6 +60,45 @@ def _simulate(smk, clock: CurveClock) -> None:
     write_curve(curve, smk.output[0])
     for line in log_lines(curve):
         print(line)
+
+
+def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, phi: float,
+                *, files: str | Mapping[str, str] = "", rough: Mapping[str, float] | None = None,
+                shape: Mapping[str, object] | None = None, allow_coarse: bool = False,
+                backend: str = "cpu") -> BrushParams:
+    """The parameters of one case of a sweep: what its job runs and what the
+    plan checks before any job starts (`workflow/rules/common.smk`), one
+    construction so that the two cannot drift apart.
+
+    Parameters
+    ----------
+    layout, n_pillars, kbar, seed, grid, phi : the case (a file brush's
+        layout is ``file_<name>``; its N, grid and phi are checked against
+        the file's)
+    files : "" for a generated layout, a map's or table's path, or
+        {"layout": path, "heights": ..., ...} for a brush as made
+        (`with_input_files` keys)
+    rough : roughness, preload, kbar_spread; None or {} for a flat brush
+    shape : shape, aspect, orientation; None or {} for discs
+    allow_coarse, backend : as `BrushParams`
+
+    Raises
+    ------
+    ParameterError
+        As `BrushParams`, `file_params` and `with_input_files`.
+    """
+    from brushcore import BrushParams
+    from brushcore.model.inputs import with_input_files
+    from brushcore.model.layout_file import file_params
+
+    fields = dict(n_pillars=n_pillars, grid=grid, phi=phi, seed=seed,
+                  allow_coarse=allow_coarse, backend=backend, **(rough or {}),
+                  **(shape or {}))
+    if files:  # a brush of one's own: the file's N, grid and phi checked
+        inputs = dict(files) if isinstance(files, Mapping) else {"layout": files}
+        params = file_params(inputs.pop("layout"), kbar, **fields)
+        return with_input_files(params, inputs)  # heights, stiffness factors, gap map
+    return BrushParams(layout=layout, kbar=kbar, **fields)
 
 
 def log_lines(curve) -> list[str]:

@@ -12,13 +12,12 @@ import jsonschema
 import yaml
 from snakemake.logging import logger
 
+from brushcore.data.simulate_job import case_params
 from brushcore.model.inputs import (
     parse_protocol,
     protocol_text,
-    with_input_files,
 )
-from brushcore.model.layout_file import file_params
-from brushcore.model.params import BrushParams, ParameterError
+from brushcore.model.params import ParameterError
 from brushcore.model.layout import build_labels, grid_hint, smallest_radius_elements
 from brushcore.data.convergence import UNDER_RESOLVED_RADIUS
 from brushcore.numerics.options import SolverOptions
@@ -303,29 +302,21 @@ def canonical_solver(config, schema_path):
 
 
 def _case_params(config, key, kbar, grid):
-    """The parameters of a case (layout, n, seed, grid, phi, rough, shape) on ``grid``."""
+    """The parameters of a case (layout, n, seed, grid, phi, rough, shape) on
+    ``grid``, as its job will build them (`case_params`)."""
     layout, n, seed, _, phi, rough, shape = key
-    brush = file_brushes(config).get(layout)
-    if brush:
-        params = file_params(
-            brush.path,
-            kbar,
-            grid=grid,
-            seed=seed,
-            allow_coarse=config["allow_coarse"],
-            **parse_rough_tag(rough),
-        )
-        return with_input_files(params, brush.inputs)
-    return BrushParams(
+    return case_params(
         layout,
         n,
         kbar,
+        seed,
         grid,
-        phi=phi,
-        seed=seed,
+        phi,
+        files=brush_files(config, layout),
+        rough=parse_rough_tag(rough),
+        shape=parse_shape_tag(shape),
         allow_coarse=config["allow_coarse"],
-        **parse_rough_tag(rough),
-        **parse_shape_tag(shape),
+        backend=config["backend"],
     )
 
 
