@@ -86,7 +86,15 @@ ATTRIBUTE_SCALARS = {
     # the normalisation's units per case (A is the case's own): F = F_bar F_K, d = d_bar d_K
     "force_unit_F_K": ("N", "Kendall's force F_K of the compact punch of area A"),
     "displacement_unit_d_K": ("m", "Kendall's displacement d_K of the compact punch of area A"),
+    # dimensional values are in the inputs' units: with h = 1 those of each grid's own h
+    "side_length": ("m", "side L = n h of the square holding the pillars"),
+    # 4: applications counted on one quadrant (a mirror-symmetric brush), 1: whole grid
+    "symmetry_fold": ("1", "symmetry fold of the solve: operator_applications count "
+                           "applications on 1/symmetry_fold of the padded grid"),
 }
+#: Counts, stored as int32 with the fill -1 (NaN in memory where a case never ran).
+COUNT_VARIABLES = ("events", "operator_applications", "cg_iterations",
+                   "touching_pillar_pairs", "symmetry_fold", "n_steps", "attached_pillars")
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
 SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "symbols",
                      "protocol_normalized")
@@ -721,17 +729,20 @@ def _provenance(
 
 
 def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, object]]:
-    """netCDF4 encoding: zlib for the padded curves and the snapshots.
+    """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int32.
 
     One chunk per curve keeps NaN padding and unrun cases nearly free on disk.
     """
     enc: dict[str, dict[str, object]] = {name: {"_FillValue": None} for name in sweep.coords}
     for name, var in sweep.data_vars.items():
+        if name in COUNT_VARIABLES:
+            enc[name] = {"dtype": "int32", "_FillValue": np.int32(-1)}
         whole = {"step", "y", "x"} & set(var.dims)
         if var.dtype.kind not in "fi" or not whole:
             continue  # small scalars and labels: default storage
         chunks = tuple(n if d in whole else 1 for d, n in var.sizes.items())
-        enc[name] = {"zlib": True, "complevel": complevel, "chunksizes": chunks}
+        enc[name] = {**enc.get(name, {}), "zlib": True, "complevel": complevel,
+                     "chunksizes": chunks}
     return enc
 
 

@@ -591,8 +591,9 @@ def extrapolate(
             _linear_fit(x, f, q)[1] for q in orders[1:])))  # C x1^q = fit(h1) - f0
         error = fs * correction + sigma + abs(f[0] - fit1)
     if poor:
-        # Report the order that was observed, but no limit built on it.
-        return result(order=p, coef=coef, gci=gci, resid=resid, non_monotone=not monotone,
+        # Report the order that was observed, but no limit built on it, nor
+        # a GCI (on three grids the error, which is NaN here).
+        return result(order=p, coef=coef, resid=resid, non_monotone=not monotone,
                       poor_fit=True, not_asymptotic=fine_end)
     return result(value=f0, error=error, order=p, coef=coef, gci=gci, resid=resid, fs=fs,
                   non_monotone=not monotone, not_asymptotic=fine_end)
@@ -833,8 +834,26 @@ def _provenance(sweep: xr.Dataset) -> dict[str, object]:
     return out
 
 
+#: Counts of a study, stored as integers (NaN where a case never ran: the fill).
+COUNT_SUFFIXES = ("n_grids", "finest_grid")
+
+
 def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
-    """Write `extrapolate_sweep`'s dataset to netCDF4 atomically (CF: no fill on coordinates)."""
+    """Write `extrapolate_sweep`'s dataset to netCDF4 atomically.
+
+    CF: no fill on coordinates; counts as int32 and flags as int8 with the
+    fill -1 where a case never ran (a flag of 0 there would read as a case
+    that passed), which xarray reads back as NaN.
+    """
     from brushcore.data.io import write_dataset_atomic
 
-    write_dataset_atomic(conv, path, {name: {"_FillValue": None} for name in conv.coords})
+    ran = conv["finest_grid"].notnull()
+    out = conv.copy()
+    enc: dict[str, dict[str, object]] = {name: {"_FillValue": None} for name in conv.coords}
+    for name, var in conv.data_vars.items():
+        if var.dtype == np.int8 and set(var.dims) <= set(ran.dims):
+            out[name] = var.where(ran).assign_attrs(var.attrs)
+            enc[name] = {"dtype": "int8", "_FillValue": np.int8(-1)}
+        elif name.endswith(COUNT_SUFFIXES):
+            enc[name] = {"dtype": "int32", "_FillValue": np.int32(-1)}
+    write_dataset_atomic(out, path, enc)

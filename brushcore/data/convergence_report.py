@@ -33,7 +33,8 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
         extrapolated value, error,
         order, the safety factor the error was built with (1.25 or 3), the
         spread (half the range over the grids, also where a flag leaves no
-        extrapolation) and the flags (as a comma-separated ``flags`` column; besides
+        extrapolation) and the flags (as a comma-separated ``flags_raised`` column, not
+        ``flags``, which pandas holds as an attribute; besides
         the fit's and ``untrusted_order``, ``under_resolved``,
         ``coarsest_under_resolved``, ``touching_pillars``, ``phi_varies`` and
         ``mixed_settings(...)``, see `write_tables`).
@@ -72,7 +73,7 @@ def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
             flags += [f for f in CASE_FLAGS if f in case[q] and int(case[q][f].isel(case=i))]
             if MIXED in one and str(one[MIXED].values):
                 flags.append(f"{MIXED}({str(one[MIXED].values).replace(' ', '+')})")
-            row["flags"] = ",".join(flags)
+            row["flags_raised"] = ",".join(flags)
             rows.append(row)
     return pd.DataFrame(rows)
 
