@@ -540,8 +540,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _converge(args: argparse.Namespace) -> int:
-    from brushcore.data.aggregate import AggregationError, build_sweep, write_sweep
-    from brushcore.data.aggregate import GRID_DIM
+    from brushcore.data.aggregate import (GRID_DIM, AggregationError, build_sweep,
+                                          mixed_runs, write_sweep)
     from brushcore.data.convergence_report import write_study
 
     out = args.out_dir
@@ -549,7 +549,8 @@ def _converge(args: argparse.Namespace) -> int:
         _error(f"--out-dir {out} is a file: allowed a folder (made if missing)")
         return 2
     try:
-        sweep = build_sweep(args.curves, keep_snapshots=())
+        # no snapshots: a study reads scalars (small sets kept them all before)
+        sweep = build_sweep(args.curves, keep_snapshots=(), all_snapshots_below_mb=0.0)
     except AggregationError as exc:
         _error(str(exc))
         return 2
@@ -559,6 +560,10 @@ def _converge(args: argparse.Namespace) -> int:
     except OSError as exc:
         _error(f"cannot write {out / 'sweep.nc'}: {exc.strerror or exc}")
         return 1
+    mixed = mixed_runs(sweep)
+    if mixed:  # a study across code versions or settings: said, not hidden in an attribute
+        warnings.warn(f"the curves differ in {mixed}: their differences join the mesh's "
+                      "in the study; run them again with one brushcore and settings", stacklevel=1)
     grids = [int(g) for g in sweep[GRID_DIM].values]
     files = [out / name for name in ("convergence.nc", "convergence.csv", "convergence.md",
                                      "convergence.png")]

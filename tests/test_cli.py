@@ -396,6 +396,25 @@ def test_ctrl_c_prints_one_line_and_exits_130(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+def test_converge_says_where_its_curves_differ_in_code_or_settings(tmp_path, capsys):
+    """A study over curves run with other settings (or commits) is warned of
+    on the terminal, as the workflow's aggregation warns: their difference
+    joins the mesh's in the extrapolation."""
+    from brushcore import BrushParams, SolverOptions, simulate, write_curve
+    from brushcore.cli import main
+
+    paths = []
+    for grid, cascade in ((32, "global"), (48, "local"), (64, "local")):
+        curve = simulate(BrushParams("regular", 4, 0.01, grid), SolverOptions(cascade=cascade))
+        paths.append(str(tmp_path / f"c{grid}.nc"))
+        write_curve(curve, paths[-1])
+    with pytest.warns(UserWarning, match=r"the curves differ in cascade \(global; local\)"):
+        assert main(["converge", *paths, "--out-dir", str(tmp_path / "study")]) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["converge", *paths[1:], "--out-dir", str(tmp_path / "two")]) == 0
+
+
 def test_a_coarse_grid_is_suggested_with_the_phi_it_realises(tmp_path, capsys):
     """Under --allow-coarse the filling factor is not checked, so the grid the
     hint names need not realise phi within 5 %: the hint and the run say
@@ -438,6 +457,8 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     for name in ("sweep.nc", "convergence.nc", "convergence.csv", "convergence.md",
                  "convergence.png"):
         assert (out / name).is_file(), name
+    with xr.open_dataset(out / "sweep.nc") as sweep:  # a study's sweep: scalars, no maps
+        assert "contact_snapshot" not in sweep
     expected = extrapolate([1 / 48, 1 / 64, 1 / 96], values)
     assert math.isfinite(expected.value)
     with xr.open_dataset(out / "convergence.nc") as study:

@@ -728,6 +728,20 @@ def _provenance(
     }
 
 
+#: Where a sweep's curves may not differ unsaid: the code, and the accuracy
+#: settings (rtol may, by design: large loads tighten it, `solve.load_options`).
+MIXED_ATTRIBUTES = ("simulation_git_commits", "precision", "cascade")
+
+
+def mixed_runs(sweep: xr.Dataset) -> str:
+    """What a sweep's curves differ in of `MIXED_ATTRIBUTES`, as "name (values),
+    ...", or "" where they agree (curves of two commits, say, before a
+    study extrapolates across them)."""
+    mixed = [name for name in MIXED_ATTRIBUTES
+             if "; " in str(sweep.attrs.get(name, "")) or ", " in str(sweep.attrs.get(name, ""))]
+    return ", ".join(f"{name} ({sweep.attrs[name]})" for name in mixed)
+
+
 def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, object]]:
     """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int32.
 

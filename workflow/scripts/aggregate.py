@@ -4,7 +4,8 @@ import sys
 
 import yaml
 
-from brushcore.data.aggregate import AggregationError, CaseKey, build_sweep, write_sweep
+from brushcore.data.aggregate import (AggregationError, CaseKey, build_sweep, mixed_runs,
+                                      write_sweep)
 from brushcore.data.joblog import logged
 
 
@@ -20,13 +21,10 @@ def main(smk) -> None:
     sweep.attrs["workflow_config"] = yaml.safe_dump(dict(smk.config), sort_keys=True)
     write_sweep(sweep, smk.output[0])
     print(sweep)
-    # (rtol may differ by design: large loads tighten it, see solve.load_options)
-    mixed = [name for name in ("simulation_git_commits", "precision", "cascade")
-             if "; " in str(sweep.attrs.get(name, "")) or ", " in str(sweep.attrs.get(name, ""))]
+    mixed = mixed_runs(sweep)
     if mixed:  # on the terminal too: the log alone would hide it
-        note = (f"{smk.output[0]}: its curves differ in " + ", ".join(
-            f"{name} ({sweep.attrs[name]})" for name in mixed)
-            + "; `snakemake -R simulate` recomputes them alike")
+        note = (f"{smk.output[0]}: its curves differ in {mixed}; "
+                "`snakemake -R simulate` recomputes them alike")
         print(note)
         print(note, file=sys.__stderr__, flush=True)
 
