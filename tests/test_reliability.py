@@ -666,3 +666,27 @@ def test_git_commit_says_dirty_for_an_edit_anywhere_in_the_package(monkeypatch) 
     monkeypatch.setattr(provenance.subprocess, "run", fake_run)
     assert provenance.git_commit.__wrapped__() == "abc123+dirty"
     assert asked[1][-1] == str(Path(brushcore.__file__).resolve().parent)
+
+
+def test_the_version_recorded_is_that_of_the_tree_that_runs(tmp_path, monkeypatch) -> None:
+    """A source tree's version is its pyproject's (a clone on PYTHONPATH beside
+    another installed copy recorded that copy's); outside a tree, the
+    installed distribution's.  Curves, sweeps and studies name it in CF's
+    ``source``, with the commit."""
+    import tomllib
+
+    from brushcore.model import provenance
+
+    tree = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    assert provenance.version.__wrapped__() == tree["project"]["version"]
+    assert provenance.source() == (f"brushcore {provenance.version()} "
+                                   f"(git {provenance.git_commit()})")
+    fake = tmp_path / "a" / "b" / "provenance.py"  # no pyproject two folders up
+    monkeypatch.setattr(provenance, "__file__", str(fake))
+    from importlib import metadata
+
+    try:
+        installed = metadata.version("brushcore")
+    except metadata.PackageNotFoundError:
+        installed = "0+unknown"
+    assert provenance.version.__wrapped__() == installed

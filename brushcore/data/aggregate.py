@@ -717,6 +717,7 @@ def _provenance(
         "date_created": now,
         "brushcore_version": provenance.version(),
         "git_commit": provenance.git_commit(),
+        "source": provenance.source(),
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
         "simulation_software_versions": "; ".join(software),

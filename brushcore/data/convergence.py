@@ -823,9 +823,12 @@ def _provenance(sweep: xr.Dataset) -> dict[str, object]:
         "date_created": now,
         "brushcore_version": provenance.version(),
         "git_commit": provenance.git_commit(),
+        "source": provenance.source(),
     }
     if "source_digest_sha256" in sweep.attrs:
         out["sweep_source_digest_sha256"] = sweep.attrs["source_digest_sha256"]
+    if "simulation_git_commits" in sweep.attrs:  # the code of the curves, not of this study
+        out["simulation_git_commits"] = sweep.attrs["simulation_git_commits"]
     # Not the sweep's units_convention ("h in m"): every value here is
     # normalised, and the coordinate h is h / L = 1/n.
     for name in ("e_star", "dgamma"):

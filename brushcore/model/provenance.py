@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import subprocess
+import tomllib
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
@@ -12,10 +13,19 @@ from pathlib import Path
 
 @lru_cache(maxsize=1)
 def version() -> str:
-    """Installed brushcore version."""
+    """Version of the brushcore that runs: its source tree's ``pyproject.toml``
+    where it runs from one (a clone on PYTHONPATH beside another installed
+    copy reported that copy's), else the installed distribution's."""
+    project = Path(__file__).resolve().parents[2] / "pyproject.toml"
+    try:
+        found = tomllib.loads(project.read_text())["project"]
+        if found.get("name") == "brushcore":
+            return str(found["version"])
+    except (OSError, KeyError, tomllib.TOMLDecodeError):
+        pass  # installed, not a source tree
     try:
         return metadata.version("brushcore")
-    except metadata.PackageNotFoundError:  # running from a source tree
+    except metadata.PackageNotFoundError:
         return "0+unknown"
 
 
@@ -32,6 +42,11 @@ def git_commit() -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return sha + ("+dirty" if dirty else "")
+
+
+def source() -> str:
+    """CF's ``source`` attribute: the software and commit that made a file."""
+    return f"brushcore {version()} (git {git_commit()})"
 
 
 #: The libraries a curve's numbers pass through (MKL's FFT and spmv where
