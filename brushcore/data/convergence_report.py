@@ -12,6 +12,7 @@ import numpy as np
 import xarray as xr
 
 from brushcore.data.aggregate import GRID_DIM
+from brushcore.data.io import write_text_atomic
 from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, MIXED,
                                         PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SETTINGS_FACTOR,
                                         SMALLEST, STUDY_FLAGS, UNDER_RESOLVED_RADIUS, case_flags,
@@ -101,9 +102,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
                  quantities: Sequence[str] = QUANTITIES) -> None:
     """Write `convergence_table` as CSV (full precision) and Markdown (5 digits)."""
     table = convergence_table(conv, quantities)
-    for p in (csv_path, md_path):
-        Path(p).parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(csv_path, index=False)
+    write_text_atomic(csv_path, table.to_csv(index=False))
     header = ("Results extrapolated to h -> 0 with f = f0 + C h^p (observed order p); "
               "error = Roache's GCI (3 grids) or Eca & Hoekstra's least-squares "
               "uncertainty (>= 4 grids), with the safety factor in its column (1.25 at a "
@@ -132,7 +131,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               f"settings (numbers more than {SETTINGS_FACTOR:g}x apart) among "
               f"{', '.join(ACCURACY_SETTINGS)} (sweep.nc's run_* give the values), so "
               "their solver errors differ and mix into the fit.\n\n")
-    Path(md_path).write_text(header + to_markdown(table))
+    write_text_atomic(md_path, header + to_markdown(table))
 
 
 def write_study(sweep: xr.Dataset, nc_path: str | Path, csv_path: str | Path,

@@ -32,6 +32,7 @@ from brushcore.model.inputs import parse_protocol
 from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, curve_layout
 from brushcore.model.shapes import parse_shape_label
 from brushcore.data.aggregate import SHAPE_DIM
+from brushcore.data.io import write_atomic
 from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index,
                                   shape_slice, snapshots)
 from brushcore.data.convergence import (MIXED, PHI_ACTUAL, QUANTITIES, STUDY_FLAGS, TOUCHING,
@@ -925,7 +926,6 @@ def convergence(
 
 
 def save(fig: Figure, path: str | Path, dpi: int = 150) -> None:
-    """Write a figure (format from the suffix), creating the directory."""
+    """Write a figure (format from the suffix) atomically, creating the directory."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=path.suffix[1:] or None))

@@ -8,6 +8,7 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -128,12 +129,14 @@ def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     os.replace(tmp, path)
 
 
-def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict) -> Path:
-    """Write a Dataset to netCDF4 under a unique temporary name, then `publish` it as ``path``.
+def write_atomic(path: str | os.PathLike, write: Callable[[str], None],
+                 nbytes: int = 0) -> Path:
+    """``write(tmp)`` a file under a unique temporary name, then `publish` it as ``path``.
 
     The temporary file lies in the same directory and is flushed before the
     rename: a killed writer leaves the old file (or none) and at most a
     ``.{name}.*.tmp`` (see `remove_stale_temporaries`), never half a file.
+    ``nbytes`` (what is written, about) names a full disk as such.
     """
     path = Path(path)
     if path.is_dir():  # else a rename error naming the temporary, after the writing
@@ -147,7 +150,7 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
                                    f"{path.parent}", str(path)) from None
     os.close(fd)
     try:
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4", encoding=encoding)
+        write(tmp)
         publish(tmp, path)
     except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
@@ -156,11 +159,22 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
                 free = shutil.disk_usage(path.parent).free
             except OSError:
                 raise exc from None
-            if free < ds.nbytes:  # netCDF says only "HDF error" when the disk is full
+            if free < nbytes:  # netCDF says only "HDF error" when the disk is full
                 raise OSError(errno.ENOSPC, f"{free} bytes free on its disk, the data take "
-                                            f"up to {ds.nbytes}", str(path)) from exc
+                                            f"up to {nbytes}", str(path)) from exc
         raise
     return path
+
+
+def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict) -> Path:
+    """Write a Dataset to netCDF4 atomically (`write_atomic`)."""
+    return write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4",
+                                                       encoding=encoding), ds.nbytes)
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
+    """Write a text file (a table) atomically (`write_atomic`)."""
+    return write_atomic(path, lambda tmp: Path(tmp).write_text(text), len(text.encode()))
 
 
 def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:

@@ -12,6 +12,7 @@ a pillar radius spans there, marking fewer than 4 as under-resolved.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from collections.abc import Sequence
 from dataclasses import astuple, dataclass, fields
@@ -24,6 +25,7 @@ from scipy import stats
 from brushcore.model import theory
 from brushcore.model.layout import pillars_differ
 from brushcore.data.aggregate import GRID_DIM
+from brushcore.data.io import write_text_atomic
 from brushcore.data.views import finest_grid, flat_slice, kbar_index
 from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
 
@@ -328,12 +330,12 @@ def write_summary(rows: Sequence[Row], csv_path: str | Path, md_path: str | Path
                   ) -> None:
     """Write the rows as CSV (and optionally as a Markdown table)."""
     header = [f.name for f in fields(Row)]
-    Path(csv_path).parent.mkdir(parents=True, exist_ok=True)
-    with open(csv_path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(header)
-        writer.writerows(astuple(r) for r in rows)
+    text = io.StringIO(newline="")
+    writer = csv.writer(text)
+    writer.writerow(header)
+    writer.writerows(astuple(r) for r in rows)
+    write_text_atomic(csv_path, text.getvalue())  # a killed job leaves no half a table
     if md_path is not None:
         lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
         lines += ["| " + " | ".join(astuple(r)) + " |" for r in rows]
-        Path(md_path).write_text("\n".join(lines) + "\n")
+        write_text_atomic(md_path, "\n".join(lines) + "\n")
