@@ -575,14 +575,14 @@ def test_far_field_bound_holds_against_the_dense_field(seed):
     from brushcore import BrushParams
     from brushcore.model.layout import build_labels
     from brushcore.numerics.halfspace.farfield import FarFieldBound, near_influence
-    from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_centroids
+    from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_index_centroids
 
     h, e_star = 1.0, 1.0
     labels = build_labels(BrushParams("random", 24, 1e-2, 64, phi=0.2, seed=seed))
     iy, ix = np.nonzero(labels >= 0)
     pillar = labels[iy, ix]
     n = int(pillar.max()) + 1
-    cy, cx = pillar_centroids(pillar, iy, ix, h, n)
+    cy, cx = pillar_index_centroids(pillar, iy, ix, h, n)
     reach = np.zeros(n)
     np.maximum.at(reach, pillar, np.hypot(iy * h - cy[pillar], ix * h - cx[pillar]))
     r_near = near_influence(cy, cx, reach, h, e_star, mirrored=False)

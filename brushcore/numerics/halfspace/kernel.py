@@ -111,10 +111,13 @@ def folded_coefficient(ya: np.ndarray, xa: np.ndarray, yb: np.ndarray, xb: np.nd
             + love_coefficient(dy, sx, h, e_star) + love_coefficient(sy, sx, h, e_star))
 
 
-def pillar_centroids(pillar_of: np.ndarray, iy: np.ndarray, ix: np.ndarray, h: float,
-                     n_pillars: int) -> tuple[np.ndarray, np.ndarray]:
+def pillar_index_centroids(pillar_of: np.ndarray, iy: np.ndarray, ix: np.ndarray, h: float,
+                           n_pillars: int) -> tuple[np.ndarray, np.ndarray]:
     """Each pillar's centroid (y, x) [length] from its elements' grid rows
-    ``iy`` and columns ``ix`` (``pillar_of`` labels each element)."""
+    ``iy`` and columns ``ix`` (``pillar_of`` labels each element), in the
+    index convention of the kernel: element i at i h, so that a mirror line
+    lies at -h/2 (`image_coordinate`); `brushcore.model.rough.pillar_centroids`
+    measures from the square's corner, (i + 1/2) h."""
     counts = np.bincount(pillar_of, minlength=n_pillars)
     cy = np.bincount(pillar_of, weights=iy * h, minlength=n_pillars) / counts
     cx = np.bincount(pillar_of, weights=ix * h, minlength=n_pillars) / counts

@@ -29,7 +29,8 @@ import scipy.fft as sfft
 from brushcore.numerics.linear.cg import pcg
 from brushcore.numerics.halfspace.convolution import HAVE_PYFFTW, planning
 from brushcore.numerics.halfspace.farfield import FarFieldBound, near_influence
-from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_centroids, self_compliance
+from brushcore.numerics.halfspace.kernel import (love_coefficient, pillar_index_centroids,
+                                                 self_compliance)
 from brushcore.numerics.linear.tiles import TileCoarse
 
 
@@ -79,7 +80,7 @@ class PillarSolver:
         for p, m in enumerate(self._members):
             self._in_box[m] = (iy[m] - y0[p]) * self._box[p, 1] + (ix[m] - x0[p])
         self._spectra: dict[int, np.ndarray] = {}
-        cy, cx = pillar_centroids(pillar_of, iy, ix, h, n_pillars)
+        cy, cx = pillar_index_centroids(pillar_of, iy, ix, h, n_pillars)
         radius = np.zeros(n_pillars)
         np.maximum.at(radius, pillar_of, np.hypot(iy * h - cy[pillar_of], ix * h - cx[pillar_of]))
         self.bound = (FarFieldBound(near_influence(cy, cx, radius, h, e_star, mirrored))

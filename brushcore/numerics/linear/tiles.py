@@ -55,8 +55,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from brushcore.numerics.halfspace.kernel import (love_coefficient, pillar_centroids, pillar_influence,
-                                      self_compliance)
+from brushcore.numerics.halfspace.kernel import (love_coefficient, pillar_index_centroids,
+                                                 pillar_influence, self_compliance)
 from brushcore.numerics.linear.precondition import BlockInverse, coarse_inverse
 from brushcore.numerics.platform.threads import stacked_matmul
 
@@ -142,7 +142,7 @@ class TileCoarse:
         self.coarse = coarse and 1 < n_pillars <= BlockInverse.MAX_COARSE
         if not self.coarse:
             return
-        cy, cx = pillar_centroids(self._pillar_of, self._iy, self._ix, h, n_pillars)
+        cy, cx = pillar_index_centroids(self._pillar_of, self._iy, self._ix, h, n_pillars)
         self._r = pillar_influence(cy, cx, h, e_star, mirrored)
         self._diag = self_compliance(h=h, e_star=e_star)
         self._coarse_vectors(np.arange(n_pillars))
