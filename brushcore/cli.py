@@ -285,8 +285,8 @@ def build_parser() -> argparse.ArgumentParser:
                           f"inverses, in [1, {MAX_THREADS}]")
     sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
-                          "pip install 'brushcore[gpu]' and a CUDA 12 card; whole grid, "
-                          "no symmetry fold)")
+                          "pip install 'brushcore[gpu]' and a CUDA card (12.x wheels; see "
+                          "the README); whole grid, no symmetry fold)")
     sim.add_argument("--out", type=_output, required=True, help="output netCDF file")
     sim.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return parser
