@@ -34,7 +34,7 @@ from scipy import optimize
 from scipy.spatial import cKDTree
 
 from brushcore.model.inputs import header_names, table_rows
-from brushcore.model.shapes import PillarShape, ellipse_half_extents
+from brushcore.model.shapes import PillarShape, along_axes, ellipse_half_extents
 from brushcore.validation import ParameterError
 
 SUFFIX = ".csv"
@@ -266,10 +266,8 @@ def _level(table: PillarTable, q: int, points: np.ndarray) -> np.ndarray:
     """Pillar q's implicit function at ``points`` (y, x): (u/a)^2 + (v/b)^2,
     <= 1 inside or on its boundary."""
     a, b = (float(axis[q]) for axis in table.semi_axes)
-    o = math.radians(table.orientations[q])
     dy, dx = (points - table.centres[q]).T
-    u = dx * math.cos(o) + dy * math.sin(o)
-    v = -dx * math.sin(o) + dy * math.cos(o)
+    u, v = along_axes(dy, dx, float(table.orientations[q]))
     return (u / a) ** 2 + (v / b) ** 2
 
 

@@ -24,6 +24,14 @@ import numpy as np
 SHAPES = ("disc", "square", "ellipse")
 
 
+def along_axes(dy: np.ndarray, dx: np.ndarray, orientation: float) -> tuple[np.ndarray,
+                                                                          np.ndarray]:
+    """Offsets (dy, dx) from a pillar's centre in its own axes (u, v): u along
+    the major axis or a side at ``orientation`` [degrees] from x, v across it."""
+    t = math.radians(orientation)
+    return dx * math.cos(t) + dy * math.sin(t), -dx * math.sin(t) + dy * math.cos(t)
+
+
 def ellipse_half_extents(a: np.ndarray | float, b: np.ndarray | float,
                          orientation: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """Half widths along y and x of the bounding boxes of ellipses [length of a, b].
@@ -97,9 +105,7 @@ class PillarShape:
         a, b = self.half_axes(area)
         if self.kind == "disc":
             return dy**2 + dx**2 <= a * a
-        t = math.radians(self.orientation)
-        u = dx * math.cos(t) + dy * math.sin(t)  # along the major axis / a side
-        v = -dx * math.sin(t) + dy * math.cos(t)
+        u, v = along_axes(dy, dx, self.orientation)
         if self.kind == "square":
             return (np.abs(u) <= a) & (np.abs(v) <= b)
         return (u / a) ** 2 + (v / b) ** 2 <= 1.0
