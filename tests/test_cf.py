@@ -42,8 +42,10 @@ def curve_files(tmp_path_factory) -> list[Path]:
     return files
 
 
-def test_curve_file_is_cf_clean(curve_files, tmp_path):
-    assert cf_errors(curve_files[0], tmp_path) == []
+@pytest.mark.parametrize("which", [0, 1, 2], ids=["soft regular", "rigid regular",
+                                                  "random single precision"])
+def test_curve_file_is_cf_clean(curve_files, tmp_path, which):
+    assert cf_errors(curve_files[which], tmp_path) == []
 
 
 def test_sweep_is_cf_clean(curve_files, tmp_path):

@@ -13,6 +13,7 @@ import xarray as xr
 
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.io import write_text_atomic
+from brushcore.model.params import MAX_PHI_ERROR
 from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, MIXED,
                                         PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SETTINGS_FACTOR,
                                         SMALLEST, STUDY_FLAGS, UNDER_RESOLVED_RADIUS, case_flags,
@@ -122,7 +123,7 @@ def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,
               "edge (random discs on grids coarser than 512); "
               f"phi_varies: phi_spread > {PHI_SPREAD_FLAG:g}, so the grids hold different "
               "brushes, not one refined (only allow_coarse lets a grid's phi be more "
-              "than 5 % off): the fit is no h -> 0 limit of one brush; "
+              f"than {100 * MAX_PHI_ERROR:g} % off): the fit is no h -> 0 limit of one brush; "
               "untrusted_order: the observed order lies outside "
               f"{conv.attrs.get('trusted_order', 'the trusted range')} and no other flag "
               "is raised, so the error carries Fs "

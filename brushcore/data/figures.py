@@ -57,6 +57,9 @@ LAYOUT_MARKERS = {"regular": "s", "random": "o", "hexagonal": "h"}
 OTHER_MARKERS = ("^", "v", "D", "P", "X", "<", ">", "p", "*")
 #: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
 SOFT_WORK_FLOOR = 0.3
+#: The rough figure draws the elastic foundation's soft limit at kbar up to
+#: this: every pillar still attached at F_ad, which stiffer brushes are not.
+SOFT_LIMIT_KBAR = 0.01
 # detached / attached pillar element on a white background (no pillar)
 SNAPSHOT_CMAP = ListedColormap(["white", "0.8", "tab:red"])
 
@@ -585,7 +588,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     Bars span the seeds.  Dashed lines are the soft limit (elastic foundation,
     every pillar attached, large N): N^(1/4) G(S d_K / lambda) with G
     `theory.gaussian_spread_pull_off` and lambda `theory.foundation_stretch`,
-    drawn for kbar <= 0.01 where it applies.
+    drawn for kbar <= `SOFT_LIMIT_KBAR` where it applies.
     """
     sweep = finest_grid(sweep)  # one value per case: the best-resolved one
     fig = _new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)), 3.6)
@@ -608,11 +611,11 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                 continue
             ax.errorbar(s_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
                         capsize=2, color=colors[kbar], label=rf"$\bar k$ = {_kbar_text(kbar)}")
-            if np.isfinite(kbar) and kbar <= 0.01 and s_axis.max() > 0 and not given:
+            if np.isfinite(kbar) and kbar <= SOFT_LIMIT_KBAR and s_axis.max() > 0 and not given:
                 span = np.linspace(0.0, s_axis.max(), 60)
                 lam = float(theory.foundation_stretch(n_pillars, phi, kbar))
                 soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
-                ax.plot(span, n_pillars**0.25 * np.asarray(soft), "--", lw=1,
+                ax.plot(span, theory.soft_limit(n_pillars) * np.asarray(soft), "--", lw=1,
                         color=colors[kbar])
                 soft_drawn = True
         ax.set_title(f"preload {preload:g} " + r"$F_K$" if protocol is None else

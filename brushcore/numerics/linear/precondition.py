@@ -139,6 +139,11 @@ def _stack_times(stack: np.ndarray, packed: bool, w: np.ndarray,
 #: (`_live_runs`): one call per run of remaining pillars costs ~1.5 us,
 #: a block of 21 ~0.15 us and one of 148 ~6 us in a curve (float32).
 RUNS_MIN_BLOCK = 64
+#: Bytes a preconditioner's stored blocks may take (the dense per-pillar
+#: inverses, the tiles' coarse blocks, and what `attach` borders them with):
+#: the workflow's memory request above 512^2 grants it (README, "Time and
+#: memory a job asks for").
+MEMORY_BUDGET = 4e9
 
 
 def _live_runs(stack: np.ndarray, remaining: np.ndarray) -> list[tuple[int, int]] | None:
@@ -342,7 +347,7 @@ class BlockInverse:
     REFACTOR_PILLARS = 400
     #: Bytes the stacks may take with the elastic inverses that `attach`
     #: borders (the stack, its packed copy and the elastic inverses).
-    BORDER_BUDGET = 4e9
+    BORDER_BUDGET = MEMORY_BUDGET
 
     def _block(self, p: int, slots: np.ndarray) -> np.ndarray:
         """Pillar p's block of the operator over the given slots [length / stress]."""
@@ -439,7 +444,7 @@ class BlockInverse:
         self.factorisations += 1
 
     @classmethod
-    def fits(cls, pillar_of: np.ndarray, budget_bytes: float = 4e9,
+    def fits(cls, pillar_of: np.ndarray, budget_bytes: float = MEMORY_BUDGET,
              max_block: int | None = None) -> bool:
         """Whether the stacked inverses (and their packed copy) fit the memory
         budget and the block size limit.

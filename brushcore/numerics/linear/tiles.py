@@ -57,7 +57,7 @@ import numpy as np
 
 from brushcore.numerics.halfspace.kernel import (love_coefficient, pillar_index_centroids,
                                                  pillar_influence, self_compliance)
-from brushcore.numerics.linear.precondition import BlockInverse, coarse_inverse
+from brushcore.numerics.linear.precondition import MEMORY_BUDGET, BlockInverse, coarse_inverse
 from brushcore.numerics.platform.threads import stacked_matmul
 
 
@@ -172,7 +172,7 @@ class TileCoarse:
 
     @classmethod
     def fits(cls, elements: np.ndarray, pillar_of: np.ndarray, n: int,
-             budget_bytes: float = 4e9) -> bool:
+             budget_bytes: float = MEMORY_BUDGET) -> bool:
         """Whether the coarse blocks and their inverses fit the memory budget."""
         n_pillars = int(pillar_of.max()) + 1
         mc = max_tiles(elements, pillar_of, n, tile_size(elements, pillar_of, n))
