@@ -187,9 +187,9 @@ def test_a_table_of_ellipses_is_the_generated_brush(tmp_path: Path, layout: str,
     for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
         assert float(read[name]) == float(made[name]), name
     # the radius rule reads the semi-minor axis: r / sqrt(2)
-    from brushcore.model.layout import smallest_disc
+    from brushcore.model.layout import smallest_pillar
 
-    assert smallest_disc(table) == pytest.approx(params.narrowest_radius_elements, rel=1e-12)
+    assert smallest_pillar(table) == pytest.approx(params.narrowest_radius_elements, rel=1e-12)
 
 
 @pytest.mark.parametrize("text, message", [

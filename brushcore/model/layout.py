@@ -9,7 +9,7 @@ downstream (springs, snapshots, counts) works from it, so any layout
 Layouts: "regular" (square lattice), "random" (random sequential
 addition), "hexagonal" (triangular lattice, see `hexagonal_centres`) and
 "file" (a label map or an image, see `layout_file`, or a table of disc
-pillars drawn on any grid, see `pillar_table`).  Pillars of one map
+and ellipse pillars drawn on any grid, see `pillar_table`).  Pillars of one map
 never touch: no two different pillars share an element edge (4-neighbour
 adjacency); a shared corner is allowed.  (Random discs on a grid coarser
 than 512 are the exception: their gap is a fixed length, `random_gap`,
@@ -410,7 +410,7 @@ def build_labels(params: BrushParams) -> np.ndarray:
             return replace(params, grid=grid, gap_map=None)
 
         hinted = grid_hint(exc, make, params.grid)
-        if hinted is exc and smallest_disc(params):
+        if hinted is exc and smallest_pillar(params):
             # a table's smallest disc may need more grids than the search tries:
             # search on from where it is resolved wherever it sits
             floor = min(_table_grid_floor(params), MAX_GRID) - 1
@@ -511,7 +511,7 @@ def generated_table(params: BrushParams) -> PillarTable:
 WIDE_RADIUS_ELEMENTS = 1.0 + math.sqrt(0.5)
 
 
-def smallest_disc(params: BrushParams) -> float | None:
+def smallest_pillar(params: BrushParams) -> float | None:
     """A pillar table's narrowest pillar half-width in elements on
     ``params.grid`` (a disc's radius, an ellipse's semi-minor axis), None
     for other layouts (whose pillars the radius rule reads alike)."""
@@ -531,7 +531,7 @@ def smallest_radius_elements(params: BrushParams, labels: np.ndarray) -> float:
     """
     if params.layout != "file":
         return params.narrowest_radius_elements
-    smallest = smallest_disc(params)
+    smallest = smallest_pillar(params)
     if smallest is not None:
         return smallest
     counts = pillar_element_counts(labels, int(labels.max()) + 1)
@@ -603,7 +603,7 @@ def check_discretisation(params: BrushParams, labels: np.ndarray) -> None:
     # an ellipse's semi-minor axis, as the radius rule reads it: its
     # equal-area radius would suggest a grid that still misses its centres;
     # a table's smallest disc, not the mean one (a stub among pillars)
-    smallest = smallest_disc(params)
+    smallest = smallest_pillar(params)
     r = smallest or params.narrowest_radius_elements
     what = "semi-minor axis" if params.shape == "ellipse" else "radius"
     if np.any(counts == 0):

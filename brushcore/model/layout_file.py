@@ -1,6 +1,6 @@
 """Layouts read from a file: an integer label map (.npy) or an image (.png),
-which fit one grid, or a table of disc pillars (.csv, `pillar_table`), drawn
-on any grid.
+which fit one grid, or a table of disc and ellipse pillars (.csv,
+`pillar_table`), drawn on any grid.
 
 Files come from other people's tools, so they are read as data, never as
 code, and refused with the file named when they do not fit:

@@ -47,9 +47,11 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     ----------
     params, options : the problem and the numerics
     progress : optional callback, see `pull_off`
-    labels : a label map to use instead of the one `params` describes
-        (for transformed or hand-made layouts); its pillar count must be
-        ``params.n_pillars``
+    labels : the label map `params` describes (`build_labels`), passed by a
+        caller that built it already; tests pass transformed maps (a turned
+        layout), whose pillar count must be ``params.n_pillars``, but
+        `brushcore.simulate` refuses any other map, since the parameters and
+        the curve's ``parameter_hash`` would not describe it
 
     Returns
     -------

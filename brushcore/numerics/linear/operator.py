@@ -32,12 +32,17 @@ class BrushOperator:
 
     Parameters
     ----------
-    convolver : the DC-FFT convolution K for the grid
+    convolver : the DC-FFT convolution K for the grid (`Convolver`, a mirror
+        quadrant's `MirrorConvolver` or a device's)
     labels : pillar index per element, -1 outside pillars, shape (n, n)
     compliance : spring compliance h^2 / k_p per pillar, shape (N,)
         [length / stress]; 0 for rigid pillars
     h : element size [length]
     e_star : effective modulus [stress]
+    use_block : precondition with the per-pillar blocks or tiles (default);
+        False takes the "diagonal" preconditioner, Sherman-Morrison on the
+        springs alone (tests and benchmarks compare)
+    coarse : add the pillar-level coarse space to the blocks (default)
     precise : makes a double-precision twin of a single-precision
         ``convolver`` (same grid), for the solves that need more digits
         than float32 transforms give (`refined`); None where the
