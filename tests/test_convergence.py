@@ -129,6 +129,17 @@ def test_non_monotone_flagged_with_nan():
     assert is_monotone(np.array([1.0, 1.0, 2.0, 3.0]))
 
 
+def test_a_diverging_order_is_reported_alike_on_even_and_uneven_grids():
+    """f = 1 + 0.5 h^-0.3 moves apart under refinement: its observed order,
+    -0.3, is reported (flagged poor) on uneven grid ratios as on even ones,
+    where it was NaN (a helper's data audit)."""
+    for grids in ((64, 128, 256), (64, 96, 128)):
+        h = 1.0 / np.array(grids, dtype=float)
+        e = extrapolate(h, 1.0 + 0.5 * h**-0.3)
+        assert e.poor_fit and math.isnan(e.value)
+        assert e.order == pytest.approx(-0.3, rel=1e-6), grids
+
+
 def test_divergent_sequence_is_poor_fit():
     # Differences grow under refinement (order < 0): there is no limit.
     h = 1.0 / np.array([128.0, 256.0, 512.0])

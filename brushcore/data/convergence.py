@@ -70,8 +70,9 @@ Method
   ran with differently, `mixed_settings`).
   Where a flag makes (1) meaningless, f0 and the error are NaN; the order
   that was observed is kept (negative when the differences grow under
-  refinement, on three grids), NaN when none was (oscillation, no root
-  with uneven ratios, the two finest values equal beside a third, or a
+  refinement, on three grids, even ratios or not), NaN when none was
+  (oscillation, no root within ``order_bounds`` or their negatives with
+  uneven ratios, the two finest values equal beside a third, or a
   least-squares order at its search bound, which is where four or more
   diverging values send it); the raw values stay with the caller (and in
   `extrapolate_sweep`'s output).
@@ -314,7 +315,7 @@ class ConvergenceOptions:
         (four or more grids), relative to max f - min f, before the fit is
         flagged poor.
     order_bounds : interval searched for p (least squares and uneven
-        three-grid roots) [-].
+        three-grid roots; its negative for three grids that diverge) [-].
     flat_rtol : successive differences below this fraction of max |f| count
         as zero: the sequence is converged to rounding, f0 = f1, error 0.
     """
@@ -447,7 +448,10 @@ def _ratio_gap(p: float, h: np.ndarray, target: float) -> float:
 
 
 def _three_grid_order(h: np.ndarray, f: np.ndarray, bounds: tuple[float, float]) -> float:
-    """Observed order through three points; NaN when none is positive."""
+    """Observed order through three points, negative where the differences
+    grow under refinement (as Richardson's closed form gives on even ratios);
+    NaN where the values oscillate or no order within ``bounds`` (or their
+    negatives) fits."""
     if f[1] == f[0]:
         return _NAN  # the two finest agree beside a third that differs: no order
     target = (f[2] - f[1]) / (f[1] - f[0])
@@ -456,7 +460,9 @@ def _three_grid_order(h: np.ndarray, f: np.ndarray, bounds: tuple[float, float])
     r21, r32 = h[1] / h[0], h[2] / h[1]
     if math.isclose(r21, r32, rel_tol=1e-9):
         return math.log(target) / math.log(r21)  # Richardson's closed form
-    lo, hi = bounds
+    # the ratio of differences runs from 0 (p -> -inf) through ln r32 / ln r21
+    # (p -> 0) to inf: below that middle the differences grow, p < 0
+    lo, hi = bounds if target > math.log(r32) / math.log(r21) else (-bounds[1], -bounds[0])
     g_lo, g_hi = _ratio_gap(lo, h, target), _ratio_gap(hi, h, target)
     if not np.isfinite(g_lo) or not np.isfinite(g_hi) or g_lo * g_hi > 0:
         return _NAN
