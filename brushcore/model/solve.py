@@ -21,7 +21,8 @@ from brushcore.numerics.linear.cg import ConvergenceError
 from brushcore.numerics.halfspace.convolution import HAVE_PYFFTW, cached_convolver
 from brushcore.numerics.halfspace.device_convolution import cached_device_convolver
 from brushcore.numerics.halfspace.fft_choice import faster_library
-from brushcore.numerics.halfspace.mirror import cached_mirror_convolver, mirror_quadrant
+from brushcore.numerics.halfspace.mirror import (Quadrant, cached_mirror_convolver,
+                                                 mirror_quadrant)
 from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.linear.precondition import BlockInverse
@@ -94,8 +95,20 @@ def run(params: BrushParams, options: SolverOptions = SolverOptions(),
     detach[op.elements] = curve.detach_step
     detach = detach.reshape(grid_labels.shape)
     if quadrant is not None:
-        detach, curve = quadrant.unfold_field(detach), quadrant.unfold_curve(curve)
+        detach, curve = quadrant.unfold_field(detach), unfold_curve(quadrant, curve)
     return detach, curve, conv.applications - before + op.refined_applications
+
+
+def unfold_curve(quadrant: Quadrant, curve: PullOffCurve) -> PullOffCurve:
+    """A quadrant's pull-off as the full brush's: forces and counts x 4,
+    pillar forces in full label order.  ``detach_step`` stays in the
+    quadrant operator's order (unfold its map with `Quadrant.unfold_field`)."""
+    peak = curve.pillar_force_at_peak
+    return replace(curve, force=curve.force * 4,
+                   attached_elements=curve.attached_elements * 4,
+                   attached_pillars=curve.attached_pillars * 4,
+                   pillar_force_at_peak=None if peak is None else quadrant.unfold_pillars(peak),
+                   symmetry_fold=4)
 
 
 def whole_grid_double(params: BrushParams, options: SolverOptions) -> Callable[[], Any]:

@@ -19,9 +19,8 @@ its mirror lines lie half an element before its first row and column.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,8 +29,6 @@ from brushcore.numerics.halfspace.kernel import wrapped_kernel
 
 if HAVE_PYFFTW:
     import pyfftw
-if TYPE_CHECKING:
-    from brushcore.numerics.events.pulloff import PullOffCurve
 
 
 class MirrorConvolver(HostBuffers):
@@ -147,17 +144,6 @@ class Quadrant:
         top = np.concatenate([quadrant[::-1, ::-1], quadrant[::-1]], axis=1)
         bottom = np.concatenate([quadrant[:, ::-1], quadrant], axis=1)
         return np.concatenate([top, bottom], axis=0)
-
-    def unfold_curve(self, curve: "PullOffCurve") -> "PullOffCurve":
-        """The quadrant's pull-off as the full brush's: forces and counts x 4,
-        pillar forces in full label order.  ``detach_step`` stays in the
-        quadrant operator's order (unfold its map with `unfold_field`)."""
-        peak = curve.pillar_force_at_peak
-        return replace(curve, force=curve.force * 4,
-                       attached_elements=curve.attached_elements * 4,
-                       attached_pillars=curve.attached_pillars * 4,
-                       pillar_force_at_peak=None if peak is None else self.unfold_pillars(peak),
-                       symmetry_fold=4)
 
     def unfold_pillars(self, values: np.ndarray) -> np.ndarray:
         """Per-pillar values in full label order from per-quadrant-pillar values."""
