@@ -7,9 +7,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import xarray as xr
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.io import write_text_atomic
@@ -22,7 +26,8 @@ from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, MIXED,
 _SHORT = {"adhesive_force_normalized": "F_ad", "work_of_separation_normalized": "W"}
 
 
-def convergence_table(conv: xr.Dataset, quantities: Sequence[str] = QUANTITIES):
+def convergence_table(conv: xr.Dataset,
+                      quantities: Sequence[str] = QUANTITIES) -> pd.DataFrame:
     """One row per (case, quantity) that was run on at least one grid.
 
     Returns
@@ -90,7 +95,7 @@ def _fmt(value: object) -> str:
     return str(value)
 
 
-def to_markdown(table) -> str:
+def to_markdown(table: pd.DataFrame) -> str:
     """A GitHub-flavoured Markdown table (no optional dependency)."""
     cols = list(table.columns)
     lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]

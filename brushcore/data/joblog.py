@@ -31,7 +31,7 @@ def terminate(signum: int, frame: object) -> NoReturn:
     raise Terminated
 
 
-def on_sigterm(handler):
+def on_sigterm(handler: Callable[..., object] | int | None) -> object:
     """Install a SIGTERM handler, returning the previous one; a no-op (None)
     off the main thread, where Python allows none (`main` called from a thread)."""
     if handler is None:

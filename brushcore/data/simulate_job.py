@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING
 from brushcore.data.joblog import CurveClock, logged, stops_on_sigterm
 
 if TYPE_CHECKING:
+    import xarray as xr
+
     from brushcore.model.params import BrushParams
 
 
@@ -101,7 +103,7 @@ def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, 
     return BrushParams(layout=layout, kbar=kbar, **fields)
 
 
-def log_lines(curve) -> list[str]:
+def log_lines(curve: xr.Dataset) -> list[str]:
     """What a job's log says of its curve: F_ad, W, events and time, the
     resolution, touching pillars (as the command says them) and how far an
     approach pressed, in the config's words."""

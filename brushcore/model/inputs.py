@@ -13,7 +13,7 @@ import dataclasses
 import math
 import re
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -313,7 +313,7 @@ PROTOCOL_SYNTAX = ("waypoints separated by commas, each 'force:F' (total force F
 PROTOCOL_LOADS = f"force waypoints in [-{MAX_ROUGH:g}, {MAX_ROUGH:g}] F_K (the preload's range)"
 
 
-def load_beyond_range(protocol) -> str:
+def load_beyond_range(protocol: Sequence[Waypoint]) -> str:
     """Why a normalised protocol asks for too large a load ("" if it does not)."""
     for k, leg in enumerate(protocol):
         if leg.kind == "force" and not abs(leg.value) <= MAX_ROUGH:
@@ -321,7 +321,7 @@ def load_beyond_range(protocol) -> str:
     return ""
 
 
-def protocol_text(protocol) -> str:
+def protocol_text(protocol: Sequence[Waypoint]) -> str:
     """The text form `parse_protocol` reads, of normalised waypoints (exact reprs)."""
     return ", ".join(w.kind if w.kind == "separation" else f"{w.kind}:{w.value!r}"
                      for w in protocol)

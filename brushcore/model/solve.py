@@ -176,7 +176,7 @@ def fft_library_used(params: BrushParams, options: SolverOptions, backend: Backe
     return "fftw" if HAVE_PYFFTW else "scipy"
 
 
-def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions):
+def grid_convolver(params: BrushParams, backend: Backend, options: SolverOptions) -> Any:
     """The whole-grid convolver for ``backend`` (cached per process); a device
     always transforms in double precision."""
     if backend.on_host:

@@ -46,7 +46,7 @@ def critical_stress(e_star: float, dgamma: float, h: float) -> float:
     return math.sqrt(e_star * dgamma / (BETA * h))
 
 
-def flat_punch_stiffness(radius: float, e_star: float) -> float:
+def flat_punch_stiffness(radius: float | np.ndarray, e_star: float) -> float | np.ndarray:
     """Normal stiffness 2 a E* of a rigid circular flat punch [force / length]."""
     return 2.0 * radius * e_star
 
@@ -160,7 +160,8 @@ def kendall_scales(area: float, e_star: float, dgamma: float) -> KendallScales:
                          displacement_scale(area, e_star, dgamma), work_scale(area, dgamma))
 
 
-def stiffness_from_kbar(kbar: float, e_star: float, side: float) -> float:
+def stiffness_from_kbar(kbar: float | np.ndarray, e_star: float,
+                        side: float) -> float | np.ndarray:
     """Pillar spring stiffness k = kbar E* L (eq. 22) [force / length]."""
     return kbar * e_star * side
 
@@ -187,7 +188,8 @@ def soft_limit(n_pillars: int | np.ndarray) -> float | np.ndarray:
     return np.asarray(n_pillars, dtype=float) ** 0.25
 
 
-def soft_work(n_pillars: int | np.ndarray, phi: float, kbar: float | np.ndarray):
+def soft_work(n_pillars: int | np.ndarray, phi: float,
+              kbar: float | np.ndarray) -> float | np.ndarray:
     """Normalised work of separation stored in soft springs, eqs. 25-27.
 
     Each of the N springs carries f = N^(-3/4) F_K at pull-off and stores
