@@ -410,6 +410,7 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    from brushcore.model.cost import cost_note
     from brushcore.model.curve import (FirstTouchWarning, check_protocol_preload,
                                        preload_contact, simulate)
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
@@ -477,6 +478,9 @@ def _simulate(args: argparse.Namespace) -> int:
               + ("" if backend.on_host else f", on {backend.device_name}")
               + (f"; {touching_note(touching)}" if touching else ""),
               file=sys.stderr)
+        cost = cost_note(params, options, protocol)
+        if cost:  # a long run said before it starts, not discovered
+            print(cost, file=sys.stderr)
         if options.lookahead:  # opt-in and documented, but a number could be quoted unread
             warnings.warn(f"--lookahead {options.lookahead:g} batches the events within "
                           f"{100 * options.lookahead:g} % of the next one: approximate (W and "

@@ -971,3 +971,31 @@ def test_the_config_schema_bounds_are_the_solvers():
     rtol = props["solver"]["properties"]["rtol"]
     assert (rtol["minimum"], rtol["maximum"]) == (SolverOptions.MIN_RTOL,
                                                   SolverOptions.MAX_RTOL)
+
+
+@pytest.mark.parametrize("case,wildcards", [
+    (dict(layout="regular", n_pillars=16), ("regular", "", "")),
+    (dict(layout="random", n_pillars=16), ("random", "", "")),
+    (dict(layout="regular", n_pillars=16, shape="ellipse", aspect=2.0),
+     ("regular", "_ellipse2.0_0.0", "")),
+    (dict(layout="regular", n_pillars=16, preload=1.0), ("regular", "", "_S0.0_P1.0_C0.0")),
+    (dict(layout="regular", n_pillars=16, roughness=0.3), ("regular", "", "_S0.3_P0.0_C0.0")),
+], ids=["regular", "random", "ellipse", "preload", "rough"])
+def test_the_command_and_the_workflow_price_a_curve_alike(case, wildcards):
+    """One table of measured curves (`brushcore.model.cost`) sets the
+    workflow's Slurm time and the command's note before a long run: each
+    brush is of the same kind in both, and the request is 3 x its bound
+    plus 5 min."""
+    from brushcore import BrushParams, SolverOptions
+    from brushcore.model import cost
+
+    common = _common_rules()
+    for grid in (512, 1024):
+        params = BrushParams(kbar=0.01, grid=grid, **case)
+        kind = cost.curve_kind(params, SolverOptions())
+        assert common["curve_kind"](*wildcards) == kind
+        minutes = common["curve_minutes"](*wildcards, grid)
+        assert minutes == math.ceil(5 + 3 * cost.expected_seconds(params, SolverOptions()) / 60)
+    note = cost.cost_note(BrushParams(kbar=0.01, grid=1024, **case), SolverOptions())
+    assert note.startswith("this run may take up to about ") and "1024^2" in note
+    assert cost.cost_note(BrushParams(kbar=0.01, grid=64, **case), SolverOptions()) == ""

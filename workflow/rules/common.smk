@@ -13,6 +13,7 @@ import yaml
 from snakemake.logging import logger
 
 from brushcore.data.simulate_job import case_params
+from brushcore.model.cost import EXACT_RTOL, slowdown, slowest_curve_s
 from brushcore.model.inputs import (
     parse_protocol,
     protocol_text,
@@ -926,44 +927,15 @@ def simulate_gres(config):
     return "gpu:1" if simulate_gpus(config) else ""
 
 
-#: The slowest curve measured [s, one thread] by job kind and grid, on the
-#: 2-core AMD EPYC development machine (README, "Speed and memory" and
-#: "Rough, graded and preloaded brushes"; docs/SPEED.md).  Where only a
-#: two-thread time exists (2048^2) the one-thread bound is twice it.
-#: "mirror": flat regular brushes of discs, solved on one quadrant; 1024:
-#: 8 x 8 rigid 123 s; 2048: 531 s on one thread (48 x 48), 8 x 8 rigid 609 s
-#: on two on a slow afternoon.  "whole": every other flat brush (random,
-#: hexagonal, other shapes, a flat preload or a stiffness spread) on the whole
-#: grid; 512: the paper sweep's slowest, 1.6 min; 1024: random 64 at k 1e-6
-#: 666 s (hexagonal 8 x 8 622 s); 2048: random 1620 at k 1e-5, about 130 min
-#: on two threads (a straight line through its 11.6 % detached in 15 min;
-#: its applications alone about 95 min).  "rough": roughness > 0, contact made
-#: element by element on the approach; 256: 116.5 s (config/rough.yaml);
-#: 512: the rough 8 x 8 brush 416.5 s; 1024: about 6 h (estimated from the
-#: rate of its first 12 min, not run).
-SLOWEST_CURVE_S = {
-    "mirror": {512: 30, 1024: 125, 2048: 1218},
-    "whole": {512: 100, 1024: 670, 2048: 15600},
-    "rough": {256: 120, 512: 420, 1024: 21600},
-}
-#: Beyond the measured grids a curve's time grows as n^3 (solves ~ n, each
-#: ~ n^2 log n), a rough one's as n^5 (also ~ n^2 more contact events).
-RUNTIME_EXPONENT = {"mirror": 3, "whole": 3, "rough": 5}
+#: The slowest curve measured per kind and grid (`SLOWEST_CURVE_S`,
+#: `RUNTIME_EXPONENT`, the settings' `slowdown`) is `brushcore.model.cost`'s,
+#: which the command's note before a long run reads too.
 #: Margin over the slowest measured curve: nodes 2-3x slower than the
 #: development machine, and 1.3x between days on one machine.
 RUNTIME_SAFETY = 3
 #: Minutes for what is not the curve: Python's and the nested Snakemake's
 #: start, FFTW planning on a fresh node, the shared file system's latency.
 RUNTIME_OVERHEAD_MIN = 5
-
-
-#: How much slower than the defaults the config's solver settings run: the
-#: paper's global cascades or a reference tolerance (exact mode: the rigid
-#: 8 x 8 brush at 2048^2 took 40 min against 379 s, 6.3x; a regular brush
-#: at 256^2 3.9x), and double-precision transforms where random brushes
-#: would run single (45 % more job time over the sweep's random curves).
-EXACT_SLOWDOWN = 6.0
-DOUBLE_SLOWDOWN = 1.5
 
 
 def curve_kind(layout, shape, rough, solver=None):
@@ -981,31 +953,16 @@ def curve_kind(layout, shape, rough, solver=None):
 
 
 def solver_slowdown(solver, kind):
-    """Factor on a curve's time for the config's solver settings (see
-    `EXACT_SLOWDOWN`, `DOUBLE_SLOWDOWN`); 1 for the defaults."""
+    """Factor on a curve's time for the config's solver settings
+    (`brushcore.model.cost.slowdown`); 1 for the defaults."""
     solver = solver or {}
     exact = (
         solver.get("cascade", "local") == "global"
-        or float(solver.get("rtol", 1e-4)) < 1e-6
+        or float(solver.get("rtol", 1e-4)) < EXACT_RTOL
     )
-    double = kind == "whole" and solver.get("precision", "auto") == "double"
-    return (EXACT_SLOWDOWN if exact else 1.0) * (DOUBLE_SLOWDOWN if double else 1.0)
-
-
-def slowest_curve_s(kind, grid):
-    """The slowest curve of `kind` on `grid` [s]: measured, interpolated on a log-log
-    scale between measured grids, or scaled by `RUNTIME_EXPONENT` beyond them."""
-    measured = SLOWEST_CURVE_S[kind]
-    grids = sorted(measured)
-    if grid in measured:
-        return float(measured[grid])
-    if grid < grids[0] or grid > grids[-1]:
-        edge = grids[0] if grid < grids[0] else grids[-1]
-        return measured[edge] * (grid / edge) ** RUNTIME_EXPONENT[kind]
-    upper = next(g for g in grids if g > grid)
-    lower = grids[grids.index(upper) - 1]
-    slope = math.log(measured[upper] / measured[lower]) / math.log(upper / lower)
-    return measured[lower] * (grid / lower) ** slope
+    return slowdown(
+        kind, exact=exact, double=solver.get("precision", "auto") == "double"
+    )
 
 
 def curve_minutes(layout, shape, rough, grid, solver=None):

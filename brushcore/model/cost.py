@@ -1,0 +1,121 @@
+"""What a curve costs: the slowest curve measured per kind and grid.
+
+One table serves the workflow's Slurm time limits (`workflow/rules/common.smk`
+asks for `RUNTIME_SAFETY` x it) and the command's word before a long run
+(`cost_note`).  Measured on one thread of the 2-core AMD EPYC development
+machine (README, "Speed and memory"; docs/SPEED.md); other machines run
+2-3x apart, so these are orders of magnitude, not promises.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from brushcore.model.params import BrushParams
+from brushcore.numerics.options import SolverOptions
+
+#: The slowest curve measured [s, one thread] by kind and grid.  Where only a
+#: two-thread time exists (2048^2) the one-thread bound is twice it.
+#: "mirror": flat regular brushes of discs, solved on one quadrant; 1024:
+#: 8 x 8 rigid 123 s; 2048: 531 s on one thread (48 x 48), 8 x 8 rigid 609 s
+#: on two on a slow afternoon.  "whole": every other flat brush (random,
+#: hexagonal, other shapes, a flat preload or a stiffness spread) on the whole
+#: grid; 512: the paper sweep's slowest, 1.6 min; 1024: random 64 at k 1e-6
+#: 666 s (hexagonal 8 x 8 622 s); 2048: random 1620 at k 1e-5, about 130 min
+#: on two threads (a straight line through its 11.6 % detached in 15 min;
+#: its applications alone about 95 min).  "rough": roughness > 0 or given
+#: heights, stiffnesses or gaps, or a protocol, contact made element by
+#: element on an approach; 256: 116.5 s (config/rough.yaml); 512: the rough
+#: 8 x 8 brush 416.5 s; 1024: about 6 h (estimated from the rate of its
+#: first 12 min, not run).
+SLOWEST_CURVE_S = {
+    "mirror": {512: 30, 1024: 125, 2048: 1218},
+    "whole": {512: 100, 1024: 670, 2048: 15600},
+    "rough": {256: 120, 512: 420, 1024: 21600},
+}
+#: Beyond the measured grids a curve's time grows as n^3 (solves ~ n, each
+#: ~ n^2 log n), a rough one's as n^5 (also ~ n^2 more contact events).
+RUNTIME_EXPONENT = {"mirror": 3, "whole": 3, "rough": 5}
+#: How much slower than the defaults other solver settings run: the paper's
+#: global cascades or a reference tolerance (exact mode: the rigid 8 x 8
+#: brush at 2048^2 took 40 min against 379 s, 6.3x; a regular brush at
+#: 256^2 3.9x), and double-precision transforms where random brushes would
+#: run single (45 % more job time over the sweep's random curves).
+EXACT_SLOWDOWN = 6.0
+DOUBLE_SLOWDOWN = 1.5
+#: An rtol under this runs at exact mode's cost.
+EXACT_RTOL = 1e-6
+#: The command says what a run may cost from this bound on [s].
+NOTE_FROM_S = 60.0
+
+
+def slowest_curve_s(kind: str, grid: int) -> float:
+    """The slowest curve of ``kind`` on ``grid`` [s, one thread]: measured,
+    interpolated on a log-log scale between measured grids, or scaled by
+    `RUNTIME_EXPONENT` beyond them."""
+    measured = SLOWEST_CURVE_S[kind]
+    grids = sorted(measured)
+    if grid in measured:
+        return float(measured[grid])
+    if grid < grids[0] or grid > grids[-1]:
+        edge = grids[0] if grid < grids[0] else grids[-1]
+        return measured[edge] * (grid / edge) ** RUNTIME_EXPONENT[kind]
+    upper = next(g for g in grids if g > grid)
+    lower = grids[grids.index(upper) - 1]
+    slope = math.log(measured[upper] / measured[lower]) / math.log(upper / lower)
+    return measured[lower] * (grid / lower) ** slope
+
+
+def slowdown(kind: str, *, exact: bool, double: bool) -> float:
+    """Factor on a curve's time for solver settings: ``exact`` (global cascades
+    or rtol < 1e-6) and ``double`` (double-precision transforms asked for)."""
+    return ((EXACT_SLOWDOWN if exact else 1.0)
+            * (DOUBLE_SLOWDOWN if double and kind == "whole" else 1.0))
+
+
+def curve_kind(params: BrushParams, options: SolverOptions,
+               protocol: Sequence[object] | None = None) -> str:
+    """The `SLOWEST_CURVE_S` kind of a run: "rough" where contact is made
+    element by element (roughness, given heights, stiffnesses or gaps, a
+    protocol), "mirror" for a flat regular brush of discs solved on a
+    quadrant, else "whole"."""
+    given = any(getattr(params, name) is not None
+                for name in ("heights", "kbar_values", "gap_map"))
+    if params.roughness > 0 or given or protocol is not None:
+        return "rough"
+    folded = options.symmetry
+    regular = params.layout == "regular" and params.shape == "disc" and params.is_flat
+    return "mirror" if regular and folded else "whole"
+
+
+def expected_seconds(params: BrushParams, options: SolverOptions,
+                     protocol: Sequence[object] | None = None) -> float:
+    """The slowest measured curve of the run's kind on its grid, times the
+    settings' `slowdown` [s, one thread]: what the run may take at most on
+    the development machine."""
+    kind = curve_kind(params, options, protocol)
+    exact = options.cascade == "global" or options.rtol < EXACT_RTOL
+    return slowest_curve_s(kind, params.grid) * slowdown(
+        kind, exact=exact, double=options.precision == "double")
+
+
+#: A kind in the words of the command's note.
+KIND_WORDS = {"mirror": "flat regular", "whole": "flat", "rough": "rough, given or protocol"}
+
+
+def cost_note(params: BrushParams, options: SolverOptions,
+              protocol: Sequence[object] | None = None) -> str:
+    """What a run may take, said where it may exceed `NOTE_FROM_S`; "" below."""
+    seconds = expected_seconds(params, options, protocol)
+    if seconds < NOTE_FROM_S:
+        return ""
+    kind = curve_kind(params, options, protocol)
+    span = f"{seconds / 60:.0f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
+    grids = sorted(SLOWEST_CURVE_S[kind])
+    basis = (f"the slowest {KIND_WORDS[kind]} curve measured at {params.grid}^2"
+             if params.grid in grids else
+             f"scaled from the slowest {KIND_WORDS[kind]} curves measured at "
+             f"{', '.join(f'{g}^2' for g in grids)}")
+    return (f"this run may take up to about {span} on one thread ({basis}; machines differ "
+            "2-3x)")
