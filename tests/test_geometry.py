@@ -335,7 +335,7 @@ def test_file_params_refuse_counts_that_differ_from_the_file(tmp_path):
         file_params(path, 0.1, grid=128)
     # a hand-made BrushParams that disagrees with its file is caught by build_labels
     p = BrushParams("file", 13, 0.1, 64, phi=0.15, layout_file=str(path), allow_coarse=True)
-    with pytest.raises(ParameterError, match=r"n_pillars=13 .*allowed 12, the count of"):
+    with pytest.raises(ParameterError, match=r"n_pillars=13 .*allowed 12, the value of"):
         build_labels(p)
 
 

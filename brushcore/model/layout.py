@@ -27,7 +27,7 @@ import numpy as np
 
 from brushcore.model.lattices import hexagonal_lattice, hexagonal_pitch
 from brushcore.model.labelmap import check_not_touching, pillar_element_counts
-from brushcore.model.layout_file import FILE_PHI_RTOL, read_label_map
+from brushcore.model.layout_file import check_file_values, read_label_map
 from brushcore.model.pillar_table import PillarTable, is_table, read_pillar_table
 from brushcore.model.params import (FLOOR_RADIUS_ELEMENTS, MAX_GRID, MAX_PHI_ERROR, MIN_GRID,
                                     RANDOM_GAP_GRID, BrushParams)
@@ -460,12 +460,8 @@ def _check_file_matches(params: BrushParams, n_file: int, phi_file: float) -> No
     """The file's pillar count and filling factor (a map's realised one, a
     table's pi sum r^2) must be the parameters' own (`brushcore.file_params`
     sets them)."""
-    if n_file != params.n_pillars:
-        raise ParameterError("n_pillars", params.n_pillars,
-                             f"{n_file}, the count of {params.layout_file}")
-    if abs(phi_file / params.phi - 1.0) > FILE_PHI_RTOL:
-        raise ParameterError("phi", params.phi,
-                             f"{phi_file!r}, the filling factor of {params.layout_file}")
+    check_file_values(params.layout_file, {"n_pillars": params.n_pillars, "phi": params.phi},
+                      {"n_pillars": n_file, "phi": phi_file})
 
 
 def table_labels(table: PillarTable, grid: int) -> np.ndarray:

@@ -278,11 +278,7 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
                       "(.csv)", f"unknown kind {Path(path).suffix or '(no suffix)'!r}")
     labels = read_label_map(path)  # a grid that differs is the grid's error, named below
     found = describe(labels)
-    for name in ("n_pillars", "grid"):
-        if name in kwargs and kwargs[name] != found[name]:
-            raise ParameterError(name, kwargs[name], f"{found[name]}, the value of {path}")
-    if "phi" in kwargs and abs(kwargs["phi"] / found["phi"] - 1.0) > FILE_PHI_RTOL:
-        raise ParameterError("phi", kwargs["phi"], f"{found['phi']!r}, the value of {path}")
+    check_file_values(path, kwargs, found)
     typed = {name for name in ("n_pillars", "grid", "phi") if name in kwargs}
     kwargs.update(n_pillars=found["n_pillars"], grid=found["grid"], phi=found["phi"])
     try:
@@ -304,18 +300,35 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
                       image_rule=exc.name == "phi") from None
 
 
+def check_file_values(path: str | Path, given: Mapping[str, object],
+                      found: Mapping[str, object], phi_meaning: str = "") -> None:
+    """The N, grid and phi ``given`` (those of ``found``'s names among them)
+    must be the file's ``found`` ones, phi within `FILE_PHI_RTOL`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter and the file's value (and ``phi_meaning``, how
+        the file's phi is reckoned, where given).
+    """
+    for name in ("n_pillars", "grid", "phi"):
+        if name not in given or name not in found:
+            continue
+        value, own = given[name], found[name]
+        differs = abs(value / own - 1.0) > FILE_PHI_RTOL if name == "phi" else value != own
+        if differs:
+            raise ParameterError(name, value, f"{own!r}, the value of {path}" + (
+                f" ({phi_meaning})" if name == "phi" and phi_meaning else ""))
+
+
 def _table_params(path: str | Path, kbar: float, kwargs: dict) -> BrushParams:
     """`file_params` of a pillar table: N and phi from the table, the grid given."""
     table = read_pillar_table(path)
     if kwargs.get("grid") is None:
         raise ParameterError("grid", None, "the grid to draw the table on (elements per "
                              "side: a pillar table fits any grid)", f"{path} is a pillar table")
-    if "n_pillars" in kwargs and kwargs["n_pillars"] != table.n_pillars:
-        raise ParameterError("n_pillars", kwargs["n_pillars"],
-                             f"{table.n_pillars}, the value of {path}")
-    if "phi" in kwargs and abs(kwargs["phi"] / table.phi - 1.0) > FILE_PHI_RTOL:
-        raise ParameterError("phi", kwargs["phi"], f"{table.phi!r}, the value of {path} "
-                             "(pi sum r^2)")
+    check_file_values(path, kwargs, {"n_pillars": table.n_pillars, "phi": table.phi},
+                      "pi sum r^2")
     # a phi given (the workflow's, from the plan) is kept: a job on another
     # machine, whose sum might round otherwise, then names the plan's case
     kwargs.update(n_pillars=table.n_pillars, phi=kwargs.get("phi", table.phi))
