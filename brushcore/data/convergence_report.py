@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
 from brushcore.data.aggregate import GRID_DIM
-from brushcore.data.io import write_text_atomic
+from brushcore.data.io import markdown_table, write_text_atomic
 from brushcore.model.params import MAX_PHI_ERROR
 from brushcore.data.convergence import (ACCURACY_SETTINGS, CASE_FLAGS, MIXED,
                                         PHI_ACTUAL, PHI_SPREAD_FLAG, QUANTITIES, SETTINGS_FACTOR,
@@ -96,12 +96,11 @@ def _fmt(value: object) -> str:
 
 
 def to_markdown(table: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table (no optional dependency)."""
-    cols = list(table.columns)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
-    for _, row in table.iterrows():
-        lines.append("| " + " | ".join(_fmt(row[c]) for c in cols) + " |")
-    return "\n".join(lines) + "\n"
+    """The table in Markdown, numbers to 5 digits (`io.markdown_table`; no
+    optional dependency such as tabulate)."""
+    cols = [str(c) for c in table.columns]
+    return markdown_table(cols, ([_fmt(row[c]) for c in table.columns]
+                                 for _, row in table.iterrows()))
 
 
 def write_tables(conv: xr.Dataset, csv_path: str | Path, md_path: str | Path,

@@ -8,7 +8,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -175,6 +175,13 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
 def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     """Write a text file (a table) atomically (`write_atomic`)."""
     return write_atomic(path, lambda tmp: Path(tmp).write_text(text), len(text.encode()))
+
+
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A GitHub-flavoured Markdown table of text cells, one line a row."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
 
 
 def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:

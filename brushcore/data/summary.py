@@ -25,7 +25,7 @@ from scipy import stats
 from brushcore.model import theory
 from brushcore.model.layout import pillars_differ
 from brushcore.data.aggregate import GRID_DIM
-from brushcore.data.io import write_text_atomic
+from brushcore.data.io import markdown_table, write_text_atomic
 from brushcore.data.views import finest_grid, flat_slice, kbar_index
 from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
 
@@ -336,6 +336,4 @@ def write_summary(rows: Sequence[Row], csv_path: str | Path, md_path: str | Path
     writer.writerows(astuple(r) for r in rows)
     write_text_atomic(csv_path, text.getvalue())  # a killed job leaves no half a table
     if md_path is not None:
-        lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-        lines += ["| " + " | ".join(astuple(r)) + " |" for r in rows]
-        write_text_atomic(md_path, "\n".join(lines) + "\n")
+        write_text_atomic(md_path, markdown_table(header, (astuple(r) for r in rows)))
