@@ -30,8 +30,8 @@ def run_job(smk) -> None:
 
 def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
-    from brushcore import SolverOptions, simulate
-    from brushcore.model.curve import FirstTouchWarning
+    from brushcore.model.curve import FirstTouchWarning, simulate
+    from brushcore.numerics.options import SolverOptions
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.model.inputs import parse_protocol
@@ -89,9 +89,9 @@ def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, 
     ParameterError
         As `BrushParams`, `file_params` and `with_input_files`.
     """
-    from brushcore import BrushParams
     from brushcore.model.inputs import with_input_files
     from brushcore.model.layout_file import file_params
+    from brushcore.model.params import BrushParams
 
     fields = dict(n_pillars=n_pillars, grid=grid, phi=phi, seed=seed,
                   allow_coarse=allow_coarse, backend=backend, **(rough or {}),
