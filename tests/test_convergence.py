@@ -830,3 +830,39 @@ def test_grids_of_different_filling_factors_are_flagged():
     assert phi_varies(np.array([0.0625, 0.111, 0.125, np.nan]))
     assert not phi_varies(np.array([0.115, 0.12, 0.125]))  # within the rule: one brush
     assert PHI_SPREAD_FLAG == pytest.approx(0.1)
+
+
+def test_a_study_of_curves_in_memory_is_the_study_of_their_files(refinement_curves):
+    """build_sweep takes the curves simulate returns as it takes their files:
+    the same values and the same study; provenance hashes each by its
+    content digest and names it by its position."""
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import read_curve
+
+    curves = [read_curve(path) for path in refinement_curves]
+    on_disk, in_memory = build_sweep(refinement_curves), build_sweep(curves)
+    q = "adhesive_force_normalized"
+    xr.testing.assert_identical(on_disk[q], in_memory[q])
+    xr.testing.assert_identical(extrapolate_sweep(on_disk)[f"{q}_extrapolated"],
+                                extrapolate_sweep(in_memory)[f"{q}_extrapolated"])
+    assert in_memory.attrs["source_files"].splitlines()[0] == "<curve 0 in memory>"
+    mixed = build_sweep([curves[0], *refinement_curves[1:]])
+    xr.testing.assert_identical(mixed[q], on_disk[q])
+
+
+def test_the_readmes_notebook_snippet_runs_and_says_what_it_shows(capsys):
+    """The README's Python lines for a notebook (units before a run, progress,
+    W by hand, a resolution study of curves in memory) run as written, and
+    the flags the text after it quotes are the study's."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = text[text.index("A notebook's other needs"):]
+    code = section[section.index("```python") + len("```python"):]
+    scope: dict = {}
+    exec(compile(code[:code.index("```")], "README.md", "exec"), scope)  # noqa: S102
+    table = scope["convergence_table"](scope["conv"]).set_index("quantity")["flags_raised"]
+    after = section[section.index("```\n", section.index("```python") + 9):][:400]
+    for quantity, quoted in (("F_ad", "untrusted_order"), ("W", "poor_fit,not_asymptotic")):
+        assert table[quantity] == quoted and f"`{quoted}`" in after, (table, after)
+    assert "% in contact" in capsys.readouterr().out

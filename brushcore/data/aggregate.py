@@ -35,7 +35,7 @@ from brushcore.model.curve import mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
-from brushcore.data.io import CurveFileError, read_curve, write_dataset_atomic
+from brushcore.data.io import CurveFileError, content_digest, read_curve, write_dataset_atomic
 from brushcore.validation import brief
 
 #: Order of the layout coordinate (others follow, sorted).
@@ -188,14 +188,20 @@ def file_sha256(path: str | Path) -> str:
     return digest.hexdigest()
 
 
-def load_curves(paths: Iterable[str | Path],
+#: How a curve handed in as a Dataset is named in messages and provenance.
+IN_MEMORY = "<curve {} in memory>"
+
+
+def load_curves(paths: Iterable[str | Path | xr.Dataset],
                 expected: Sequence[tuple[CaseKey, float]] | None = None
                 ) -> dict[CaseKey, tuple[Path, xr.Dataset]]:
     """Read every curve file and index it by its case.
 
     Parameters
     ----------
-    paths : curve files
+    paths : curve files, or curves as `brushcore.simulate` returns them
+        (named `IN_MEMORY` with their position; their provenance hash is
+        `io.content_digest`'s, a file's that of its bytes)
     expected : per path, the case and phi it must hold (the workflow's,
         from the file's name), or None to take each file's own
 
@@ -213,9 +219,9 @@ def load_curves(paths: Iterable[str | Path],
         raise ValueError(f"{len(expected)} expected cases for {len(paths)} curve files")
     unreadable = []
     for i, raw in enumerate(paths):
-        path = Path(raw)
+        path = Path(IN_MEMORY.format(i) if isinstance(raw, xr.Dataset) else raw)
         try:
-            curve = read_curve(path)
+            curve = raw if isinstance(raw, xr.Dataset) else read_curve(path)
             key = case_key(curve)
         # the file's fault (unreadable, an attribute missing or not a number), not a
         # bug here, which would otherwise send the user to delete good curves
@@ -365,7 +371,7 @@ def snapshot_filter(
 
 
 def build_sweep(
-    paths: Sequence[str | Path],
+    paths: Sequence[str | Path | xr.Dataset],
     *,
     keep_snapshots: Iterable[tuple[str, int]] = (("regular", 256),),
     all_snapshots_below_mb: float = 64.0,
@@ -375,7 +381,9 @@ def build_sweep(
 
     Parameters
     ----------
-    paths : curve files written by `brushcore.data.io.write_curve`.
+    paths : curve files written by `brushcore.data.io.write_curve`, or the
+        curves themselves (`brushcore.simulate`'s Datasets; a notebook's
+        study needs no files), in any mix.
     keep_snapshots : (layout, n_pillars) whose contact snapshots are kept;
         their finest grid is the one whose maps the sweep keeps (maps of
         different grids cannot share (y, x)).
@@ -694,8 +702,12 @@ def _snapshots(
 def _provenance(
     curves: dict[CaseKey, tuple[Path, xr.Dataset]], *, phi: object
 ) -> dict[str, object]:
-    files = sorted(str(path) for path, _ in curves.values())
-    hashes = [file_sha256(f) for f in files]
+    sources = sorted(((str(path), curve) for path, curve in curves.values()),
+                     key=lambda source: source[0])
+    files = [name for name, _ in sources]
+    in_memory = IN_MEMORY.partition("{}")
+    hashes = [content_digest(curve) if name.startswith(in_memory[0])
+              and name.endswith(in_memory[2]) else file_sha256(name) for name, curve in sources]
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
     commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
     versions = sorted({str(c.attrs.get("brushcore_version", "unknown")) for _, c in curves.values()})
