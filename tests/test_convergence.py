@@ -319,7 +319,7 @@ def test_sweep_dataset_round_trip(tmp_path):
 
 
 def test_a_case_never_run_is_written_as_missing_not_as_unflagged(tmp_path):
-    """On disk a study's flags are int8 and its counts int32, with the fill -1
+    """On disk a study's flags are int8 and its grid numbers int64, with the fill -1
     where a case ran on no grid: a flag of 0 there read as a case that passed
     (a helper's study: 12.5 % of the file's cases flagged against 40 % of
     those run).  xarray reads the fill back as NaN."""
@@ -337,13 +337,23 @@ def test_a_case_never_run_is_written_as_missing_not_as_unflagged(tmp_path):
     with netCDF4.Dataset(path) as raw:
         flag, count = raw[f"{q}_non_monotone"], raw[f"{q}_n_grids"]
         assert flag.dtype == np.int8 and flag._FillValue == -1
-        assert count.dtype == np.int32 and raw["finest_grid"].dtype == np.int32
+        assert count.dtype == np.int64 and raw["finest_grid"].dtype == np.int64
     with xr.open_dataset(path) as back:
         gone = back.sel(layout="regular", seed=0, n_pillars=64, kbar=np.inf)
         ran = back.sel(layout="regular", seed=0, n_pillars=256, kbar=np.inf)
         assert np.isnan(float(gone[f"{q}_non_monotone"])) and np.isnan(float(gone["finest_grid"]))
         assert float(ran[f"{q}_non_monotone"]) == 1 and float(ran[f"{q}_n_grids"]) == 4
         assert float(back[f"{q}_too_few_grids"].mean()) == pytest.approx(0.0)  # 3 cases ran
+        assert float(gone[f"{q}_n_grids"]) == 0  # a true count
+    # a part of a study (no finest_grid) is written too, its flags as they are
+    write_dataset(conv[[f"{q}_poor_fit", f"{q}_n_grids"]], tmp_path / "part.nc")
+    # a quantity's flags are missing where it has no value, not where the first has none
+    w = "work_of_separation_normalized"
+    sweep[w].loc[dict(n_pillars=256, kbar=np.inf)] = np.nan
+    write_dataset(extrapolate_sweep(sweep), path)
+    with xr.open_dataset(path) as back:
+        case = back.sel(layout="regular", seed=0, n_pillars=256, kbar=np.inf)
+        assert np.isnan(float(case[f"{w}_poor_fit"])) and float(case[f"{q}_non_monotone"]) == 1
 
 
 def test_table_gives_how_far_the_realised_phi_moves_over_the_grids_run():
@@ -555,7 +565,7 @@ def test_grid_dimension_aggregates_with_missing_combinations(refinement_curves, 
     import netCDF4
 
     with netCDF4.Dataset(path) as raw:  # counts as integers, the fill where none ran
-        assert raw["events"].dtype == np.int32 and raw["events"]._FillValue == -1
+        assert raw["events"].dtype == np.int64 and raw["events"]._FillValue == -1
     with xr.open_dataset(path) as back:
         assert np.isnan(float(back["events"].sel(kbar=1e-3, grid=48).squeeze()))
         # mirror-symmetric brushes count quadrant applications; L = n h with h = 1

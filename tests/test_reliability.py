@@ -479,8 +479,8 @@ def test_writing_to_a_folder_says_so_before_writing(cli_curves: list[Path],
                                                      tmp_path: Path) -> None:
     """A folder as the file name: one clear error naming it, nothing left behind
     (it was a rename error naming the temporary, after the whole write)."""
-    with pytest.raises(IsADirectoryError, match=r"a folder, not a file name: give one such "
-                                                r"as .*curve\.nc"):
+    with pytest.raises(IsADirectoryError, match=r"a folder, not a file name: give a file in "
+                                                r"it, .*/NAME"):
         write_curve(read_curve(cli_curves[0]), tmp_path)
     assert list(tmp_path.iterdir()) == []
     # a folder no file can be made in (a read-only one): the path asked for, not the temporary
@@ -601,7 +601,7 @@ def test_simulate_script_killed_by_sigterm_writes_no_curve(tmp_path: Path) -> No
     """)
     proc = subprocess.Popen([sys.executable, "-c", job])
     for _ in range(600):  # the job has built its brush and started the curve
-        if log.exists() and "thread(s), backend cpu" in log.read_text():
+        if log.exists() and " thread(s)" in log.read_text():
             break
         time.sleep(0.05)
     time.sleep(3.0)
@@ -660,12 +660,31 @@ def test_git_commit_says_dirty_for_an_edit_anywhere_in_the_package(monkeypatch) 
 
     def fake_run(args, **kwargs):
         asked.append(args)
-        out = "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/linear/cg.py\n"
+        out = (f"{REPO}\n" if args[1:] == ["rev-parse", "--show-toplevel"] else
+               "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/linear/cg.py\n")
         return subprocess.CompletedProcess(args, 0, stdout=out, stderr="")
 
     monkeypatch.setattr(provenance.subprocess, "run", fake_run)
     assert provenance.git_commit.__wrapped__() == "abc123+dirty"
-    assert asked[1][-1] == str(Path(brushcore.__file__).resolve().parent)
+    assert asked[-1][-1] == str(Path(brushcore.__file__).resolve().parent)
+
+
+def test_a_brushcore_inside_another_projects_repository_records_no_commit(tmp_path,
+                                                                           monkeypatch):
+    """Installed in a virtual environment inside another project's git
+    repository, brushcore recorded that project's commit as its own (a
+    review's finding): a repository whose top holds no brushcore pyproject
+    is not brushcore's."""
+    from brushcore.model import provenance
+
+    (tmp_path / "pyproject.toml").write_text('[project]\nname = "myproject"\nversion = "1"\n')
+
+    def fake_run(args, **kwargs):
+        out = f"{tmp_path}\n" if "--show-toplevel" in args else "857ce5c\n"
+        return subprocess.CompletedProcess(args, 0, stdout=out, stderr="")
+
+    monkeypatch.setattr(provenance.subprocess, "run", fake_run)
+    assert provenance.git_commit.__wrapped__() == "unknown"
 
 
 def test_the_version_recorded_is_that_of_the_tree_that_runs(tmp_path, monkeypatch) -> None:
@@ -690,3 +709,24 @@ def test_the_version_recorded_is_that_of_the_tree_that_runs(tmp_path, monkeypatc
     except metadata.PackageNotFoundError:
         installed = "0+unknown"
     assert provenance.version.__wrapped__() == installed
+
+
+@pytest.mark.parametrize("name,value,said", [
+    ("n_pillars", np.array([4, 4]), "its case attributes are not all numbers"),
+    ("seed", np.inf, "its case attributes are not all numbers"),
+    ("grid", None, "its attribute 'grid' is missing"),
+])
+def test_a_curve_with_bad_case_attributes_is_refused_as_the_files_fault(name, value, said):
+    """An array or a non-finite number where a case's integer stands, or an
+    attribute missing: aggregation says which curve and what, and what brings
+    it back, where an array or inf escaped as a traceback."""
+    from brushcore.data.aggregate import AggregationError, build_sweep
+
+    curve = simulate(BrushParams("regular", 4, 0.1, 32))
+    if value is None:
+        del curve.attrs[name]
+    else:
+        curve.attrs[name] = value
+    with pytest.raises(AggregationError, match=rf"cannot aggregate 1 curve file\(s\): <curve 0 "
+                                               rf"in memory> \({said}.*Run their brushcore"):
+        build_sweep([curve])

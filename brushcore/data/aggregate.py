@@ -92,7 +92,7 @@ ATTRIBUTE_SCALARS = {
     "symmetry_fold": ("1", "symmetry fold of the solve: operator_applications count "
                            "applications on 1/symmetry_fold of the padded grid"),
 }
-#: Counts, stored as int32 with the fill -1 (NaN in memory where a case never ran).
+#: Counts, stored as int64 with the fill -1 (NaN in memory where a case never ran).
 COUNT_VARIABLES = ("events", "operator_applications", "cg_iterations",
                    "touching_pillar_pairs", "symmetry_fold", "n_steps", "attached_pillars")
 #: Curve-file attributes every curve of a sweep must share (the physics) ...
@@ -169,14 +169,26 @@ class CaseKey:
 
 
 def case_key(curve: xr.Dataset) -> CaseKey:
-    """Read the case coordinates from a curve file's attributes."""
+    """Read the case coordinates from a curve file's attributes.
+
+    Raises
+    ------
+    CurveFileError
+        Where one is missing or no number (an array, inf for an integer):
+        the file's fault, which aggregation reports as such.
+    """
     a = curve.attrs
-    layout = curve_layout(a)  # a brush of one's own by its file, as the workflow names it
-    shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
-                        float(a.get("orientation", 0.0)))  # files without a shape: discs
-    return CaseKey(layout, int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
-                   int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS),
-                   shape=shape)
+    try:
+        layout = curve_layout(a)  # a brush of one's own by its file, as the workflow names it
+        shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
+                            float(a.get("orientation", 0.0)))  # files without a shape: discs
+        return CaseKey(layout, int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
+                       int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS),
+                       shape=shape)
+    except KeyError as exc:
+        raise CurveFileError(f"its attribute {exc} is missing") from None
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise CurveFileError(f"its case attributes are not all numbers: {exc}") from None
 
 
 def file_sha256(path: str | Path) -> str:
@@ -225,7 +237,7 @@ def load_curves(paths: Iterable[str | Path | xr.Dataset],
             key = case_key(curve)
         # the file's fault (unreadable, an attribute missing or not a number), not a
         # bug here, which would otherwise send the user to delete good curves
-        except (CurveFileError, KeyError, ValueError) as exc:
+        except CurveFileError as exc:
             unreadable.append(f"{path} ({str(exc).removeprefix(f'{path}: ')})")
             continue
         if expected is not None:
@@ -729,7 +741,9 @@ def _provenance(
         "date_created": now,
         "brushcore_version": provenance.version(),
         "git_commit": provenance.git_commit(),
-        "source": provenance.source(),
+        # CF: how the data were made, the curves' code, then what gathered them
+        "source": f"brushcore simulations (git {', '.join(commits)}), aggregated by "
+                  f"{provenance.source()}",
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
         "simulation_software_versions": "; ".join(software),
@@ -756,14 +770,14 @@ def mixed_runs(sweep: xr.Dataset) -> str:
 
 
 def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, object]]:
-    """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int32.
+    """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int64.
 
     One chunk per curve keeps NaN padding and unrun cases nearly free on disk.
     """
     enc: dict[str, dict[str, object]] = {name: {"_FillValue": None} for name in sweep.coords}
     for name, var in sweep.data_vars.items():
         if name in COUNT_VARIABLES:
-            enc[name] = {"dtype": "int32", "_FillValue": np.int32(-1)}
+            enc[name] = {"dtype": "int64", "_FillValue": np.int64(-1)}
         whole = {"step", "y", "x"} & set(var.dims)
         if var.dtype.kind not in "fi" or not whole:
             continue  # small scalars and labels: default storage

@@ -843,26 +843,39 @@ def _provenance(sweep: xr.Dataset) -> dict[str, object]:
     return out
 
 
-#: Counts of a study, stored as integers (NaN where a case never ran: the fill).
-COUNT_SUFFIXES = ("n_grids", "finest_grid")
+#: Grid numbers of a study, stored as integers (NaN where none ran: the fill).
+GRID_SUFFIXES = ("finest_grid",)
+
+
+def _ran(conv: xr.Dataset, name: str) -> xr.DataArray | None:
+    """Where the cases of flag ``name`` have values: a quantity's flag where
+    that quantity has a value on some grid (``{q}_n_grids`` > 0), a case flag
+    where any grid ran (``finest_grid``); None where the study lacks it."""
+    for q in QUANTITIES:
+        if name.startswith(f"{q}_") and f"{q}_n_grids" in conv:
+            return conv[f"{q}_n_grids"] > 0
+    return conv["finest_grid"].notnull() if "finest_grid" in conv else None
 
 
 def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
-    """Write `extrapolate_sweep`'s dataset to netCDF4 atomically.
+    """Write `extrapolate_sweep`'s dataset (or a part of it) to netCDF4 atomically.
 
-    CF: no fill on coordinates; counts as int32 and flags as int8 with the
-    fill -1 where a case never ran (a flag of 0 there would read as a case
-    that passed), which xarray reads back as NaN.
+    CF: no fill on coordinates; flags as int8 with the fill -1 where their
+    case has no value (a flag of 0 there would read as a case that passed),
+    grid numbers and counts as int64 with the fill -1, which xarray reads
+    back as NaN; ``{q}_n_grids`` is 0 there, a true count.
     """
+    from brushcore.data.aggregate import COUNT_VARIABLES
     from brushcore.data.io import write_dataset_atomic
 
-    ran = conv["finest_grid"].notnull()
     out = conv.copy()
     enc: dict[str, dict[str, object]] = {name: {"_FillValue": None} for name in conv.coords}
     for name, var in conv.data_vars.items():
-        if var.dtype == np.int8 and set(var.dims) <= set(ran.dims):
+        ran = _ran(conv, name) if var.dtype == np.int8 else None
+        if ran is not None and set(var.dims) >= set(ran.dims):
             out[name] = var.where(ran).assign_attrs(var.attrs)
             enc[name] = {"dtype": "int8", "_FillValue": np.int8(-1)}
-        elif name.endswith(COUNT_SUFFIXES):
-            enc[name] = {"dtype": "int32", "_FillValue": np.int32(-1)}
+        elif name.endswith(GRID_SUFFIXES) or name.endswith("n_grids") \
+                or name in COUNT_VARIABLES:  # one type however the study was run
+            enc[name] = {"dtype": "int64", "_FillValue": np.int64(-1)}
     write_dataset_atomic(out, path, enc)

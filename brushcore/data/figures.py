@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+import matplotlib
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
@@ -929,6 +930,9 @@ def convergence(
 
 
 def save(fig: Figure, path: str | Path, dpi: int = 150) -> None:
-    """Write a figure (format from the suffix) atomically, creating the directory."""
+    """Write a figure (format from the suffix; none: matplotlib's default format,
+    its suffix added, as savefig does) atomically, creating the directory."""
     path = Path(path)
-    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=path.suffix[1:] or None))
+    if not path.suffix:
+        path = path.with_name(f"{path.name}.{matplotlib.rcParams['savefig.format']}")
+    write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format=path.suffix[1:].lower()))

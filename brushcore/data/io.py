@@ -140,8 +140,8 @@ def write_atomic(path: str | os.PathLike, write: Callable[[str], None],
     """
     path = Path(path)
     if path.is_dir():  # else a rename error naming the temporary, after the writing
-        raise IsADirectoryError(errno.EISDIR, "a folder, not a file name: give one such "
-                                f"as {path / 'curve.nc'}", str(path))
+        raise IsADirectoryError(errno.EISDIR, "a folder, not a file name: give a file "
+                                f"in it, {path / 'NAME'}", str(path))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -174,7 +174,10 @@ def write_dataset_atomic(ds: xr.Dataset, path: str | os.PathLike, encoding: dict
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     """Write a text file (a table) atomically (`write_atomic`)."""
-    return write_atomic(path, lambda tmp: Path(tmp).write_text(text), len(text.encode()))
+    # UTF-8 and the text's own line ends (a CSV's \r\n stays so on any system)
+    return write_atomic(path, lambda tmp: Path(tmp).write_text(text, encoding="utf-8",
+                                                               newline=""),
+                        len(text.encode()))
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:

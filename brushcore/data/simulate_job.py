@@ -51,7 +51,9 @@ def _simulate(smk, clock: CurveClock) -> None:
                          float(w.phi), files=smk.params.layout_file, rough=smk.params.rough,
                          shape=smk.params.shape, allow_coarse=bool(smk.config["allow_coarse"]),
                          backend=smk.config["backend"])
-    print(f"{params} on {smk.threads} thread(s), backend {params.backend}", flush=True)
+    # the digest tells which given heights, stiffnesses or gap map ran
+    given = f" (inputs {params.inputs_digest})" if params.inputs_digest else ""
+    print(f"{params}{given} on {smk.threads} thread(s)", flush=True)
     text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
     protocol = None if text is None else parse_protocol(text)
     with warnings.catch_warnings():  # said below, in the config's words
@@ -75,8 +77,8 @@ def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, 
     Parameters
     ----------
     layout, n_pillars, kbar, seed, grid, phi : the case (a file brush's
-        layout is ``file_<name>``; its N, grid and phi are checked against
-        the file's)
+        layout is ``file_<name>``, and it takes "file" from ``files``; its
+        N, grid and phi are checked against the file's)
     files : "" for a generated layout, a map's or table's path, or
         {"layout": path, "heights": ..., ...} for a brush as made
         (`with_input_files` keys)

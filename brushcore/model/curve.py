@@ -163,7 +163,7 @@ def _coords(params: BrushParams, steps: int, snapshots: int,
 
 
 def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
-               area_total: float, *, events: int, steps: int, applications: int,
+               scales: theory.KendallScales, *, events: int, steps: int, applications: int,
                cg_iterations: int, wall: float, title: str, references: str,
                preconditioner: str, hashed: tuple[dict, ...] = (),
                symmetry_fold: int = 1) -> dict[str, object]:
@@ -181,16 +181,15 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         # netCDF has no boolean attributes
         **{k: int(v) if isinstance(v, bool) else v for k, v in asdict(options).items()},
         "symmetry_fold": symmetry_fold,
-        "phi_actual": area_total / params.side**2,
-        "real_contact_area": area_total,
+        "phi_actual": scales.area / params.side**2,
+        "real_contact_area": scales.area,
         "pillar_radius": params.pillar_radius,
         "pillar_radius_elements": params.pillar_radius_elements,
         "side_length": params.side,
         # the units of the normalised columns, on every curve: heights measured
         # in metres are divided by d_K before a run of given heights
-        "displacement_unit_d_K": theory.displacement_scale(area_total, params.e_star,
-                                                           params.dgamma),
-        "force_unit_F_K": theory.force_scale(area_total, params.e_star, params.dgamma),
+        "displacement_unit_d_K": scales.displacement,
+        "force_unit_F_K": scales.force,
         "critical_stress": theory.critical_stress(params.e_star, params.dgamma, params.h),
         **geometry_attrs(params, labels),
         "events": events,
@@ -474,7 +473,7 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     wall = time.perf_counter() - t0
     h = params.h
     scales = unit_scales(params, labels)  # the pillar elements, as detach >= 0
-    area_total, fs, ds_, ws = scales.area, scales.force, scales.displacement, scales.work
+    fs, ds_, ws = scales.force, scales.displacement, scales.work
     area = curve.attached_elements * h * h
     i_max = int(np.argmax(curve.force))
     f_ad = float(curve.force[i_max])
@@ -501,9 +500,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
         **_pillar_results(labels, h, curve.pillar_force_at_peak, curve.displacement[last]),
         **_result_variables(f_ad, float(curve.displacement[i_max]), work, fs, ws,
                             "adhesive force (maximum tensile force)",
-                            "work of separation, integral of F dd"),
+                            "work of separation, integral of max(F, 0) dd"),
     }
-    attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
+    attrs = _run_attrs(params, options, labels, scales, events=curve.events,
                        steps=int(curve.displacement.size), applications=applications,
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Adhesive pull-off of a spring-mounted pillar brush",
@@ -522,7 +521,8 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     backend = resolve_backend(params.backend)
     t0 = time.perf_counter()
     inputs = pillar_inputs(params, labels)
-    fs, ds_ = inputs.f_unit, inputs.d_unit
+    scales = inputs.scales
+    fs, ds_ = scales.force, scales.displacement
     if protocol is None:
         waypoints = preload_protocol(inputs.preload)
     else:
@@ -546,8 +546,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         compliance=inputs.compliance, progress=progress, labels=labels)
     wall = time.perf_counter() - t0
     h = params.h
-    scales = unit_scales(params, labels)
-    area_total, ws = scales.area, scales.work
+    ws = scales.work
     d, f = curve.displacement, curve.force
     peaks = [_retraction_peak(d, f, first, last) for first, last in curve.pulls]
     i_max, f_ad, d_ad, work = peaks[-1] if peaks else (-1, math.nan, math.nan, math.nan)
@@ -654,7 +653,7 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         # In d_K, as BrushParams(gap_map=...) and --gap-map take it back.
         data["gap_map_normalized"] = _var(("y", "x"), np.array(params.gap_map),
                                           "extra gap of each element / d_K", "1")
-    attrs = _run_attrs(params, options, labels, area_total, events=curve.events,
+    attrs = _run_attrs(params, options, labels, scales, events=curve.events,
                        steps=int(d.size), applications=applications,
                        cg_iterations=curve.cg_iterations, wall=wall,
                        title="Approach, preload and pull-off of a rough, graded pillar brush",

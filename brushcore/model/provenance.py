@@ -11,18 +11,24 @@ from importlib import metadata
 from pathlib import Path
 
 
+def _is_brushcore_project(pyproject: Path) -> bool:
+    """Whether ``pyproject`` is brushcore's own (a source tree, not another
+    project brushcore is installed in)."""
+    try:
+        project = tomllib.loads(pyproject.read_text())["project"]
+        return project.get("name") == "brushcore" and "version" in project
+    except (OSError, KeyError, TypeError, tomllib.TOMLDecodeError):
+        return False
+
+
 @lru_cache(maxsize=1)
 def version() -> str:
     """Version of the brushcore that runs: its source tree's ``pyproject.toml``
     where it runs from one (a clone on PYTHONPATH beside another installed
     copy reported that copy's), else the installed distribution's."""
     project = Path(__file__).resolve().parents[2] / "pyproject.toml"
-    try:
-        found = tomllib.loads(project.read_text())["project"]
-        if found.get("name") == "brushcore":
-            return str(found["version"])
-    except (OSError, KeyError, tomllib.TOMLDecodeError):
-        pass  # installed, not a source tree
+    if _is_brushcore_project(project):
+        return str(tomllib.loads(project.read_text())["project"]["version"])
     try:
         return metadata.version("brushcore")
     except metadata.PackageNotFoundError:
@@ -35,6 +41,10 @@ def git_commit() -> str:
     the package is modified), or "unknown"."""
     here = Path(__file__).resolve().parents[1]  # the package, not this module's folder
     try:
+        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=here,
+                             capture_output=True, text=True, timeout=10, check=True).stdout
+        if not _is_brushcore_project(Path(top.strip()) / "pyproject.toml"):
+            return "unknown"  # installed inside another project's repository: not ours
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
                              text=True, timeout=10, check=True).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--", str(here)], cwd=here,

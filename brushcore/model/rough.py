@@ -30,7 +30,7 @@ class PillarInputs:
     kbar : normalised stiffness per pillar (inf: rigid)
     compliance : h^2 / k_p per pillar [length / stress] (0: rigid)
     gap_map : extra gap per element [length], shape (n, n), or None
-    d_unit, f_unit : d_K [length] and F_K [force] of the discretised area
+    scales : F_K, d_K, W_K and A of the discretised area (`unit_scales`)
     preload : P [force]
     """
 
@@ -38,8 +38,7 @@ class PillarInputs:
     kbar: np.ndarray
     compliance: np.ndarray
     gap_map: np.ndarray | None
-    d_unit: float
-    f_unit: float
+    scales: theory.KendallScales
     preload: float
 
 
@@ -73,7 +72,7 @@ def pillar_inputs(params: BrushParams, labels: np.ndarray) -> PillarInputs:
     with np.errstate(divide="ignore"):
         compliance = np.where(np.isinf(k), 0.0, params.h**2 / k)
     gap = None if params.gap_map is None else np.asarray(params.gap_map) * d_unit
-    return PillarInputs(heights, kbar, compliance, gap, d_unit, f_unit,
+    return PillarInputs(heights, kbar, compliance, gap, scales,
                         params.preload * f_unit)
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from brushcore.numerics.platform import mkl
 from brushcore.validation import is_integer, is_real, normalise, require, require_switches
 
@@ -107,7 +109,7 @@ class SolverOptions:
         normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"))
         require(is_real(self.rtol) and self.MIN_RTOL <= self.rtol <= self.MAX_RTOL, "rtol",
                 self.rtol, f"a number in [{self.MIN_RTOL:g}, "
-                f"{f'{self.MAX_RTOL:.0e}'.replace('e-0', 'e-')}]")  # 1e-3, as typed
+                f"{np.format_float_scientific(self.MAX_RTOL, trim='-', exp_digits=1)}]")
         require(is_integer(self.max_iter) and self.max_iter >= 1, "max_iter",
                  self.max_iter, "an integer >= 1")
         require(is_real(self.tie_rtol) and 0 <= self.tie_rtol <= 1e-6, "tie_rtol",
