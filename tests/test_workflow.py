@@ -980,7 +980,9 @@ def test_the_config_schema_bounds_are_the_solvers():
      ("regular", "_ellipse2.0_0.0", "")),
     (dict(layout="regular", n_pillars=16, preload=1.0), ("regular", "", "_S0.0_P1.0_C0.0")),
     (dict(layout="regular", n_pillars=16, roughness=0.3), ("regular", "", "_S0.3_P0.0_C0.0")),
-], ids=["regular", "random", "ellipse", "preload", "rough"])
+    (dict(layout="regular", n_pillars=4, heights=np.array([0.1, 0.0, 0.0, -0.1])),
+     ("file_mine", "", "", "offsets")),
+], ids=["regular", "random", "ellipse", "preload", "rough", "given heights"])
 def test_the_command_and_the_workflow_price_a_curve_alike(case, wildcards):
     """One table of measured curves (`brushcore.model.cost`) sets the
     workflow's Slurm time and the command's note before a long run: each
@@ -993,9 +995,13 @@ def test_the_command_and_the_workflow_price_a_curve_alike(case, wildcards):
     for grid in (512, 1024):
         params = BrushParams(kbar=0.01, grid=grid, **case)
         kind = cost.curve_kind(params, SolverOptions())
-        assert common["curve_kind"](*wildcards) == kind
-        minutes = common["curve_minutes"](*wildcards, grid)
+        offsets = wildcards[3:] == ("offsets",)  # a layout_files brush given heights
+        assert common["curve_kind"](*wildcards[:3], None, offsets) == kind
+        minutes = common["curve_minutes"](*wildcards[:3], grid, None, offsets)
         assert minutes == math.ceil(5 + 3 * cost.expected_seconds(params, SolverOptions()) / 60)
-    note = cost.cost_note(BrushParams(kbar=0.01, grid=1024, **case), SolverOptions())
-    assert note.startswith("this run may take up to about ") and "1024^2" in note
+    note = cost.cost_note(BrushParams(kbar=0.01, grid=2048, **case), SolverOptions())
+    assert note.startswith("this run may take up to about ") and "measured at" in note
     assert cost.cost_note(BrushParams(kbar=0.01, grid=64, **case), SolverOptions()) == ""
+    # a bound of the host's curves: not said of a GPU run
+    gpu = BrushParams(kbar=0.01, grid=2048, backend="gpu", **case)
+    assert cost.cost_note(gpu, SolverOptions()) == ""

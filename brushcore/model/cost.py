@@ -46,8 +46,9 @@ EXACT_SLOWDOWN = 6.0
 DOUBLE_SLOWDOWN = 1.5
 #: An rtol under this runs at exact mode's cost.
 EXACT_RTOL = 1e-6
-#: The command says what a run may cost from this bound on [s].
-NOTE_FROM_S = 60.0
+#: The command says what a run may cost from this bound on [s]: a bound,
+#: not a forecast (a 4-pillar protocol at 256^2 bounded by 2 min took 1.6 s).
+NOTE_FROM_S = 300.0
 
 
 def slowest_curve_s(kind: str, grid: int) -> float:
@@ -68,25 +69,35 @@ def slowest_curve_s(kind: str, grid: int) -> float:
 
 
 def slowdown(kind: str, *, exact: bool, double: bool) -> float:
-    """Factor on a curve's time for solver settings: ``exact`` (global cascades
-    or rtol < 1e-6) and ``double`` (double-precision transforms asked for)."""
+    """Factor on a curve's time for solver settings: ``exact`` (`is_exact`)
+    and ``double`` (double-precision transforms asked for)."""
     return ((EXACT_SLOWDOWN if exact else 1.0)
             * (DOUBLE_SLOWDOWN if double and kind == "whole" else 1.0))
 
 
+def is_exact(options: SolverOptions) -> bool:
+    """Whether settings run at exact mode's cost: global cascades, or an rtol
+    under `EXACT_RTOL`."""
+    return options.cascade == "global" or options.rtol < EXACT_RTOL
+
+
+def kind_of(*, uneven: bool, mirrored: bool) -> str:
+    """The `SLOWEST_CURVE_S` kind: "rough" where contact is made element by
+    element on an approach (``uneven``: roughness, given heights or a gap
+    map, a protocol), else "mirror" for a flat regular brush of discs
+    solved on a quadrant (``mirrored``), else "whole".  The command
+    (`curve_kind`) and the workflow (from a job's wildcards) both ask it."""
+    return "rough" if uneven else "mirror" if mirrored else "whole"
+
+
 def curve_kind(params: BrushParams, options: SolverOptions,
                protocol: Sequence[object] | None = None) -> str:
-    """The `SLOWEST_CURVE_S` kind of a run: "rough" where contact is made
-    element by element (roughness, given heights, stiffnesses or gaps, a
-    protocol), "mirror" for a flat regular brush of discs solved on a
-    quadrant, else "whole"."""
-    given = any(getattr(params, name) is not None
-                for name in ("heights", "kbar_values", "gap_map"))
-    if params.roughness > 0 or given or protocol is not None:
-        return "rough"
-    folded = options.symmetry
+    """`kind_of` a run: given stiffnesses alone leave a flat brush in full
+    contact at first touch, so they do not make it rough."""
+    uneven = (params.roughness > 0 or params.heights is not None
+              or params.gap_map is not None or protocol is not None)
     regular = params.layout == "regular" and params.shape == "disc" and params.is_flat
-    return "mirror" if regular and folded else "whole"
+    return kind_of(uneven=uneven, mirrored=regular and options.symmetry)
 
 
 def expected_seconds(params: BrushParams, options: SolverOptions,
@@ -95,27 +106,31 @@ def expected_seconds(params: BrushParams, options: SolverOptions,
     settings' `slowdown` [s, one thread]: what the run may take at most on
     the development machine."""
     kind = curve_kind(params, options, protocol)
-    exact = options.cascade == "global" or options.rtol < EXACT_RTOL
     return slowest_curve_s(kind, params.grid) * slowdown(
-        kind, exact=exact, double=options.precision == "double")
+        kind, exact=is_exact(options), double=options.precision == "double")
 
 
 #: A kind in the words of the command's note.
-KIND_WORDS = {"mirror": "flat regular", "whole": "flat", "rough": "rough, given or protocol"}
+KIND_WORDS = {"mirror": "flat regular", "whole": "flat", "rough": "uneven or protocol"}
 
 
 def cost_note(params: BrushParams, options: SolverOptions,
               protocol: Sequence[object] | None = None) -> str:
-    """What a run may take, said where it may exceed `NOTE_FROM_S`; "" below."""
+    """What a run on the host may take, said where it may exceed `NOTE_FROM_S`;
+    "" below, and on a GPU, whose times the table does not hold."""
     seconds = expected_seconds(params, options, protocol)
-    if seconds < NOTE_FROM_S:
+    if seconds < NOTE_FROM_S or params.backend != "cpu":
         return ""
     kind = curve_kind(params, options, protocol)
-    span = f"{seconds / 60:.0f} min" if seconds < 5400 else f"{seconds / 3600:.1f} h"
+    hours = seconds / 3600
+    span = (f"{seconds / 60:.0f} min" if seconds < 5400 else
+            f"{hours:.1f} h" if hours < 10 else f"{hours:.0f} h")
     grids = sorted(SLOWEST_CURVE_S[kind])
     basis = (f"the slowest {KIND_WORDS[kind]} curve measured at {params.grid}^2"
              if params.grid in grids else
              f"scaled from the slowest {KIND_WORDS[kind]} curves measured at "
              f"{', '.join(f'{g}^2' for g in grids)}")
-    return (f"this run may take up to about {span} on one thread ({basis}; machines differ "
-            "2-3x)")
+    factor = seconds / slowest_curve_s(kind, params.grid)
+    settings = f", x{factor:g} for these solver settings" if factor != 1 else ""
+    return (f"this run may take up to about {span} on one thread ({basis}{settings}; "
+            "machines differ 2-3x)")

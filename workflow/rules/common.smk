@@ -13,7 +13,8 @@ import yaml
 from snakemake.logging import logger
 
 from brushcore.data.simulate_job import case_params
-from brushcore.model.cost import EXACT_RTOL, slowdown, slowest_curve_s
+from brushcore.model.cost import is_exact, kind_of, slowdown, slowest_curve_s
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
 from brushcore.model.inputs import (
     parse_protocol,
     protocol_text,
@@ -938,34 +939,30 @@ RUNTIME_SAFETY = 3
 RUNTIME_OVERHEAD_MIN = 5
 
 
-def curve_kind(layout, shape, rough, solver=None):
-    """The `SLOWEST_CURVE_S` kind of a curve from its wildcards (shape and rough
-    suffixes) and the config's solver settings (``symmetry: false`` solves a
-    regular brush on the whole grid)."""
-    if parse_rough_tag(rough).get("roughness", 0.0) > 0 or "_Q" in rough:
-        return "rough"  # an approach element by element (re-attachment in cycles)
+def curve_kind(layout, shape, rough, solver=None, offsets=False):
+    """The `SLOWEST_CURVE_S` kind of a curve (`brushcore.model.cost.kind_of`,
+    as the command's note asks it) from its wildcards (shape and rough
+    suffixes), whether its brush is given heights or a gap map
+    (``offsets``, `_given_offsets`) and the config's solver settings
+    (``symmetry: false`` solves a regular brush on the whole grid)."""
+    uneven = (
+        parse_rough_tag(rough).get("roughness", 0.0) > 0 or "_Q" in rough or offsets
+    )
     folded = (solver or {}).get("symmetry", True)
-    return (
-        "mirror"
-        if layout == "regular" and not shape and not rough and folded
-        else "whole"
+    return kind_of(
+        uneven=uneven,
+        mirrored=layout == "regular" and not shape and not rough and folded,
     )
 
 
 def solver_slowdown(solver, kind):
     """Factor on a curve's time for the config's solver settings
-    (`brushcore.model.cost.slowdown`); 1 for the defaults."""
-    solver = solver or {}
-    exact = (
-        solver.get("cascade", "local") == "global"
-        or float(solver.get("rtol", 1e-4)) < EXACT_RTOL
-    )
-    return slowdown(
-        kind, exact=exact, double=solver.get("precision", "auto") == "double"
-    )
+    (`brushcore.model.cost.slowdown`, `is_exact`); 1 for the defaults."""
+    options = SolverOptions(**(solver or {}))
+    return slowdown(kind, exact=is_exact(options), double=options.precision == "double")
 
 
-def curve_minutes(layout, shape, rough, grid, solver=None):
+def curve_minutes(layout, shape, rough, grid, solver=None, offsets=False):
     """Time limit of a curve's first attempt [min]: `RUNTIME_SAFETY` x the
     slowest measured curve of its kind and grid, times `solver_slowdown` of
     the config's ``solver`` settings, plus `RUNTIME_OVERHEAD_MIN`.
@@ -975,11 +972,19 @@ def curve_minutes(layout, shape, rough, grid, solver=None):
     with `threads`: the measurements are on one thread, and a second gains
     at most 2x.
     """
-    kind = curve_kind(layout, shape, rough, solver)
+    kind = curve_kind(layout, shape, rough, solver, offsets)
     seconds = (
         RUNTIME_SAFETY * slowest_curve_s(kind, grid) * solver_slowdown(solver, kind)
     )
     return math.ceil(RUNTIME_OVERHEAD_MIN + seconds / 60)
+
+
+def _offsets(config, layout):
+    """Whether ``layout`` is a `layout_files` brush given heights or a gap map."""
+    if not layout.startswith(FILE_LAYOUT_PREFIX):
+        return False  # a generated layout: no files to read
+    brush = file_brushes(config).get(layout)
+    return bool(brush) and _given_offsets(brush)
 
 
 def simulate_runtime(config):
@@ -995,6 +1000,7 @@ def simulate_runtime(config):
             wildcards.rough,
             int(wildcards.grid),
             config.get("solver"),
+            _offsets(config, wildcards.layout),
         )
         return minutes if cap is None else min(minutes, int(cap))
 
@@ -1009,7 +1015,14 @@ def clipped_runtimes(config):
         return None
     asked = [
         (
-            curve_minutes(layout, shape, rough, grid, config.get("solver")),
+            curve_minutes(
+                layout,
+                shape,
+                rough,
+                grid,
+                config.get("solver"),
+                _offsets(config, layout),
+            ),
             curve_file(layout, n, kbar, seed, grid, phi, rough, shape),
         )
         for layout, n, kbar, seed, grid, phi, rough, shape in sweep_cases(config)
