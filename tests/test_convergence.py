@@ -844,8 +844,9 @@ def test_grids_of_different_filling_factors_are_flagged():
 
 def test_a_study_of_curves_in_memory_is_the_study_of_their_files(refinement_curves):
     """build_sweep takes the curves simulate returns as it takes their files:
-    the same values and the same study; provenance hashes each by its
-    content digest and names it by its position."""
+    the same values and the same study; provenance names and hashes each by
+    its content digest, whatever the order; a curve that is no curve (NaN
+    F_ad) is refused as its file would be."""
     from brushcore.data.aggregate import build_sweep
     from brushcore.data.io import read_curve
 
@@ -855,9 +856,19 @@ def test_a_study_of_curves_in_memory_is_the_study_of_their_files(refinement_curv
     xr.testing.assert_identical(on_disk[q], in_memory[q])
     xr.testing.assert_identical(extrapolate_sweep(on_disk)[f"{q}_extrapolated"],
                                 extrapolate_sweep(in_memory)[f"{q}_extrapolated"])
-    assert in_memory.attrs["source_files"].splitlines()[0] == "<curve 0 in memory>"
+    from brushcore.data.aggregate import AggregationError
+    from brushcore.data.io import content_digest
+
+    names = in_memory.attrs["source_files"].splitlines()
+    assert f"<curve sha256:{content_digest(curves[0])} in memory>" in names
+    assert build_sweep(curves[::-1]).attrs["source_digest_sha256"] == \
+        in_memory.attrs["source_digest_sha256"]
     mixed = build_sweep([curves[0], *refinement_curves[1:]])
     xr.testing.assert_identical(mixed[q], on_disk[q])
+    broken = curves[0].copy()
+    broken[q] = broken[q] * np.nan
+    with pytest.raises(AggregationError, match=r"variable adhesive_force_normalized holds NaN"):
+        build_sweep([broken])
 
 
 def test_the_readmes_notebook_snippet_runs_and_says_what_it_shows(capsys):

@@ -660,8 +660,7 @@ def test_git_commit_says_dirty_for_an_edit_anywhere_in_the_package(monkeypatch) 
 
     def fake_run(args, **kwargs):
         asked.append(args)
-        out = (f"{REPO}\n" if args[1:] == ["rev-parse", "--show-toplevel"] else
-               "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/linear/cg.py\n")
+        out = "abc123\n" if args[1] == "rev-parse" else " M brushcore/numerics/linear/cg.py\n"
         return subprocess.CompletedProcess(args, 0, stdout=out, stderr="")
 
     monkeypatch.setattr(provenance.subprocess, "run", fake_run)
@@ -673,18 +672,24 @@ def test_a_brushcore_inside_another_projects_repository_records_no_commit(tmp_pa
                                                                            monkeypatch):
     """Installed in a virtual environment inside another project's git
     repository, brushcore recorded that project's commit as its own (a
-    review's finding): a repository whose top holds no brushcore pyproject
-    is not brushcore's."""
+    review's finding): only a package beside brushcore's own pyproject asks
+    git (a source tree, also one inside a larger repository)."""
     from brushcore.model import provenance
 
     (tmp_path / "pyproject.toml").write_text('[project]\nname = "myproject"\nversion = "1"\n')
+    site = tmp_path / ".venv/lib/python3.11/site-packages/brushcore/model"
 
     def fake_run(args, **kwargs):
-        out = f"{tmp_path}\n" if "--show-toplevel" in args else "857ce5c\n"
-        return subprocess.CompletedProcess(args, 0, stdout=out, stderr="")
+        return subprocess.CompletedProcess(args, 0, stdout="857ce5c\n", stderr="")
 
     monkeypatch.setattr(provenance.subprocess, "run", fake_run)
+    monkeypatch.setattr(provenance, "__file__", str(site / "provenance.py"))
     assert provenance.git_commit.__wrapped__() == "unknown"
+    tree = tmp_path / "monorepo/brushcore"  # a checkout below another repository's top
+    tree.mkdir(parents=True)
+    (tree / "pyproject.toml").write_text('[project]\nname = "brushcore"\nversion = "1"\n')
+    monkeypatch.setattr(provenance, "__file__", str(tree / "brushcore/model/provenance.py"))
+    assert provenance.git_commit.__wrapped__().startswith("857ce5c")
 
 
 def test_the_version_recorded_is_that_of_the_tree_that_runs(tmp_path, monkeypatch) -> None:
@@ -712,9 +717,11 @@ def test_the_version_recorded_is_that_of_the_tree_that_runs(tmp_path, monkeypatc
 
 
 @pytest.mark.parametrize("name,value,said", [
-    ("n_pillars", np.array([4, 4]), "its case attributes are not all numbers"),
-    ("seed", np.inf, "its case attributes are not all numbers"),
-    ("grid", None, "its attribute 'grid' is missing"),
+    ("n_pillars", np.array([4, 4]), r"its attribute n_pillars is array\(\[4, 4\]\), not an "
+                                    r"integer"),
+    ("seed", np.inf, "its attribute seed is inf, not an integer"),
+    ("grid", 32.7, "its attribute grid is 32.7, not an integer"),
+    ("grid", None, "not a brushcore curve file, missing attribute grid"),
 ])
 def test_a_curve_with_bad_case_attributes_is_refused_as_the_files_fault(name, value, said):
     """An array or a non-finite number where a case's integer stands, or an
@@ -727,6 +734,7 @@ def test_a_curve_with_bad_case_attributes_is_refused_as_the_files_fault(name, va
         del curve.attrs[name]
     else:
         curve.attrs[name] = value
-    with pytest.raises(AggregationError, match=rf"cannot aggregate 1 curve file\(s\): <curve 0 "
-                                               rf"in memory> \({said}.*Run their brushcore"):
+    with pytest.raises(AggregationError, match=rf"cannot aggregate 1 curve file\(s\): <curve "
+                                               rf"sha256:[0-9a-f]{{64}} in memory> \({said}.*"
+                                               rf"Run their brushcore"):
         build_sweep([curve])

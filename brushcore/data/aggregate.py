@@ -22,6 +22,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import math
+import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,7 +36,8 @@ from brushcore.model.curve import mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
-from brushcore.data.io import CurveFileError, content_digest, read_curve, write_dataset_atomic
+from brushcore.data.io import (CurveFileError, check_curve, content_digest, read_curve,
+                               write_dataset_atomic)
 from brushcore.validation import brief
 
 #: Order of the layout coordinate (others follow, sorted).
@@ -178,17 +180,27 @@ def case_key(curve: xr.Dataset) -> CaseKey:
         the file's fault, which aggregation reports as such.
     """
     a = curve.attrs
-    try:
-        layout = curve_layout(a)  # a brush of one's own by its file, as the workflow names it
-        shape = shape_label(str(a.get("shape", "disc")), float(a.get("aspect", 1.0)),
-                            float(a.get("orientation", 0.0)))  # files without a shape: discs
-        return CaseKey(layout, int(a["n_pillars"]), float(a["kbar"]), int(a["seed"]),
-                       int(a["grid"]), *(float(a.get(name, 0.0)) for name in ROUGH_DIMS),
-                       shape=shape)
-    except KeyError as exc:
-        raise CurveFileError(f"its attribute {exc} is missing") from None
-    except (ValueError, TypeError, OverflowError) as exc:
-        raise CurveFileError(f"its case attributes are not all numbers: {exc}") from None
+
+    def number(name: str, default: float | None = None, integer: bool = False) -> float:
+        value = a.get(name, default)
+        if value is None:
+            raise CurveFileError(f"its attribute {name!r} is missing")
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            x = math.nan
+        # kbar may be inf (rigid); an integer must be one (32.7 was cut to 32)
+        if math.isnan(x) or integer and not (math.isfinite(x) and x.is_integer()):
+            raise CurveFileError(f"its attribute {name} is {value!r}, not "
+                                 + ("an integer" if integer else "a number"))
+        return int(x) if integer else x
+
+    layout = curve_layout(a)  # a brush of one's own by its file, as the workflow names it
+    shape = shape_label(str(a.get("shape", "disc")), number("aspect", 1.0),
+                        number("orientation", 0.0))  # files without a shape: discs
+    return CaseKey(layout, number("n_pillars", integer=True), number("kbar"),
+                   number("seed", integer=True), number("grid", integer=True),
+                   *(number(name, 0.0) for name in ROUGH_DIMS), shape=shape)
 
 
 def file_sha256(path: str | Path) -> str:
@@ -200,8 +212,10 @@ def file_sha256(path: str | Path) -> str:
     return digest.hexdigest()
 
 
-#: How a curve handed in as a Dataset is named in messages and provenance.
-IN_MEMORY = "<curve {} in memory>"
+#: How a curve handed in as a Dataset is named in messages and provenance: by
+#: its content digest (`io.content_digest`), whatever its place in the list.
+IN_MEMORY = "<curve sha256:{} in memory>"
+_IN_MEMORY = re.compile(r"<curve sha256:([0-9a-f]{64}) in memory>")
 
 
 def load_curves(paths: Iterable[str | Path | xr.Dataset],
@@ -212,8 +226,8 @@ def load_curves(paths: Iterable[str | Path | xr.Dataset],
     Parameters
     ----------
     paths : curve files, or curves as `brushcore.simulate` returns them
-        (named `IN_MEMORY` with their position; their provenance hash is
-        `io.content_digest`'s, a file's that of its bytes)
+        (named `IN_MEMORY` by their content digest, which provenance takes
+        as their hash, a file's being that of its bytes; checked as a file is)
     expected : per path, the case and phi it must hold (the workflow's,
         from the file's name), or None to take each file's own
 
@@ -231,9 +245,12 @@ def load_curves(paths: Iterable[str | Path | xr.Dataset],
         raise ValueError(f"{len(expected)} expected cases for {len(paths)} curve files")
     unreadable = []
     for i, raw in enumerate(paths):
-        path = Path(IN_MEMORY.format(i) if isinstance(raw, xr.Dataset) else raw)
+        in_memory = isinstance(raw, xr.Dataset)
+        path = Path(IN_MEMORY.format(content_digest(raw)) if in_memory else raw)
         try:
-            curve = raw if isinstance(raw, xr.Dataset) else read_curve(path)
+            if in_memory:
+                check_curve(raw, str(path), digest=False)
+            curve = raw if in_memory else read_curve(path)
             key = case_key(curve)
         # the file's fault (unreadable, an attribute missing or not a number), not a
         # bug here, which would otherwise send the user to delete good curves
@@ -717,9 +734,8 @@ def _provenance(
     sources = sorted(((str(path), curve) for path, curve in curves.values()),
                      key=lambda source: source[0])
     files = [name for name, _ in sources]
-    in_memory = IN_MEMORY.partition("{}")
-    hashes = [content_digest(curve) if name.startswith(in_memory[0])
-              and name.endswith(in_memory[2]) else file_sha256(name) for name, curve in sources]
+    hashes = [digest.group(1) if (digest := _IN_MEMORY.fullmatch(name)) else file_sha256(name)
+              for name, _ in sources]
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
     commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
     versions = sorted({str(c.attrs.get("brushcore_version", "unknown")) for _, c in curves.values()})

@@ -181,9 +181,12 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
-    """A GitHub-flavoured Markdown table of text cells, one line a row."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    """A GitHub-flavoured Markdown table of text cells, one line a row (a cell's
+    own '|' escaped)."""
+    def line(cells: Sequence[str]) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+    lines = [line(header), "|" + "---|" * len(header), *map(line, rows)]
     return "\n".join(lines) + "\n"
 
 
@@ -239,11 +242,27 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
             ds = ds.load()
     except Exception as exc:  # netCDF4 raises OSError, RuntimeError, ValueError...
         raise CurveFileError(f"{path}: cannot be read as a netCDF curve file ({exc})") from exc
+    check_curve(ds, str(path))
+    return ds
+
+
+def check_curve(ds: xr.Dataset, label: str, digest: bool = True) -> None:
+    """Check that ``ds`` (a file's, or a curve in memory, called ``label``) is
+    a complete curve: `read_curve`'s checks but the opening; ``digest``
+    False leaves out the stored digest (a curve in memory may have been
+    changed on purpose since it was read).
+
+    Raises
+    ------
+    CurveFileError
+        Naming it, as `read_curve`.
+    """
+    path = label
     missing = [v for v in REQUIRED_VARS if v not in ds.variables]
     missing += [f"attribute {a}" for a in REQUIRED_ATTRS if a not in ds.attrs]
     if missing:
         raise CurveFileError(f"{path}: not a brushcore curve file, missing {', '.join(missing)}")
-    stored = ds.attrs.get(DIGEST_ATTR)
+    stored = ds.attrs.get(DIGEST_ATTR) if digest else None
     if stored is not None and str(stored) != content_digest(ds):
         raise CurveFileError(f"{path}: corrupt, its values do not match the {DIGEST_ATTR} "
                              "written with them")
@@ -256,4 +275,3 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
             continue
         if not np.all(np.isfinite(ds[name].values)):
             raise CurveFileError(f"{path}: variable {name} holds NaN or inf")
-    return ds

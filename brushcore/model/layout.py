@@ -429,7 +429,7 @@ def _checked_labels(params: BrushParams) -> np.ndarray:
         # coarse for their gap: counted, as for random discs, not refused.
         table = read_pillar_table(params.layout_file)
         labels = table_labels(table, params.grid)
-        _check_file_matches(params, table.n_pillars, table.phi)
+        _check_file_matches(params, table.n_pillars, table.phi, "pi sum r^2")
         check_discretisation(params, labels)
         _check_pillar_widths(params, labels, "grid", params.grid, "a finer grid")
         return labels
@@ -456,12 +456,13 @@ def _checked_labels(params: BrushParams) -> np.ndarray:
     return labels
 
 
-def _check_file_matches(params: BrushParams, n_file: int, phi_file: float) -> None:
+def _check_file_matches(params: BrushParams, n_file: int, phi_file: float,
+                        phi_meaning: str = "") -> None:
     """The file's pillar count and filling factor (a map's realised one, a
     table's pi sum r^2) must be the parameters' own (`brushcore.file_params`
     sets them)."""
     check_file_values(params.layout_file, {"n_pillars": params.n_pillars, "phi": params.phi},
-                      {"n_pillars": n_file, "phi": phi_file})
+                      {"n_pillars": n_file, "phi": phi_file}, phi_meaning)
 
 
 def table_labels(table: PillarTable, grid: int) -> np.ndarray:

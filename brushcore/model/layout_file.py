@@ -312,8 +312,8 @@ def check_file_values(path: str | Path, given: Mapping[str, object],
         the file's phi is reckoned, where given).
     """
     for name in ("n_pillars", "grid", "phi"):
-        if name not in given or name not in found:
-            continue
+        if given.get(name) is None or name not in found:
+            continue  # not given (None: as not given; BrushParams names a None it gets)
         value, own = given[name], found[name]
         differs = abs(value / own - 1.0) > FILE_PHI_RTOL if name == "phi" else value != own
         if differs:

@@ -40,11 +40,9 @@ def git_commit() -> str:
     """Commit of the source tree brushcore runs from ("+dirty" if anything in
     the package is modified), or "unknown"."""
     here = Path(__file__).resolve().parents[1]  # the package, not this module's folder
+    if not _is_brushcore_project(here.parent / "pyproject.toml"):
+        return "unknown"  # installed (in site-packages, maybe inside another repository)
     try:
-        top = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=here,
-                             capture_output=True, text=True, timeout=10, check=True).stdout
-        if not _is_brushcore_project(Path(top.strip()) / "pyproject.toml"):
-            return "unknown"  # installed inside another project's repository: not ours
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
                              text=True, timeout=10, check=True).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--", str(here)], cwd=here,
