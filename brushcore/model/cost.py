@@ -24,8 +24,8 @@ from brushcore.numerics.options import SolverOptions
 #: grid; 512: the paper sweep's slowest, 1.6 min; 1024: random 64 at k 1e-6
 #: 666 s (hexagonal 8 x 8 622 s); 2048: random 1620 at k 1e-5, about 130 min
 #: on two threads (a straight line through its 11.6 % detached in 15 min;
-#: its applications alone about 95 min).  "rough": roughness > 0 or given
-#: heights, stiffnesses or gaps, or a protocol, contact made element by
+#: its applications alone about 95 min).  "rough": roughness > 0, given
+#: heights or a gap map, or a protocol: contact made element by
 #: element on an approach; 256: 116.5 s (config/rough.yaml); 512: the rough
 #: 8 x 8 brush 416.5 s; 1024: about 6 h (estimated from the rate of its
 #: first 12 min, not run).
