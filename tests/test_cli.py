@@ -624,3 +624,26 @@ def test_input_files_of_an_unknown_key_are_refused_as_bad_input(tmp_path) -> Non
                                              r"key; kbar_file gives kbar_values\): allowed keys "
                                              r"among \['gap_map', 'heights'"):
         with_input_files(BrushParams("regular", 4, 0.01, 48), {"kbar_values": "k.txt"})
+
+
+def test_a_run_that_may_take_long_says_so_before_it_starts(tmp_path, capsys, monkeypatch):
+    """After the discretisation line and before any solve, a run whose bound
+    exceeds five minutes says what it may take (random 64 at 1024^2: the
+    slowest flat curve measured there, 670 s); a small run says nothing."""
+    import brushcore.model.curve as curve
+    from brushcore.cli import main
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt  # the line is said: no need to solve
+
+    monkeypatch.setattr(curve, "simulate", interrupted)
+    out = tmp_path / "c.nc"
+    base = ["simulate", "--layout", "random", "--pillars", "64", "--kbar", "1e-4",
+            "--quiet", "--out", str(out)]
+    assert main([*base, "--grid", "1024"]) == 130
+    err = capsys.readouterr().err
+    assert ("this run may take up to about 11 min on one thread (the slowest flat curve "
+            "measured at 1024^2; machines differ 2-3x)") in err, err
+    assert err.index("grid 1024:") < err.index("this run may take") and not out.exists()
+    assert main([*base, "--grid", "256"]) == 130
+    assert "this run may take" not in capsys.readouterr().err
