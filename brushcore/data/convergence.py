@@ -843,8 +843,9 @@ def _provenance(sweep: xr.Dataset) -> dict[str, object]:
     return out
 
 
-#: Grid numbers of a study, stored as integers (NaN where none ran: the fill).
-GRID_SUFFIXES = ("finest_grid",)
+#: A study's grid numbers and counts, stored as integers (NaN where none ran:
+#: the fill; ``{q}_n_grids`` 0 there).
+INTEGER_SUFFIXES = ("finest_grid", "n_grids")
 
 
 def _ran(conv: xr.Dataset, name: str) -> xr.DataArray | None:
@@ -875,7 +876,7 @@ def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
         if ran is not None and set(var.dims) >= set(ran.dims):
             out[name] = var.where(ran).assign_attrs(var.attrs)
             enc[name] = {"dtype": "int8", "_FillValue": np.int8(-1)}
-        elif name.endswith(GRID_SUFFIXES) or name.endswith("n_grids") \
-                or name in COUNT_VARIABLES:  # one type however the study was run
+        elif name.endswith(INTEGER_SUFFIXES) or name in COUNT_VARIABLES:
+            # one type however the study was run (from a file's sweep or in memory)
             enc[name] = {"dtype": "int64", "_FillValue": np.int64(-1)}
     write_dataset_atomic(out, path, enc)

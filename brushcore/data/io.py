@@ -257,14 +257,13 @@ def check_curve(ds: xr.Dataset, label: str, digest: bool = True) -> None:
     CurveFileError
         Naming it, as `read_curve`.
     """
-    path = label
     missing = [v for v in REQUIRED_VARS if v not in ds.variables]
     missing += [f"attribute {a}" for a in REQUIRED_ATTRS if a not in ds.attrs]
     if missing:
-        raise CurveFileError(f"{path}: not a brushcore curve file, missing {', '.join(missing)}")
+        raise CurveFileError(f"{label}: not a brushcore curve file, missing {', '.join(missing)}")
     stored = ds.attrs.get(DIGEST_ATTR) if digest else None
     if stored is not None and str(stored) != content_digest(ds):
-        raise CurveFileError(f"{path}: corrupt, its values do not match the {DIGEST_ATTR} "
+        raise CurveFileError(f"{label}: corrupt, its values do not match the {DIGEST_ATTR} "
                              "written with them")
     # A protocol that never retracts, or whose retraction stays compressive,
     # has no adhesive force (NaN) and may carry NaN in the other results.
@@ -274,4 +273,4 @@ def check_curve(ds: xr.Dataset, label: str, digest: bool = True) -> None:
         if never_pulled and name in PULL_OFF_VARS:
             continue
         if not np.all(np.isfinite(ds[name].values)):
-            raise CurveFileError(f"{path}: variable {name} holds NaN or inf")
+            raise CurveFileError(f"{label}: variable {name} holds NaN or inf")

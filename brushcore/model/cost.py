@@ -100,14 +100,22 @@ def curve_kind(params: BrushParams, options: SolverOptions,
     return kind_of(uneven=uneven, mirrored=regular and options.symmetry)
 
 
+def _priced(params: BrushParams, options: SolverOptions,
+            protocol: Sequence[object] | None) -> tuple[str, float, float]:
+    """The run's kind, its slowest measured curve on the grid [s] and the
+    settings' `slowdown`."""
+    kind = curve_kind(params, options, protocol)
+    return kind, slowest_curve_s(kind, params.grid), slowdown(
+        kind, exact=is_exact(options), double=options.precision == "double")
+
+
 def expected_seconds(params: BrushParams, options: SolverOptions,
                      protocol: Sequence[object] | None = None) -> float:
     """The slowest measured curve of the run's kind on its grid, times the
     settings' `slowdown` [s, one thread]: what the run may take at most on
     the development machine."""
-    kind = curve_kind(params, options, protocol)
-    return slowest_curve_s(kind, params.grid) * slowdown(
-        kind, exact=is_exact(options), double=options.precision == "double")
+    _, slowest, factor = _priced(params, options, protocol)
+    return slowest * factor
 
 
 #: A kind in the words of the command's note.
@@ -118,10 +126,10 @@ def cost_note(params: BrushParams, options: SolverOptions,
               protocol: Sequence[object] | None = None) -> str:
     """What a run on the host may take, said where it may exceed `NOTE_FROM_S`;
     "" below, and on a GPU, whose times the table does not hold."""
-    seconds = expected_seconds(params, options, protocol)
+    kind, slowest, factor = _priced(params, options, protocol)
+    seconds = slowest * factor
     if seconds < NOTE_FROM_S or params.backend != "cpu":
         return ""
-    kind = curve_kind(params, options, protocol)
     hours = seconds / 3600
     span = (f"{seconds / 60:.0f} min" if seconds < 5400 else
             f"{hours:.1f} h" if hours < 10 else f"{hours:.0f} h")
@@ -130,7 +138,6 @@ def cost_note(params: BrushParams, options: SolverOptions,
              if params.grid in grids else
              f"scaled from the slowest {KIND_WORDS[kind]} curves measured at "
              f"{', '.join(f'{g}^2' for g in grids)}")
-    factor = seconds / slowest_curve_s(kind, params.grid)
     settings = f", x{factor:g} for these solver settings" if factor != 1 else ""
     return (f"this run may take up to about {span} on one thread ({basis}{settings}; "
             "machines differ 2-3x)")

@@ -366,17 +366,15 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     path = Path(path)
     if path.suffix.lower() != SUFFIX:
         path = path.with_name(path.name + SUFFIX)
-    if table.aspects is None:
-        lines = ["# pillar table: one disc a line, in label order; x, y, radius in units of L",
-                 ", ".join(COLUMNS)]
-        lines += [f"{float(x)!r}, {float(y)!r}, {float(r)!r}"
-                  for (y, x), r in zip(table.centres, table.radii)]
-    else:
-        lines = ["# pillar table: one pillar a line, in label order; x, y, radius in units "
-                 "of L (an ellipse's equal-area radius), orientation in degrees",
-                 ", ".join(COLUMNS + SHAPE_COLUMNS)]
-        lines += [f"{float(x)!r}, {float(y)!r}, {float(r)!r}, {float(a)!r}, {float(o)!r}"
-                  for (y, x), r, a, o in zip(table.centres, table.radii, table.aspects,
-                                             table.orientations)]
+    shaped = table.aspects is not None
+    columns = [table.centres[:, 1], table.centres[:, 0], table.radii]
+    lines = ["# pillar table: one disc a line, in label order; x, y, radius in units of L"
+             if not shaped else
+             "# pillar table: one pillar a line, in label order; x, y, radius in units "
+             "of L (an ellipse's equal-area radius), orientation in degrees",
+             ", ".join(COLUMNS + (SHAPE_COLUMNS if shaped else ()))]
+    if shaped:
+        columns += [table.aspects, table.orientations]
+    lines += [", ".join(repr(float(value)) for value in row) for row in zip(*columns)]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path

@@ -11,14 +11,14 @@ from importlib import metadata
 from pathlib import Path
 
 
-def _is_brushcore_project(pyproject: Path) -> bool:
-    """Whether ``pyproject`` is brushcore's own (a source tree, not another
-    project brushcore is installed in)."""
+def _brushcore_project(pyproject: Path) -> dict | None:
+    """The ``[project]`` table of ``pyproject`` where it is brushcore's own (a
+    source tree, not another project brushcore is installed in), else None."""
     try:
         project = tomllib.loads(pyproject.read_text())["project"]
-        return project.get("name") == "brushcore" and "version" in project
     except (OSError, KeyError, TypeError, tomllib.TOMLDecodeError):
-        return False
+        return None
+    return project if project.get("name") == "brushcore" and "version" in project else None
 
 
 @lru_cache(maxsize=1)
@@ -26,9 +26,9 @@ def version() -> str:
     """Version of the brushcore that runs: its source tree's ``pyproject.toml``
     where it runs from one (a clone on PYTHONPATH beside another installed
     copy reported that copy's), else the installed distribution's."""
-    project = Path(__file__).resolve().parents[2] / "pyproject.toml"
-    if _is_brushcore_project(project):
-        return str(tomllib.loads(project.read_text())["project"]["version"])
+    project = _brushcore_project(Path(__file__).resolve().parents[2] / "pyproject.toml")
+    if project is not None:
+        return str(project["version"])
     try:
         return metadata.version("brushcore")
     except metadata.PackageNotFoundError:
@@ -40,7 +40,7 @@ def git_commit() -> str:
     """Commit of the source tree brushcore runs from ("+dirty" if anything in
     the package is modified), or "unknown"."""
     here = Path(__file__).resolve().parents[1]  # the package, not this module's folder
-    if not _is_brushcore_project(here.parent / "pyproject.toml"):
+    if _brushcore_project(here.parent / "pyproject.toml") is None:
         return "unknown"  # installed (in site-packages, maybe inside another repository)
     try:
         sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
