@@ -14,7 +14,10 @@ min_version("9.0")
 configfile: "config/config.yaml"
 
 
-include: "workflow/rules/common.smk"
+include: "workflow/rules/config_checks.smk"
+include: "workflow/rules/cases.smk"
+include: "workflow/rules/resources.smk"
+include: "workflow/rules/targets.smk"
 include: "workflow/rules/layout_files.smk"
 
 

@@ -25,6 +25,9 @@ xr = pytest.importorskip("xarray")
 pytest.importorskip("snakemake")
 
 REPO = Path(__file__).resolve().parents[1]
+#: The rule files of plain Python helpers, in the Snakefile's order.
+RULE_HELPERS = ("config_checks.smk", "cases.smk", "resources.smk", "targets.smk",
+                "layout_files.smk")
 SNAKEMAKE = [sys.executable, "-m", "snakemake"]
 FIGURES = [f"fig{n}.{ext}" for n in (5, 6, 7, 8) for ext in ("png", "pdf")]
 CASE_DIMS = ("layout", "n_pillars", "kbar", "seed")
@@ -758,10 +761,10 @@ def test_time_requests_follow_the_solver_settings() -> None:
 
 
 def _common_rules() -> dict:
-    """The functions of workflow/rules/common.smk and layout_files.smk (plain
-    Python), as the Snakefile sees them (one scope, in the Snakefile's order)."""
+    """The functions of the workflow's rule files (plain Python), as the
+    Snakefile sees them (one scope, in the Snakefile's order)."""
     scope: dict = {}
-    for name in ("common.smk", "layout_files.smk"):
+    for name in RULE_HELPERS:
         path = REPO / "workflow/rules" / name
         exec(compile(path.read_text(), str(path), "exec"), scope)  # noqa: S102 - our own rules
     return scope

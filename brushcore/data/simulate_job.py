@@ -71,7 +71,7 @@ def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, 
                 shape: Mapping[str, object] | None = None, allow_coarse: bool = False,
                 backend: str = "cpu") -> BrushParams:
     """The parameters of one case of a sweep: what its job runs and what the
-    plan checks before any job starts (`workflow/rules/common.smk`), one
+    plan checks before any job starts (`workflow/rules/config_checks.smk`), one
     construction so that the two cannot drift apart.
 
     Parameters

@@ -1,6 +1,6 @@
 """What a curve costs: the slowest curve measured per kind and grid.
 
-One table serves the workflow's Slurm time limits (`workflow/rules/common.smk`
+One table serves the workflow's Slurm time limits (`workflow/rules/resources.smk`
 asks for `RUNTIME_SAFETY` x it) and the command's word before a long run
 (`cost_note`).  Measured on one thread of the 2-core AMD EPYC development
 machine (README, "Speed and memory"; docs/SPEED.md); other machines run

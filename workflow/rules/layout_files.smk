@@ -2,8 +2,8 @@
 made, its heights, stiffness factors and gap map: read and refused at
 plan time, the cases they run, and what their simulate jobs take.
 
-Included by the Snakefile after common.smk, whose helpers (ConfigError,
-`_rough_tags`, `parse_rough_tag`) these use.
+Included by the Snakefile after the helpers it uses (ConfigError of
+config_checks.smk, `_rough_tags` and `parse_rough_tag` of cases.smk).
 """
 
 import functools
