@@ -178,6 +178,16 @@ def test_batched_downdate_matches_the_per_pillar_one():
     np.testing.assert_allclose(strict.to_host(dev.inv), cpu.inv, rtol=0, atol=1e-12 * np.abs(cpu.inv).max())
     np.testing.assert_allclose(strict.to_host(got), want, rtol=1e-10, atol=1e-12 * np.abs(want).max())
     assert not strict.to_host(dev.inv)[9].any() and dev.respond  # strict keeps the warm start
+    # re-attaching (a protocol's approach): blocks inverted afresh on the device
+    # against the host's bordered ones, coarse vectors and sums of |G| alike
+    back = np.concatenate([gone[:2], gone[-5:]])
+    cpu.attach(back)
+    dev.attach(strict.asarray(back))
+    scale = np.abs(cpu.inv).max()
+    np.testing.assert_allclose(strict.to_host(dev.inv), cpu.inv, rtol=0, atol=1e-11 * scale)
+    np.testing.assert_allclose(strict.to_host(dev._z), cpu._z, rtol=0, atol=1e-10 * scale)
+    np.testing.assert_allclose(strict.to_host(dev._reach), np.abs(cpu.inv).sum(axis=2), rtol=0,
+                               atol=1e-10 * scale)  # the host's is computed where read
 
 
 def test_device_setup_computes_the_hosts_numbers():
@@ -203,7 +213,7 @@ def test_device_setup_computes_the_hosts_numbers():
     np.testing.assert_allclose(dev._table, cpu._table, rtol=1e-14, atol=0)
     for p in range(12):
         k = int(np.count_nonzero(pillar_of == p))
-        np.testing.assert_allclose(strict.to_host(dev._device_block(p, k)),
+        np.testing.assert_allclose(strict.to_host(dev._device_block(p, np.arange(k))),
                                    cpu._block(p, np.arange(k)), rtol=1e-14, atol=0)
 
 
@@ -279,6 +289,11 @@ GPU_CASES = {
     "16x16 kbar 0.455 at 256": BrushParams("regular", 256, 0.455, 256),
     "16x16 kbar 0.455 at 512": BrushParams("regular", 256, 0.455, 512),
     "rigid 8x8 at 256": BrushParams("regular", 64, math.inf, 256),
+    # the engine's other paths on a card: a whole-grid random brush with its
+    # far-field warm start, and the protocol engine (blocks re-inverted on attach)
+    "random 64 kbar 1e-4 at 256": BrushParams("random", 64, 1e-4, 256, seed=1),
+    "rough 4x4 preloaded at 128": BrushParams("regular", 16, 0.455, 128, roughness=0.5,
+                                              preload=1.0, seed=2),
 }
 
 
@@ -296,9 +311,17 @@ def test_gpu_matches_cpu(name):
     assert got.attrs["backend"] == "gpu" and got.attrs["device_memory_bytes"] > 0
 
 
+def _cupy13_bincount(x, weights=None, minlength=0):
+    """`cupy.bincount` as CuPy 13 has it: an empty ``x`` raises (cupy#8116),
+    where NumPy returns zeros."""
+    if x.size == 0:
+        raise ValueError("zero-size array to reduction operation maximum which has no identity")
+    return np.bincount(x, weights=weights, minlength=minlength)
+
+
 def _fake_gpu() -> backend_module.Backend:
     """The gpu backend's wiring with NumPy standing in for CuPy (array_api_compat's
-    NumPy view as the namespace, a fake card of 8 GiB)."""
+    NumPy view as the namespace, a fake card of 8 GiB, CuPy 13's bincount)."""
     compat = pytest.importorskip("array_api_compat.numpy")
     device = types.SimpleNamespace(id=0, synchronize=lambda: None)
     runtime = types.SimpleNamespace(memGetInfo=lambda: (6 * 2**30, 8 * 2**30),
@@ -306,7 +329,7 @@ def _fake_gpu() -> backend_module.Backend:
     pool = types.SimpleNamespace(total_bytes=lambda: 0, used_bytes=lambda: 0)
     native = types.SimpleNamespace(
         ndarray=np.ndarray, asnumpy=np.asarray, flatnonzero=np.flatnonzero,
-        bincount=np.bincount, get_default_memory_pool=lambda: pool,
+        bincount=_cupy13_bincount, get_default_memory_pool=lambda: pool,
         cuda=types.SimpleNamespace(runtime=runtime, Device=lambda: device))
     return backend_module.Backend("gpu", compat, native)
 

@@ -71,7 +71,7 @@ class DeviceBlocks(BlockInverse):
         self.inv = xp.zeros((n_pillars, self.m, self.m), dtype=xp.float64)
         for group in self._shape_groups(counts):
             k = int(counts[group[0]])
-            block = xp.linalg.inv(self._device_block(group[0], k))
+            block = xp.linalg.inv(self._device_block(group[0], np.arange(k)))
             for p in group:  # one inversion per shape, on the device
                 self.inv[p, :k, :k] = block
         self._pos_host = self.pos
@@ -96,8 +96,15 @@ class DeviceBlocks(BlockInverse):
         if self.interacting:
             r, r_near = self._interaction(counts)
             self._r, self._r_near = be.asarray(r), be.asarray(r_near)
-            self._z = xp.sum(self.inv, axis=2)
-            self._reach = xp.sum(xp.abs(self.inv), axis=2)
+            self._z = xp.zeros((n_pillars, self.m), dtype=xp.float64)
+            self._reach = xp.zeros((n_pillars, self.m), dtype=xp.float64)
+            # a chunk at a time: abs() of the whole stack would double the peak
+            # that `fits_device` budgets for
+            for chunk in self._chunks(np.arange(n_pillars)):
+                p = be.asarray(chunk.astype(np.int64))
+                g = xp.take(self.inv, p, axis=0)
+                be.put(self._z, p, xp.sum(g, axis=2))
+                be.put(self._reach, p, xp.sum(xp.abs(g), axis=2))
             self.coupling = float(xp.max(self._r @ xp.sum(self._z, axis=1)))
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
         if self.coarse:
@@ -118,12 +125,13 @@ class DeviceBlocks(BlockInverse):
         self._table_device = love_coefficient(d[:, None], d[None, :], h, e_star, xp)
         return be.to_host(self._table_device)
 
-    def _device_block(self, p: int, k: int) -> Any:
-        """`BlockInverse._block` over pillar p's first k slots, gathered on the
+    def _device_block(self, p: int, slots: np.ndarray) -> Any:
+        """`BlockInverse._block` over pillar p's ``slots``, gathered on the
         device from its copy of the table (random brushes have a shape per
         pillar: m^2 host lookups each)."""
         xp, be = self.backend.xp, self.backend
-        iy, ix = be.asarray(self._iyy[p, :k]), be.asarray(self._ixx[p, :k])
+        iy, ix = be.asarray(self._iyy[p, slots]), be.asarray(self._ixx[p, slots])
+        k = slots.size
         at = (xp.abs(iy[:, None] - iy[None, :]) * self._table_device.shape[1]
               + xp.abs(ix[:, None] - ix[None, :]))
         table = xp.reshape(self._table_device, (-1,))
@@ -273,16 +281,20 @@ class DeviceBlocks(BlockInverse):
         return xp.reshape(p[:, None] * m + xp.arange(m, dtype=xp.int64)[None, :], (-1,))
 
     def attach(self, elements: Any) -> None:
-        """See `BlockInverse.attach`: touched blocks inverted afresh (on the host,
-        from host geometry) and copied to the device."""
+        """See `BlockInverse.attach`: touched blocks gathered and inverted afresh
+        on the device (O(m^3) there, where a host core took seconds a pillar
+        at m of thousands; the CPU class borders its inverse instead)."""
+        xp, be, m = self.backend.xp, self.backend, self.m
         pil, slot = self._pillars(elements)
         self._live[pil, slot] = True
         touched = np.unique(pil)
         for p in touched:
             live = np.flatnonzero(self._live[p])
-            g = np.zeros((self.m, self.m))
-            g[np.ix_(live, live)] = np.linalg.inv(self._block(p, live))
-            self.inv[int(p), :, :] = self.backend.asarray(g)
+            flat = xp.zeros(m * m, dtype=xp.float64)
+            at = (live[:, None] * m + live[None, :]).reshape(-1)
+            block = xp.linalg.inv(self._device_block(int(p), live))
+            be.put(flat, be.asarray(at.astype(np.int64)), xp.reshape(block, (-1,)))
+            self.inv[int(p), :, :] = xp.reshape(flat, (m, m))
         self._remaining += np.bincount(pil, minlength=self._remaining.size)
         for chunk in self._chunks(touched):
             p = self.backend.asarray(chunk.astype(np.int64))

@@ -102,6 +102,11 @@ class Backend:
             w = None if weights is None else weights._array
             out = np.bincount(index._array, weights=w, minlength=minlength)
             return self.xp.asarray(out)
+        if self.name == "gpu" and index.shape[0] == 0:
+            # CuPy before cupy#9951 (2026) raises on an empty index where NumPy
+            # gives zeros, and a pull-off's last detachment empties it.
+            dtype = self.xp.int64 if weights is None else weights.dtype
+            return self.xp.zeros(minlength, dtype=dtype)
         return self.native.bincount(index, weights=weights, minlength=minlength)
 
     def put(self, target: Any, index: Any, values: Any) -> None:
