@@ -69,10 +69,15 @@ rule all:
         sweep_targets(config),
 
 
-# Once the executor is known (not while the Snakefile is read): a local run
-# with backend gpu needs CuPy and a card here, a cluster's jobs on their node.
+# Once the executor and the groups are known (not while the Snakefile is read):
+# a local run with backend gpu needs CuPy and a card here, a cluster's jobs on
+# their node; a cluster's bundles of fine-grid curves are warned of (not in
+# a dry run).
 onstart:
     check_local_backend(config, workflow.local_exec)
+    groups = {} if workflow.local_exec else workflow.group_settings.group_components
+    if bundled := bundled_fine_grids(config, groups):
+        logger.warning(bundled)
 
 
 # Figures and tables an earlier sweep made that this config does not: they stay

@@ -706,6 +706,22 @@ def test_a_retry_asks_for_twice_the_time_and_the_same_memory() -> None:
     assert list(inspect.signature(common["simulate_mem_mb"]).parameters) == ["wildcards"]
 
 
+def test_bundles_of_fine_grid_curves_are_warned_of() -> None:
+    """A bundle fails as a whole and Snakemake removes the curves it finished:
+    `--group-components sims=N` over grids finer than 512 is warned of at the
+    run's start, naming the grids; sims=1 or coarse grids only, not."""
+    common = _common_rules()
+    config = {"fig5": {"kbar": [], "layout": "regular", "n_pillars": 256},
+              "regular": [16], "hexagonal": [], "random": [], "grid": [256, 1024, 2048],
+              "grid_by_n": [], "roughness": [0.0], "preload": [0.0], "kbar_spread": [0.0],
+              "shape": ["disc"], "layout_files": [], "kbar": [0.01], "phi": 0.5, "seeds": 1}
+    warn = common["bundled_fine_grids"]
+    text = warn(config, {"sims": 8})
+    assert text.startswith("--group-components sims=8 bundles curves on grids [1024, 2048]"), text
+    assert warn(config, {"sims": 1}) is None and warn(config, {}) is None
+    assert warn(config | {"grid": [256, 512]}, {"sims": 8}) is None
+
+
 def test_snapshots_are_kept_for_fig5_only_when_it_is_drawn() -> None:
     """sweep.nc keeps the Fig. 5 brush's contact snapshots beside any others
     small enough; with `fig5: {kbar: []}` (no Fig. 5) none is asked for."""

@@ -168,3 +168,29 @@ def clipped_runtimes(config):
         f"{len(asked)} simulations (the largest: {minutes} min for {name}); a curve "
         f"that needs longer is killed at {cap} min (its retry too) and writes nothing"
     )
+
+
+#: Finest grid whose curves may share a Slurm job (README, "How jobs are bundled").
+BUNDLE_MAX_GRID = 512
+
+
+def bundled_fine_grids(config, components):
+    """The plan-time warning where `--group-components sims=N` (N > 1) bundles
+    curves finer than BUNDLE_MAX_GRID, or None: a bundle fails as a whole, and
+    Snakemake then removes the curves that had finished inside it."""
+    size = int(components.get("sims", 1))
+    if size <= 1:
+        return None
+    fine = sorted(
+        {int(grid) for *_, grid, _, _, _ in sweep_cases(config)}
+        - set(range(BUNDLE_MAX_GRID + 1))
+    )
+    if not fine:
+        return None
+    return (
+        f"--group-components sims={size} bundles curves on grids {fine}: when one member of "
+        "a bundle fails (a time or memory limit), Snakemake removes every curve the bundle "
+        "finished and its retry runs them all again, hours each at these grids; bundle "
+        f"only grids up to {BUNDLE_MAX_GRID} (run the finer ones in a sweep of their own "
+        "with sims=1)"
+    )
