@@ -233,7 +233,7 @@ PRECISION_BAND = 3e-5
 
 
 def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
-             band: float = 0.0):
+             band: float = 0.0, cut: bool = True):
     """Condition on CG's tolerance: no decision that the error could flip.
 
     At the tolerance CG's error is still ~rtol of the largest stress, and a
@@ -250,13 +250,15 @@ def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
     verdict is appended to ``verdicts``.  Margins also hold ``band`` times
     max|x| (`PRECISION_BAND` while the transforms are float32); a solve
     unsettled only by the band stops there (more float32 iterations cannot
-    settle it) with its verdict False, which hands it to double.
+    settle it) with its verdict False, which hands it to double.  Without
+    ``cut`` only the threshold is settled (the protocol engine's next event
+    is not the largest stress's).
     """
     def clear(x, margin) -> bool:
         verdict = True
         if threshold is not None:
             verdict = not bool(xp.any(xp.abs(x - threshold) < margin))
-        if verdict and (threshold is None or not bool(xp.any(x >= threshold))):
+        if cut and verdict and (threshold is None or not bool(xp.any(x >= threshold))):
             top = int(xp.argmax(x))
             peak = float(x[top])
             verdict = (int(xp.count_nonzero(x >= peak - margin - float(margin[top])))
