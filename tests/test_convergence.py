@@ -887,3 +887,24 @@ def test_the_readmes_notebook_snippet_runs_and_says_what_it_shows(capsys):
     for quantity, quoted in (("F_ad", "untrusted_order"), ("W", "poor_fit,not_asymptotic")):
         assert table[quantity] == quoted and f"`{quoted}`" in after, (table, after)
     assert "% in contact" in capsys.readouterr().out
+
+
+def test_a_study_refuses_curves_of_other_given_arrays():
+    """Per-pillar stiffnesses given by hand are no case coordinate: curves of
+    one case whose grids were given other arrays are two brushes, and a study
+    across them is refused (it extrapolated F_ad 1.354, 0.755, 1.356 as one
+    series); the same arrays on every grid pass."""
+    from brushcore import BrushParams, simulate
+    from brushcore.data.aggregate import AggregationError, build_sweep
+
+    def curve(grid: int, factors: list[float]) -> xr.Dataset:
+        return simulate(BrushParams("regular", 4, 0.01, grid,
+                                    kbar_values=0.01 * np.array(factors)))
+
+    one, other = [1.0, 1.0, 1.0, 1.0], [1.0, 50.0, 1.0, 50.0]
+    with pytest.raises(AggregationError, match="not one brush"):
+        build_sweep([curve(32, one), curve(48, other), curve(64, one)])
+    with pytest.raises(AggregationError, match="two brushes under one case"):
+        build_sweep([curve(48, one), curve(48, other)])
+    sweep = build_sweep([curve(32, other), curve(48, other)])
+    assert list(sweep.grid.values) == [32, 48]

@@ -24,14 +24,14 @@ import hashlib
 import math
 import re
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
 from brushcore.model import provenance
-from brushcore.model.params import RANDOM_GAP_GRID, narrowest_radius
+from brushcore.model.params import RANDOM_GAP_GRID, BrushParams, narrowest_radius
 from brushcore.model.curve import mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
@@ -261,6 +261,12 @@ def load_curves(paths: Iterable[str | Path | xr.Dataset],
             _check_named_case(path, key, float(curve.attrs["phi"]), *expected[i])
         _check_brush(path, curve, key)
         if key in curves:
+            other = curves[key][1].attrs.get("inputs_digest", "")
+            if other != curve.attrs.get("inputs_digest", ""):
+                raise AggregationError(
+                    f"curve files {curves[key][0]} and {path} hold two brushes under one "
+                    f"case ({key}): they were given other per-pillar heights, stiffnesses "
+                    "or gap maps (inputs_digest); aggregate each brush on its own")
             raise AggregationError(
                 f"curve files {curves[key][0]} and {path} hold the same case ({key}): "
                 "a sweep takes one file per case and grid"
@@ -329,6 +335,37 @@ def _check_one_file_per_layout(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -
                 f"curve files {first} and {second} are both brush {layout} but were drawn "
                 "from files of different content (layout_file_sha256): rename one file, "
                 "or rerun the curves of the older one")
+
+
+def _check_one_brush_per_case(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -> None:
+    """Per-pillar heights and stiffnesses given by hand (``--heights``,
+    ``--kbar-factors``, ``--kbar-file``; not a case coordinate) must be the
+    same on every grid of a case: curves of other arrays are other brushes,
+    and a study across them would extrapolate from one brush to another.
+    (A gap map is a map per grid, so only its presence is compared.)"""
+    seen: dict[CaseKey, tuple[Path, int, tuple, str]] = {}
+    for key, (path, curve) in curves.items():
+        given = given_inputs(curve)
+        arrays: tuple = (given,)
+        if given:
+            params = BrushParams.from_curve(curve)
+            arrays += tuple(getattr(params, name) for name in ("heights", "kbar_values"))
+        words = f"{given} ({curve.attrs.get('inputs_digest', '')})" if given else "none"
+        case = replace(key, grid=0)
+        if case not in seen:
+            seen[case] = (path, key.grid, arrays, words)
+            continue
+        first, grid, before, before_words = seen[case]
+        same = len(before) == len(arrays) and all(
+            (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+            for a, b in zip(before, arrays))
+        if not same:
+            raise AggregationError(
+                f"curve files {first} (grid {grid}) and {path} (grid {key.grid}) are "
+                f"{str(case).removesuffix(' on 0^2')} but not one brush: they were given "
+                f"other per-pillar arrays ({before_words}; {words}), so a study across "
+                "their grids would mix two brushes; rerun every grid with the same "
+                "--heights, --kbar-factors or --kbar-file")
 
 
 def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:
@@ -433,6 +470,7 @@ def build_sweep(
     """
     curves = load_curves(paths, expected)
     _check_one_file_per_layout(curves)
+    _check_one_brush_per_case(curves)
     # A file brush has its file's phi (each case's phi_actual); the attribute is
     # that of the generated brushes, whose phi the figures' theory lines take.
     generated = {k: pc for k, pc in curves.items() if pc[1].attrs.get("layout") != "file"}
