@@ -359,6 +359,35 @@ def test_concurrent_identical_jobs_match_a_lone_one(tmp_path: Path) -> None:
 # -- loud failures -------------------------------------------------------------------------
 
 
+def test_damaged_fftw_wisdom_is_planned_afresh_not_fatal(tmp_path: Path) -> None:
+    """FFTW's importer does not refuse damaged wisdom: it aborts the process
+    in an assertion (exit 134, no message), and every later run on the
+    machine with it.  Three bytes changed in the cached text (the damage an
+    audit found fatal) are caught by the stored checksum: the run warns,
+    plans afresh and finishes, and its save replaces the damaged file."""
+    import pickle
+
+    env = {**os.environ, "BRUSHCORE_WISDOM_DIR": str(tmp_path / "wisdom")}
+    run = [*CLI, "simulate", *SMALL_ARGS, "--out"]
+    first = subprocess.run([*run, str(tmp_path / "a.nc")], env=env, capture_output=True,
+                           text=True, timeout=120)
+    assert first.returncode == 0, output(first)
+    cache = tmp_path / "wisdom" / "fftw-wisdom.pickle"
+    stored = pickle.loads(cache.read_bytes())
+    text = stored["wisdom"][0]
+    damaged = re.sub(rb"(#x[0-9a-f]+) (#x0)\b", rb"\1s\2", text, count=1)
+    assert damaged != text
+    stored["wisdom"] = (damaged, *stored["wisdom"][1:])  # its old checksum kept
+    cache.write_bytes(pickle.dumps(stored))
+    again = subprocess.run([*run, str(tmp_path / "b.nc")], env=env, capture_output=True,
+                           text=True, timeout=120)
+    assert again.returncode == 0, output(again)
+    assert "is damaged" in again.stderr, output(again)
+    assert read_curve(tmp_path / "b.nc").attrs["events"] == read_curve(tmp_path / "a.nc").attrs["events"]
+    mended = pickle.loads(cache.read_bytes())
+    assert mended["wisdom"][0] != damaged
+
+
 def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
     params = BrushParams(**SMALL)
     with pytest.raises(ConvergenceError) as info:

@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import hashlib
 import os
 import pickle
 import threading
+import warnings
 from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
@@ -80,13 +82,37 @@ def _wisdom_lock() -> contextlib.AbstractContextManager[None]:
     return machine_lock("fftw-wisdom.lock")
 
 
+def _wisdom_digest(wisdom: tuple) -> str:
+    """SHA-256 of exported wisdom (a tuple of bytes, one per precision)."""
+    return hashlib.sha256(b"\0".join(wisdom)).hexdigest()
+
+
 def _load_wisdom() -> None:
+    """Import this machine's wisdom, if any and intact.
+
+    Stored with its digest (files from before 2026-12-07 without): FFTW's
+    importer does not refuse damaged wisdom but aborts the process in an
+    assertion (3 bytes changed in the text: ``planner.c: assertion failed``,
+    exit 134 and no message), and every later run on the machine with it.
+    """
     path = _wisdom_path()
     try:
         with open(path, "rb") as fh:
-            pyfftw.import_wisdom(pickle.load(fh))
-    except (OSError, ValueError, pickle.UnpicklingError, EOFError, TypeError):
-        pass  # no or unreadable wisdom: plan afresh
+            stored = pickle.load(fh)
+    except (OSError, ValueError, pickle.UnpicklingError, EOFError, TypeError, AttributeError):
+        return  # no or unreadable wisdom: plan afresh
+    wisdom = stored.get("wisdom") if isinstance(stored, dict) else stored
+    intact = (isinstance(wisdom, tuple) and all(isinstance(w, bytes) for w in wisdom)
+              and (not isinstance(stored, dict) or stored.get("sha256") == _wisdom_digest(wisdom)))
+    if not intact:
+        warnings.warn(f"FFTW wisdom in {path} is damaged (its checksum does not match); "
+                      "planning afresh, and the next save replaces it", RuntimeWarning,
+                      stacklevel=2)
+        return
+    try:
+        pyfftw.import_wisdom(wisdom)
+    except (ValueError, TypeError):
+        pass
 
 
 def save_to_cache(name: str, data: bytes) -> None:
@@ -97,14 +123,19 @@ def save_to_cache(name: str, data: bytes) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(data)
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())  # a crash must not leave a renamed, half-written file
         os.replace(tmp, path)
     except OSError:
         pass
 
 
 def _save_wisdom() -> None:
-    save_to_cache(_wisdom_path().name, pickle.dumps(pyfftw.export_wisdom()))
+    wisdom = pyfftw.export_wisdom()
+    save_to_cache(_wisdom_path().name,
+                  pickle.dumps({"wisdom": wisdom, "sha256": _wisdom_digest(wisdom)}))
 
 
 #: Grids (elements per side) whose `Convolver` plans with FFTW_PATIENT.
