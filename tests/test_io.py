@@ -24,3 +24,23 @@ def test_dimensional_values_in_element_units_say_so(tmp_path) -> None:
     material = simulate(BrushParams("regular", 4, 0.01, 48, e_star=2e6, dgamma=0.05, h=1e-7))
     assert not any(ELEMENT_UNITS_COMMENT in material[n].attrs.get("comment", "")
                    for n in material.variables)
+
+
+def test_an_atomic_write_removes_what_a_killed_one_left(tmp_path):
+    """A writer killed mid-write (an aggregation, a table, a figure) leaves a
+    `.NAME.*.tmp` beside its output; the next write of that output removes
+    it, but not one touched since it started (another writer's, still going)."""
+    import os
+    import time
+
+    from brushcore.data.io import write_text_atomic
+
+    out = tmp_path / "summary.csv"
+    stale, live = tmp_path / ".summary.csv.killed.tmp", tmp_path / ".summary.csv.live.tmp"
+    stale.write_text("half")
+    live.write_text("half")
+    os.utime(stale, (time.time() - 60, time.time() - 60))
+    os.utime(live, (time.time() + 60, time.time() + 60))
+    write_text_atomic(out, "a,b\n")
+    assert out.read_text() == "a,b\n"
+    assert not stale.exists() and live.exists()

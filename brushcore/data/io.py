@@ -8,6 +8,7 @@ import math
 import os
 import shutil
 import tempfile
+import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
@@ -135,10 +136,13 @@ def write_atomic(path: str | os.PathLike, write: Callable[[str], None],
 
     The temporary file lies in the same directory and is flushed before the
     rename: a killed writer leaves the old file (or none) and at most a
-    ``.{name}.*.tmp`` (see `remove_stale_temporaries`), never half a file.
-    ``nbytes`` (what is written, about) names a full disk as such.
+    ``.{name}.*.tmp``, never half a file; the next write of ``path`` removes
+    such leftovers last touched before it started (`remove_stale_temporaries`;
+    a writer started since may still own its own).  ``nbytes`` (what is
+    written, about) names a full disk as such.
     """
     path = Path(path)
+    started = time.time()
     if path.is_dir():  # else a rename error naming the temporary, after the writing
         raise IsADirectoryError(errno.EISDIR, "a folder, not a file name: give a file "
                                 f"in it, {path / 'NAME'}", str(path))
@@ -163,6 +167,7 @@ def write_atomic(path: str | os.PathLike, write: Callable[[str], None],
                 raise OSError(errno.ENOSPC, f"{free} bytes free on its disk, the data take "
                                             f"up to {nbytes}", str(path)) from exc
         raise
+    remove_stale_temporaries(path, older_than=started)
     return path
 
 

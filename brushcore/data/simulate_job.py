@@ -7,6 +7,7 @@ when a module it imports does, so the job's logic lives here.
 
 from __future__ import annotations
 
+import time
 import warnings
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
@@ -44,7 +45,8 @@ def _simulate(smk, clock: CurveClock) -> None:
         orphaned()
 
     check_output_path(smk.output[0])  # an unwritable folder fails now, not after the solve
-    remove_stale_temporaries(smk.output[0])  # left by a job killed while writing
+    # left by a job killed while writing (not by one started since: --nolock runs)
+    remove_stale_temporaries(smk.output[0], older_than=time.time())
     pin_threads(smk.threads)
     w = smk.wildcards
     params = case_params(w.layout, int(w.n_pillars), float(w.kbar), int(w.seed), int(w.grid),

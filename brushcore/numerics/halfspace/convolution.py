@@ -64,7 +64,13 @@ def machine_lock(name: str) -> Iterator[None]:
         yield
         return
     with fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # say why a run stands still (minutes at 2048^2)
+            warnings.warn(f"waiting for another brushcore process on this machine: it holds "
+                          f"{path} while it plans or times its FFTs (once per grid and "
+                          "machine; its plans are then shared)", RuntimeWarning, stacklevel=3)
+            fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
         finally:
