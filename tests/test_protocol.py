@@ -1065,8 +1065,11 @@ def test_value_files_are_read_as_data(tmp_path):
     with pytest.raises(ParameterError, match=r"archive, not one array"):
         read("archive.npy", (tmp_path / "archive.npz").read_bytes())
     # A decimal comma is two values: the count is off, and the message says why.
-    with pytest.raises(ParameterError, match=r"it holds 8 values;.*write decimals with a point"):
+    with pytest.raises(ParameterError, match=r"line 1 holds 2 values;.*write decimals with a point"):
         read("comma.txt", b"0,5\n1,5\n2,5\n3,5\n")
+    # columns (labels beside values, a 2 x 2 block) would pass for four values: refused
+    with pytest.raises(ParameterError, match=r"line 1 holds 2 values: a file of columns"):
+        read("table.txt", b"0 0.5\n1 1.5\n")
     assert read("csv.txt", b"0.5, 1.5,2.5 ,3.5\n").tolist() == [0.5, 1.5, 2.5, 3.5]
     # A count that fits does not make decimal commas right: said, where no value has a point.
     with pytest.warns(UserWarning, match=r"line 1 '0,5 1,5' is read as values that commas "

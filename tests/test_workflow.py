@@ -356,7 +356,12 @@ def test_snakefmt_clean() -> None:
     ("bad", "message"),
     [
         ({"kbar": [-1.0e-3, 1.0]}, "config key 'kbar.0': -0.001 is less than the minimum"),
-        ({"kbar": [float("nan"), 1.0]}, "config key 'kbar.0': nan is not a number"),
+        ({"kbar": [float("nan"), 1.0]},
+         "config key 'kbar.0': nan is not a number; allowed a number >= 1e-09"),
+        ({"phi": float("nan")}, r"config key 'phi': nan is not a number; allowed a number in \(0, 0.5\]"),
+        # YAML 1.1's booleans and an empty key, said as such
+        ({"backend": False}, "YAML reads yes/no/on/off/true/false as true or false"),
+        ({"kbar": None}, r"the key is empty \(YAML reads that as null\)"),
         ({"solver": {"rtol": 1.0e-8, "precision": "mixed"}},
          "config: solver.rtol = 1e-08 is invalid: allowed a number >= 1e-06 with "
          "solver.precision 'mixed'"),

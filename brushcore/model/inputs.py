@@ -153,6 +153,13 @@ def read_pillar_values(path: str | Path, n_pillars: int, name: str,
             _check_values(path, name, f"entry {i}", [float(value)], kind)
         return arr.astype(float)
     rows, comma_hint = _rows(path, name)
+    wide = [(number, row) for number, row in rows if len(row) > 1]
+    if len(rows) > 1 and wide:  # a table (label and value?) would pass for a list of values
+        number, row = wide[0]
+        raise ParameterError(name, str(path), f"{n_pillars} values, one per line (or all on "
+                             "one line)", f"line {number} holds {len(row)} values"
+                             + (comma_hint or ": a file of columns, e.g. labels beside the "
+                                "values, gives the values alone"))
     values, lines = [], []
     for number, row in rows:
         _check_values(path, name, f"line {number}", row, kind)

@@ -37,8 +37,8 @@ def check_config(config, schema_path):
         where = _first_nan(config)
         if where is not None:
             raise ConfigError(
-                f"config key '{where}': nan is not a number; allowed a number "
-                "in the range the schema gives"
+                f"config key '{where}': nan is not a number; allowed "
+                f"{_schema_range(schema, where)}"
             )
         _integral_counts(config)
         _shape_settings_used(config, schema)
@@ -59,7 +59,16 @@ def check_config(config, schema_path):
         message = f"{error.instance!r} fits none of its forms: " + "; ".join(
             forms.values()
         )
-    if (
+    if error.validator == "type" and error.instance is None:
+        # `kbar:` with nothing after it
+        message += "; the key is empty (YAML reads that as null): give it a value, or leave it out for its default"
+    elif error.validator == "type" and isinstance(error.instance, bool):
+        # backend: off, kbar: [no]
+        message += (
+            "; YAML reads yes/no/on/off/true/false as true or false: quote a word "
+            "meant as text ('off'), or give what the key takes"
+        )
+    elif (
         error.validator == "type"
         and error.validator_value == "array"
         and not isinstance(error.instance, (list, dict))
@@ -262,6 +271,28 @@ def _shape_settings_used(config, schema):
                 f"and no brush of this config has them (shape: {sorted(shapes)}); add "
                 f"{' or '.join(readers)} to 'shape' (or fig5.shape), or remove '{key}'"
             )
+
+
+def _schema_range(schema, where):
+    """The range the schema allows at a dotted config key ("phi", "kbar.0",
+    "fig5.kbar.1"), in a message's words: "a number in (0, 0.5]"."""
+    node = schema
+    for part in where.split("."):
+        node = (
+            node.get("items", {})
+            if part.isdigit()
+            else node.get("properties", {}).get(part, {})
+        )
+    low = node.get("exclusiveMinimum", node.get("minimum"))
+    high = node.get("exclusiveMaximum", node.get("maximum"))
+    if high is None:
+        sign = ">" if "exclusiveMinimum" in node else ">="
+        return "a number" if low is None else f"a number {sign} {low:g}"
+    if low is None:
+        return f"a number {'<' if 'exclusiveMaximum' in node else '<='} {high:g}"
+    left = "(" if "exclusiveMinimum" in node else "["
+    right = ")" if "exclusiveMaximum" in node else "]"
+    return f"a number in {left}{low:g}, {high:g}{right}"
 
 
 def _first_nan(value, where=""):
