@@ -224,7 +224,8 @@ def build_parser() -> argparse.ArgumentParser:
         "dgamma a0^3), a0 = sqrt(A / pi) of the discretised pillar area A. Any of these runs "
         "an approach from first touch to the preload, then the pull-off. Per-pillar files: "
         "one value per pillar in label order (regular: row-major, first axis slowest; the "
-        "curve file lists every pillar's centre), text ('#' comments) or .npy.")
+        "curve file lists every pillar's centre), text ('#' comments; one value a line, or "
+        "all on one line) or .npy.")
     rough.add_argument("--roughness", type=float, default=0.0,
                        help=f"standard deviation of Gaussian pillar heights [d_K], in "
                             f"[0, {MAX_ROUGH:g}], drawn from --seed")

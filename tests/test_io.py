@@ -28,19 +28,21 @@ def test_dimensional_values_in_element_units_say_so(tmp_path) -> None:
 
 def test_an_atomic_write_removes_what_a_killed_one_left(tmp_path):
     """A writer killed mid-write (an aggregation, a table, a figure) leaves a
-    `.NAME.*.tmp` beside its output; the next write of that output removes
-    it, but not one touched since it started (another writer's, still going)."""
+    `.NAME.*.tmp` beside its output; a later write of that output removes
+    it once untouched for STALE_AFTER_S, not one touched since (a writer
+    that started earlier may still be at work on it)."""
     import os
     import time
 
-    from brushcore.data.io import write_text_atomic
+    from brushcore.data.io import STALE_AFTER_S, write_text_atomic
 
     out = tmp_path / "summary.csv"
     stale, live = tmp_path / ".summary.csv.killed.tmp", tmp_path / ".summary.csv.live.tmp"
     stale.write_text("half")
     live.write_text("half")
-    os.utime(stale, (time.time() - 60, time.time() - 60))
-    os.utime(live, (time.time() + 60, time.time() + 60))
+    old = time.time() - STALE_AFTER_S - 60
+    os.utime(stale, (old, old))
+    os.utime(live, (time.time() - 60, time.time() - 60))  # an earlier writer, still going
     write_text_atomic(out, "a,b\n")
     assert out.read_text() == "a,b\n"
     assert not stale.exists() and live.exists()

@@ -38,7 +38,7 @@ from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
 from brushcore.data.io import (CurveFileError, check_curve, content_digest, read_curve,
                                write_dataset_atomic)
-from brushcore.validation import brief
+from brushcore.validation import ParameterError, brief
 
 #: Order of the layout coordinate (others follow, sorted).
 LAYOUT_ORDER = ("regular", "hexagonal", "random")
@@ -348,7 +348,10 @@ def _check_one_brush_per_case(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) ->
         given = given_inputs(curve)
         arrays: tuple = (given,)
         if given:
-            params = BrushParams.from_curve(curve)
+            try:
+                params = BrushParams.from_curve(curve)
+            except ParameterError:  # written before its arrays were kept: not comparable
+                continue
             arrays += tuple(getattr(params, name) for name in ("heights", "kbar_values"))
         words = f"{given} ({curve.attrs.get('inputs_digest', '')})" if given else "none"
         case = replace(key, grid=0)
@@ -365,7 +368,7 @@ def _check_one_brush_per_case(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) ->
                 f"{str(case).removesuffix(' on 0^2')} but not one brush: they were given "
                 f"other per-pillar arrays ({before_words}; {words}), so a study across "
                 "their grids would mix two brushes; rerun every grid with the same "
-                "--heights, --kbar-factors or --kbar-file")
+                "--heights, --kbar-factors or --kbar-file (and a gap map on each or none)")
 
 
 def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:

@@ -130,16 +130,21 @@ def publish(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     os.replace(tmp, path)
 
 
+#: Seconds a temporary must lie untouched before a later writer of the same
+#: output removes it: a live writer writes a sweep in seconds.
+STALE_AFTER_S = 600.0
+
+
 def write_atomic(path: str | os.PathLike, write: Callable[[str], None],
                  nbytes: int = 0) -> Path:
     """``write(tmp)`` a file under a unique temporary name, then `publish` it as ``path``.
 
     The temporary file lies in the same directory and is flushed before the
     rename: a killed writer leaves the old file (or none) and at most a
-    ``.{name}.*.tmp``, never half a file; the next write of ``path`` removes
-    such leftovers last touched before it started (`remove_stale_temporaries`;
-    a writer started since may still own its own).  ``nbytes`` (what is
-    written, about) names a full disk as such.
+    ``.{name}.*.tmp``, never half a file; a later write of ``path`` removes
+    such leftovers untouched for STALE_AFTER_S (`remove_stale_temporaries`;
+    one touched since may belong to a writer still at work).  ``nbytes``
+    (what is written, about) names a full disk as such.
     """
     path = Path(path)
     started = time.time()
@@ -167,7 +172,7 @@ def write_atomic(path: str | os.PathLike, write: Callable[[str], None],
                 raise OSError(errno.ENOSPC, f"{free} bytes free on its disk, the data take "
                                             f"up to {nbytes}", str(path)) from exc
         raise
-    remove_stale_temporaries(path, older_than=started)
+    remove_stale_temporaries(path, older_than=started - STALE_AFTER_S)
     return path
 
 

@@ -375,7 +375,8 @@ class _Engine:
                                   settled(PRECISION_BAND if refine else 0.0),
                                   SolverOptions.MIXED_MIN_RTOL if refine else SETTLE_FLOOR)
             if verdicts and not verdicts[-1] and refine:
-                with op.refined():
+                with op.refined():  # the field afresh: float32's would stay in it
+                    y = op.field(xs)
                     xs, y, more = pcg_image(op.apply_with_field, op.precondition, rhs, xs,
                                             y[att] + op.spring(xs), y, self.options.rtol,
                                             self.options.max_iter, None, settled(0.0),

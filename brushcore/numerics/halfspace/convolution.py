@@ -19,8 +19,8 @@ import fcntl
 import hashlib
 import os
 import pickle
+import sys
 import threading
-import warnings
 from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
@@ -48,8 +48,14 @@ def cache_dir() -> Path:
         os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "brushcore"))
 
 
+#: Wisdom with its checksum (`_save_wisdom`); the file before it, a bare
+#: tuple, is still read where the new one is missing and left as it was,
+#: for versions that read only it.
+WISDOM_FILE, OLD_WISDOM_FILE = "fftw-wisdom-v2.pickle", "fftw-wisdom.pickle"
+
+
 def _wisdom_path() -> Path:
-    return cache_dir() / "fftw-wisdom.pickle"
+    return cache_dir() / WISDOM_FILE
 
 
 @contextlib.contextmanager
@@ -67,9 +73,10 @@ def machine_lock(name: str) -> Iterator[None]:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:  # say why a run stands still (minutes at 2048^2)
-            warnings.warn(f"waiting for another brushcore process on this machine: it holds "
-                          f"{path} while it plans or times its FFTs (once per grid and "
-                          "machine; its plans are then shared)", RuntimeWarning, stacklevel=3)
+            # a note, not a warning: warnings as errors must not fail the run
+            print(f"brushcore: waiting for another brushcore process on this machine: it "
+                  f"holds {path} while it plans or times its FFTs (once per grid and "
+                  "machine; its plans are then shared)", file=sys.stderr, flush=True)
             fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
@@ -102,6 +109,8 @@ def _load_wisdom() -> None:
     exit 134 and no message), and every later run on the machine with it.
     """
     path = _wisdom_path()
+    if not path.exists():
+        path = cache_dir() / OLD_WISDOM_FILE
     try:
         with open(path, "rb") as fh:
             stored = pickle.load(fh)
@@ -111,9 +120,8 @@ def _load_wisdom() -> None:
     intact = (isinstance(wisdom, tuple) and all(isinstance(w, bytes) for w in wisdom)
               and (not isinstance(stored, dict) or stored.get("sha256") == _wisdom_digest(wisdom)))
     if not intact:
-        warnings.warn(f"FFTW wisdom in {path} is damaged (its checksum does not match); "
-                      "planning afresh, and the next save replaces it", RuntimeWarning,
-                      stacklevel=2)
+        print(f"brushcore: FFTW wisdom in {path} is damaged (its checksum does not match); "
+              "planning afresh, and the next save replaces it", file=sys.stderr, flush=True)
         return
     try:
         pyfftw.import_wisdom(wisdom)
