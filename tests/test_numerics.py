@@ -463,37 +463,37 @@ def test_far_response_is_the_first_order_answer_to_second_order_in_size(mirrored
 
 
 def test_settled_needs_every_decision_clear_of_the_error():
-    from brushcore.numerics.events.pulloff import SETTLE_SAFETY, _settles
+    from brushcore.numerics.events.pulloff import SETTLE_SAFETY, settles
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.9, 0.5])
     err = 0.01 / SETTLE_SAFETY  # a margin of 0.01 (plus DECISION_FLOOR err)
     z = np.full(3, err)
     # a cascade round: 1.0 and 0.9 go, 0.5 stays, all clear of the threshold 0.8
-    assert _settles(0.8, 1e-7, np, verdicts)(x, z, err)
-    assert not _settles(0.895, 1e-7, np, verdicts)(x, z, err)  # 0.9 within 0.01
+    assert settles(0.8, 1e-7, np, verdicts)(x, z, err)
+    assert not settles(0.895, 1e-7, np, verdicts)(x, z, err)  # 0.9 within 0.01
     # no element over the threshold: the next event takes 1.0 alone ...
-    assert _settles(1.2, 1e-7, np, verdicts)(x, z, err)
+    assert settles(1.2, 1e-7, np, verdicts)(x, z, err)
     # ... unless the runner-up lies within the error of it
-    assert not _settles(1.2, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), z, err)
-    assert not _settles(None, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), z, err)
+    assert not settles(1.2, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), z, err)
+    assert not settles(None, 1e-7, np, verdicts)(np.array([1.0, 0.995, 0.5]), z, err)
     # exact ties go together: settled
-    assert _settles(None, 1e-7, np, verdicts)(np.array([1.0, 1.0, 0.5]), z, err)
+    assert settles(None, 1e-7, np, verdicts)(np.array([1.0, 1.0, 0.5]), z, err)
     assert verdicts == [True, False, True, False, False, True]
 
 
 def test_settled_weighs_each_element_by_its_own_error():
     """At the tolerance a large error on an element far from every cut does
     not hold the solve back; the same error on the runner-up does."""
-    from brushcore.numerics.events.pulloff import _settles
+    from brushcore.numerics.events.pulloff import settles
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.99, 0.5])  # no element over 1.2: the next event takes 1.0
     z = np.array([1e-4, 1e-4, 0.01])
     # margins 3 |z_i| + 0.3 max|z|: 0.0033 each for the two leaders, clear
     # (3 max|z| for every element, 0.03, would not be)
-    assert _settles(1.2, 1e-7, np, verdicts)(x, z, 0.01)
-    assert not _settles(1.2, 1e-7, np, verdicts)(x, z[[0, 2, 1]], 0.01)  # 0.99 may lead
+    assert settles(1.2, 1e-7, np, verdicts)(x, z, 0.01)
+    assert not settles(1.2, 1e-7, np, verdicts)(x, z[[0, 2, 1]], 0.01)  # 0.99 may lead
     assert verdicts == [True, False]
 
 
@@ -522,21 +522,21 @@ def test_float32_band_hands_near_ties_to_double():
     only the band leaves unsettled stops at once (verdict False: refined in
     double), one the estimate itself leaves unsettled iterates on, and the
     early exit of a cascade round waits until the band is clear."""
-    from brushcore.numerics.events.pulloff import _decides, _settles
+    from brushcore.numerics.events.pulloff import _decides, settles
 
     verdicts: list[bool] = []
     z = np.full(3, 1e-6)  # margins 3.3e-6
     near = np.array([1.0, 0.9, 0.5])  # 0.9 lies 1e-4 from the threshold 0.8999
-    assert _settles(0.8999, 1e-7, np, verdicts)(near, z, 1e-6)  # no band: clear
-    assert _settles(0.8999, 1e-7, np, verdicts, band=1e-3)(near, z, 1e-6)  # stops ...
+    assert settles(0.8999, 1e-7, np, verdicts)(near, z, 1e-6)  # no band: clear
+    assert settles(0.8999, 1e-7, np, verdicts, band=1e-3)(near, z, 1e-6)  # stops ...
     assert verdicts == [True, False]  # ... unsettled: to double
     # the runner-up within the band of the leader: the next event is unsure too
-    assert _settles(None, 1e-7, np, verdicts, band=1e-3)(np.array([1.0, 0.9995, 0.5]), z, 1e-6)
+    assert settles(None, 1e-7, np, verdicts, band=1e-3)(np.array([1.0, 0.9995, 0.5]), z, 1e-6)
     assert verdicts[-1] is False
     # within the error estimate itself: not settled, float32 iterates on
-    assert not _settles(0.8999, 1e-7, np, verdicts, band=1e-3)(near, np.full(3, 1e-4), 1e-4)
+    assert not settles(0.8999, 1e-7, np, verdicts, band=1e-3)(near, np.full(3, 1e-4), 1e-4)
     # far from every cut: settled with the band
-    assert _settles(0.7, 1e-7, np, verdicts, band=1e-3)(near, z, 1e-6)
+    assert settles(0.7, 1e-7, np, verdicts, band=1e-3)(near, z, 1e-6)
     assert verdicts[-2:] == [False, True]
     stopped: list[float] = []
     over = np.array([1.2, 0.5, 0.9])  # threshold 0.9001: the first element goes

@@ -67,7 +67,7 @@ class SolverOptions:
     settle_decisions : a solve at the tolerance goes on (to 1e-9 at most)
         while an element lies within its margin of sigma_c or of the next
         event's cut, so that which elements detach follows the model, not
-        CG's rounding (`brushcore.numerics.events.pulloff._settles`; in
+        CG's rounding (`brushcore.numerics.events.pulloff.settles`; in
         protocols, the cascades' solves against sigma_c).  True by
         default, off in `exact()`.
     fft_library : "auto" (default), "fftw" or "mkl": whose FFTs the host's

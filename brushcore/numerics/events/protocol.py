@@ -41,7 +41,7 @@ from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.validation import is_real, normalise, require
 from brushcore.numerics.events.pulloff import (PRECISION_BAND, SETTLE_FLOOR, Progress,
-                                               SolverError, _settles, pull_off)
+                                               SolverError, settles, pull_off)
 
 APPROACH, START, RETRACT = -1, 0, 1
 #: Relative round-off of a gap, g = d - z - f_p / k_p - u, in units of its
@@ -345,7 +345,7 @@ class _Engine:
 
         With a ``threshold`` (a cascade's sigma_c) and ``settle_decisions``,
         a solve at the tolerance goes on while an attached element lies
-        within its error margin of the threshold (`pulloff._settles`), so
+        within its error margin of the threshold (`pulloff.settles`), so
         that which elements detach follows the model, not CG's rounding: a
         pillar 9.7e-5 under sigma_c during its neighbour's cascade, with CG's
         error at 1e-4 of the largest stress, let go 2 % of d early (W 2.9e-3
@@ -366,7 +366,7 @@ class _Engine:
         def settled(band: float):
             if threshold is None or not self.options.settle_decisions:
                 return None
-            return _settles(threshold, 0.0, xp, verdicts, band, cut=False)
+            return settles(threshold, 0.0, xp, verdicts, band, cut=False)
 
         refine = op.can_refine  # float32 transforms: a band more, then double
         try:

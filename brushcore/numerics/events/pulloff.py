@@ -177,7 +177,7 @@ DECISION_FLOOR = 0.3
 
 def _margins(safety: float, z, zmax: float, xp):
     """Each element's margin: ``safety`` times its own error estimate plus
-    DECISION_FLOOR times the largest (shared by `_decides` and `_settles`)."""
+    DECISION_FLOOR times the largest (shared by `_decides` and `settles`)."""
     return safety * xp.abs(z) + DECISION_FLOOR * zmax
 
 
@@ -214,7 +214,7 @@ def _decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     return decided
 
 
-#: Margin, in CG error estimates, that a settled decision leaves (`_settles`).
+#: Margin, in CG error estimates, that a settled decision leaves (`settles`).
 SETTLE_SAFETY = 3.0
 #: Relative error at which a solve stops unsettled: near-ties closer than
 #: this are ties.  Single-precision transforms stop at
@@ -232,7 +232,7 @@ SETTLE_FLOOR = 1e-9
 PRECISION_BAND = 3e-5
 
 
-def _settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
+def settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
              band: float = 0.0, cut: bool = True):
     """Condition on CG's tolerance: no decision that the error could flip.
 
@@ -304,7 +304,7 @@ def _solve_stresses(op: BrushOperator, options: SolverOptions, x0: np.ndarray,
     def conditions(band: float) -> tuple:
         return ((_decides(threshold, xp, stopped, band)
                  if threshold is not None and options.early_decisions else None),
-                _settles(threshold, tie, xp, verdicts, band) if options.settle_decisions
+                settles(threshold, tie, xp, verdicts, band) if options.settle_decisions
                 else None)
     band = PRECISION_BAND if op.can_refine else 0.0  # float32 transforms
     floor = SolverOptions.MIXED_MIN_RTOL if op.can_refine else SETTLE_FLOOR
