@@ -341,12 +341,18 @@ def test_generated_tables_run_where_their_brushes_run(tmp_path: Path) -> None:
 
 
 def test_a_decimal_comma_before_an_exponent_is_still_warned_about(tmp_path: Path) -> None:
-    """"2,5e-1" is a decimal-comma locale's 0.25 (read as 2 and 0.5): warned."""
+    """"2,5e-1" is a decimal-comma locale's 0.25 (read as 2 and 0.5): on one
+    line warned, on several refused (two values a line), the commas named."""
     from brushcore.model.inputs import read_pillar_values
 
-    path = _table(tmp_path, "2,5e-1\n3,0e-1\n", "h.txt")
+    path = _table(tmp_path, "2,5e-1 3,0e-1\n", "h.txt")
     with pytest.warns(UserWarning, match="no decimal point"):
         assert read_pillar_values(path, 4, "heights").tolist() == [2.0, 0.5, 3.0, 0.0]
+    path = _table(tmp_path, "2,5e-1\n3,0e-1\n", "h2.txt")
+    with pytest.warns(UserWarning, match="no decimal point"), \
+            pytest.raises(ParameterError, match=r"line 1 holds 2 values; commas separate "
+                                                 r"values: write decimals with a point"):
+        read_pillar_values(path, 4, "heights")
 
 
 def test_a_table_in_other_units_is_named_as_such_without_a_comma_warning(tmp_path: Path
