@@ -359,10 +359,8 @@ def _check_one_brush_per_case(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) ->
             seen[case] = (path, key.grid, arrays, words)
             continue
         first, grid, before, before_words = seen[case]
-        same = len(before) == len(arrays) and all(
-            (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
-            for a, b in zip(before, arrays))
-        if not same:
+        # the names given, then heights and stiffnesses (None where not given)
+        if len(before) != len(arrays) or not all(map(np.array_equal, before, arrays)):
             raise AggregationError(
                 f"curve files {first} (grid {grid}) and {path} (grid {key.grid}) are "
                 f"{str(case).removesuffix(' on 0^2')} but not one brush: they were given "

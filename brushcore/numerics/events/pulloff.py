@@ -335,7 +335,7 @@ def _event_peak(sigma1, z, xp) -> tuple[float, float]:
     error to 2e-4 of it.  The correction costs nothing (z is at hand)."""
     top = int(xp.argmax(sigma1))
     peak = float(sigma1[top])
-    return peak, peak + (0.0 if z is None else float(z[top]))
+    return peak, peak + float(z[top])
 
 
 class _Recorder:

@@ -98,13 +98,12 @@ class DeviceBlocks(BlockInverse):
             self._r, self._r_near = be.asarray(r), be.asarray(r_near)
             self._z = xp.zeros((n_pillars, self.m), dtype=xp.float64)
             self._reach = xp.zeros((n_pillars, self.m), dtype=xp.float64)
+            self._far = False  # its tilts come with `_setup_far`, below
             # a chunk at a time: abs() of the whole stack would double the peak
             # that `fits_device` budgets for
             for chunk in self._chunks(np.arange(n_pillars)):
                 p = be.asarray(chunk.astype(np.int64))
-                g = xp.take(self.inv, p, axis=0)
-                be.put(self._z, p, xp.sum(g, axis=2))
-                be.put(self._reach, p, xp.sum(xp.abs(g), axis=2))
+                self._refresh_rows(p, xp.take(self.inv, p, axis=0))
             self.coupling = float(xp.max(self._r @ xp.sum(self._z, axis=1)))
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
         if self.coarse:
