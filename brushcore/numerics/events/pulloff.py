@@ -175,9 +175,10 @@ DECISION_SAFETY = 3.0
 DECISION_FLOOR = 0.3
 
 
-def _margins(safety: float, z, zmax: float, xp):
+def margins(safety: float, z, zmax: float, xp):
     """Each element's margin: ``safety`` times its own error estimate plus
-    DECISION_FLOOR times the largest (shared by `_decides` and `settles`)."""
+    DECISION_FLOOR times the largest (shared by `_decides`, `settles` and
+    the protocol engine's settled events)."""
     return safety * xp.abs(z) + DECISION_FLOOR * zmax
 
 
@@ -205,7 +206,7 @@ def _decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     times max|x| (`PRECISION_BAND` while the transforms are float32).
     """
     def decided(x, z, zmax: float) -> bool:
-        margin = _margins(DECISION_SAFETY, z, zmax, xp) + _band(band, x, xp)
+        margin = margins(DECISION_SAFETY, z, zmax, xp) + _band(band, x, xp)
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
@@ -266,7 +267,7 @@ def settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
         return verdict
 
     def settled(x, z, zmax: float) -> bool:
-        margin = _margins(SETTLE_SAFETY, z, zmax, xp)
+        margin = margins(SETTLE_SAFETY, z, zmax, xp)
         verdicts.append(clear(x, margin + _band(band, x, xp)))
         return verdicts[-1] or (band > 0.0 and clear(x, margin))
     return settled
