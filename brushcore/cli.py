@@ -553,6 +553,12 @@ def _converge(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         _error(f"--out-dir {out} is a file: allowed a folder (made if missing)")
         return 2
+    missing = [str(p) for p in args.curves if not p.is_file()]
+    if missing:  # a path typed wrong: nothing to run again
+        _error(f"no such curve file{'s' if len(missing) > 1 else ''}: {', '.join(missing[:10])}"
+               + (f" and {len(missing) - 10} more" if len(missing) > 10 else "")
+               + ": allowed the .nc files brushcore simulate wrote")
+        return 2
     try:
         # no snapshots: a study reads scalars (small sets kept them all before)
         sweep = build_sweep(args.curves, keep_snapshots=(), all_snapshots_below_mb=0.0)

@@ -583,6 +583,18 @@ def test_converge_keeps_two_files_of_one_name_apart(tmp_path, capsys) -> None:
     assert "no convergence study: it needs a case run on three" in capsys.readouterr().out
 
 
+def test_converge_names_a_curve_file_that_is_not_there(tmp_path, capsys) -> None:
+    """A mistyped path is said as one, before any file is read, and not
+    answered with advice to run the curve again."""
+    (tmp_path / "here.nc").write_bytes(b"")
+    assert main(["converge", str(tmp_path / "nope.nc"), str(tmp_path / "here.nc"),
+                 "--out-dir", str(tmp_path / "study")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"no such curve file: \S*nope\.nc: allowed the \.nc files", err)
+    assert "here.nc" not in err and "again" not in err
+    assert not (tmp_path / "study").exists()
+
+
 def test_converge_refines_a_map_drawn_once_a_grid(tmp_path, capsys) -> None:
     """A map fits one grid, so its refinement has one file a grid (g32/brush.npy,
     ...): their contents differ by nature, and they are one brush."""
