@@ -776,3 +776,31 @@ def test_a_curve_with_bad_case_attributes_is_refused_as_the_files_fault(name, va
                                                rf"sha256:[0-9a-f]{{64}} in memory> \({said}.*"
                                                rf"Run their brushcore"):
         build_sweep([curve])
+
+
+def test_a_job_that_cannot_write_its_curve_says_so_in_one_line(tmp_path, monkeypatch, capfd):
+    """A full disk at the curve's writing: the job's log and the terminal get
+    one line naming the file and the cause, the job fails (status 1) and
+    leaves no curve; no traceback."""
+    import errno
+    from types import SimpleNamespace
+
+    from brushcore.data import simulate_job
+
+    def full(curve, path):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+    monkeypatch.setattr("brushcore.data.io.write_curve", full)
+    out, log = tmp_path / "curve.nc", tmp_path / "curve.log"
+    smk = SimpleNamespace(
+        output=[str(out)], log=[str(log)], threads=1,
+        wildcards=SimpleNamespace(layout="regular", n_pillars="4", kbar="0.455", seed="0",
+                                  grid="32", phi="0.12"),
+        params=SimpleNamespace(layout_file="", rough={}, shape={}, solver={}),
+        config={"allow_coarse": False, "backend": "cpu"})
+    with pytest.raises(SystemExit) as stop:
+        simulate_job.run_job(smk)
+    assert stop.value.code == 1
+    line = f"cannot write {out}: {os.strerror(errno.ENOSPC)}"
+    assert line in log.read_text() and "Traceback" not in log.read_text()
+    assert line in capfd.readouterr().err
+    assert not out.exists()

@@ -7,6 +7,7 @@ when a module it imports does, so the job's logic lives here.
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from collections.abc import Mapping
@@ -63,7 +64,13 @@ def _simulate(smk, clock: CurveClock) -> None:
         curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
                          protocol=protocol)
     orphaned()
-    write_curve(curve, smk.output[0])
+    try:
+        write_curve(curve, smk.output[0])
+    except OSError as exc:  # a full disk or quota: one line, as the CLI says it
+        line = f"cannot write {smk.output[0]}: {exc.strerror or exc}"
+        print(line, flush=True)  # the log
+        print(f"{smk.log[0]}: {line}", file=sys.__stderr__, flush=True)  # the terminal
+        raise SystemExit(1) from None
     for line in log_lines(curve):
         print(line)
 
