@@ -1,6 +1,6 @@
 """Reliability (issue 5): kills, corrupt files, determinism and loud failures.
 
-* A sweep of ``config/test.yaml`` killed with SIGKILL (Snakemake and its jobs)
+* A sweep of ``config/test.yaml`` (narrowed to 5 curves) killed with SIGKILL (Snakemake and its jobs)
   after its first curve file resumes to the same ``sweep.nc`` as a clean run.
 * Aggregation refuses truncated, bit-flipped, foreign and non-finite curve
   files with an error naming the file, also through the Snakemake rule.
@@ -35,7 +35,15 @@ from brushcore.data.io import CurveFileError, read_curve, write_curve  # noqa: E
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake"]
 CLI = [sys.executable, "-m", "brushcore.cli"]
-TEST_SWEEP = ["--cores", "2", "--configfile", "config/test.yaml"]
+#: The kill-and-resume sweep: config/test.yaml narrowed to both layouts at two kbar
+#: and its Fig. 5 brush (5 curves instead of 11), written into each copy of the
+#: repository by `copy_repo`, run up to sweep.nc (what the tests compare): the
+#: figures and summary, most of the test sweep's job time, are left out.
+NARROW_CONFIG = "config/narrow.yaml"
+NARROW = ("kbar: [1.0e-2, 1.0]\nregular: [4]\nrandom: [4]\n"
+          "fig5: {n_pillars: 4, kbar: [0.455]}\n")
+TEST_SWEEP = ["results/sweep.nc", "--cores", "2", "--configfile", "config/test.yaml",
+              NARROW_CONFIG]
 # Things a run leaves behind that must not leak into a copy of the repository.
 IGNORE = shutil.ignore_patterns(
     ".git", ".snakemake", "results", "logs", "__pycache__", "*.egg-info", ".pytest_cache",
@@ -54,8 +62,10 @@ SMALL_ARGS = ["--layout", "random", "--pillars", "16", "--kbar", "0.1", "--grid"
 
 
 def copy_repo(dest: Path) -> Path:
-    """The repository without results, Snakemake state or git."""
+    """The repository without results, Snakemake state or git (and with the
+    narrowed test sweep's config, `NARROW_CONFIG`)."""
     shutil.copytree(REPO, dest, ignore=IGNORE)
+    (dest / NARROW_CONFIG).write_text(NARROW)
     return dest
 
 
@@ -294,7 +304,7 @@ def test_aggregate_rule_fails_on_a_truncated_curve(clean_run: Path, tmp_path: Pa
     victim = curve_files(work)[0]
     victim.write_bytes(victim.read_bytes()[:1000])
     os.utime(victim)  # newer than sweep.nc
-    proc = snakemake(work, "--cores", "1", "--configfile", "config/test.yaml",
+    proc = snakemake(work, "--cores", "1", "--configfile", "config/test.yaml", NARROW_CONFIG,
                      "--forcerun", "aggregate")
     log = (work / "logs/aggregate.log").read_text() if (work / "logs/aggregate.log").exists() \
         else ""

@@ -24,6 +24,8 @@ import yaml
 xr = pytest.importorskip("xarray")
 pytest.importorskip("snakemake")
 
+import snakemake_runner  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 #: The rule files of plain Python helpers, in the Snakefile's order.
 RULE_HELPERS = ("config_checks.smk", "cases.smk", "resources.smk", "targets.smk",
@@ -57,7 +59,11 @@ IGNORE = shutil.ignore_patterns(
 
 
 def snakemake(workdir: Path, *args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run Snakemake in `workdir`, capturing its (merged) output."""
+    """Run Snakemake in `workdir`, capturing its (merged) output.  Dry runs and
+    lint run in a child of a process that imported Snakemake and brushcore
+    already (`snakemake_runner`): the same command, 3-4 s less start-up each."""
+    if not snakemake_runner.needs_fresh_process(args):
+        return snakemake_runner.run(workdir, *args, timeout=timeout)
     return subprocess.run(
         [*SNAKEMAKE, *args], cwd=workdir, capture_output=True, text=True, timeout=timeout
     )
