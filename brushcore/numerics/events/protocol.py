@@ -450,7 +450,7 @@ class _Engine:
         """One row of the curve.  Right after a move the force is that of
         sigma corrected by its error estimate (`_fix`), as the event itself
         was placed: a random 64 brush's F_ad (kbar 1e-2, 128^2) was 1.1e-5
-        off exact mode with the force as carried, 4.4e-7 corrected."""
+        off exact mode with the force as carried, 3.9e-7 corrected."""
         r, op = self.rec, self.op
         sig = self.sig if self._fix is None else self.sig + self._fix
         self._fix = None
