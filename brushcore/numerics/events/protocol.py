@@ -30,6 +30,7 @@ its approach a straight line, and it costs exactly what that pull-off does.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass
 
@@ -41,8 +42,8 @@ from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.validation import is_real, normalise, require
 from brushcore.numerics.events.pulloff import (PRECISION_BAND, SETTLE_FLOOR, SETTLE_SAFETY,
-                                               Progress, SolverError, margins, settles,
-                                               pull_off)
+                                               Progress, SolverError, band_margin, margins,
+                                               settles, pull_off)
 
 APPROACH, START, RETRACT = -1, 0, 1
 #: Relative round-off of a gap, g = d - z - f_p / k_p - u, in units of its
@@ -662,7 +663,7 @@ class _Engine:
                 return t, reach, rtol
             e = xp.abs(err) + t * xp.abs(err1)  # of sigma at t
             margin = margins(SETTLE_SAFETY, e, float(xp.max(e)), xp)
-            margin = margin + band * float(xp.max(xp.abs(sig + t * sig1)))
+            margin = margin + band_margin(band, sig + t * sig1, xp)
             margin = margin + rate * float(margin[first] / rate[first])  # t's own error
             if not bool(xp.any(~reach & (below < margin))):
                 return t, reach, rtol
@@ -673,12 +674,9 @@ class _Engine:
         """Re-solve sigma and sigma_1 at the current d to ``rtol``, in double
         precision (their fields afresh where the transforms were float32)."""
         op = self.op
-        if not op.can_refine:
-            self._solve_state(rtol=rtol)
-            self._solve_unit(rtol)
-            return
-        with op.refined():
-            self._stale_u = self._stale_u1 = True
+        with op.refined() if op.can_refine else contextlib.nullcontext():
+            if op.can_refine:  # float32's fields would stay in the double solves
+                self._stale_u = self._stale_u1 = True
             self._solve_state(rtol=rtol)
             self._solve_unit(rtol)
 

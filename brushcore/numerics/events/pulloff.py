@@ -182,7 +182,7 @@ def margins(safety: float, z, zmax: float, xp):
     return safety * xp.abs(z) + DECISION_FLOOR * zmax
 
 
-def _band(band: float, x, xp) -> float:
+def band_margin(band: float, x, xp) -> float:
     """``band`` times max|x|: the float32 part of every margin (0 in double)."""
     return band * float(xp.max(xp.abs(x))) if band else 0.0
 
@@ -206,7 +206,7 @@ def _decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     times max|x| (`PRECISION_BAND` while the transforms are float32).
     """
     def decided(x, z, zmax: float) -> bool:
-        margin = margins(DECISION_SAFETY, z, zmax, xp) + _band(band, x, xp)
+        margin = margins(DECISION_SAFETY, z, zmax, xp) + band_margin(band, x, xp)
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
@@ -268,7 +268,7 @@ def settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
 
     def settled(x, z, zmax: float) -> bool:
         margin = margins(SETTLE_SAFETY, z, zmax, xp)
-        verdicts.append(clear(x, margin + _band(band, x, xp)))
+        verdicts.append(clear(x, margin + band_margin(band, x, xp)))
         return verdicts[-1] or (band > 0.0 and clear(x, margin))
     return settled
 
