@@ -27,7 +27,7 @@ from brushcore.model.params import BrushParams
 from brushcore.model.pillar_table import read_pillar_table, save_pillar_table
 from brushcore.model.scales import unit_scales
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.events.protocol import Waypoint, positive_work
+from brushcore.numerics.events.waypoints import Waypoint, positive_work
 from brushcore.validation import ParameterError
 from brushcore.model.provenance import version as _version
 

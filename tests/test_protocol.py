@@ -26,7 +26,8 @@ from brushcore.model.solve import run, run_protocol_curve
 from brushcore.model.layout import build_labels
 from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.linear.precondition import BlockInverse, coarse_inverse
-from brushcore.numerics.events.protocol import dispatches, loop_energy, positive_work, preload_protocol
+from brushcore.numerics.events.protocol import dispatches
+from brushcore.numerics.events.waypoints import loop_energy, positive_work, preload_protocol
 
 EXACT = SolverOptions.exact()  # CG to 1e-8, global cascades: reference results
 

@@ -30,8 +30,8 @@ from brushcore.model.solve import (element_offsets, fft_library_used, load_optio
                                    stiffness_span)
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.events.protocol import (APPROACH, RETRACT, START, Waypoint, loop_energy,
-                                         positive_work, preload_protocol)
+from brushcore.numerics.events.waypoints import (APPROACH, RETRACT, START, Waypoint,
+                                                 loop_energy, positive_work, preload_protocol)
 from brushcore.numerics.events.pulloff import Progress
 from brushcore.validation import ParameterError
 

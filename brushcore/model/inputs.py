@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from brushcore.model.params import MAX_ROUGH, MIN_KBAR, BrushParams
-from brushcore.numerics.events.protocol import KINDS, Waypoint
+from brushcore.numerics.events.waypoints import KINDS, Waypoint
 from brushcore.validation import ParameterError
 
 

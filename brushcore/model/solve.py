@@ -26,7 +26,8 @@ from brushcore.numerics.halfspace.mirror import (Quadrant, cached_mirror_convolv
 from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.linear.precondition import BlockInverse
-from brushcore.numerics.events.protocol import ProtocolCurve, Waypoint, dispatches, run_protocol
+from brushcore.numerics.events.protocol import dispatches, run_protocol
+from brushcore.numerics.events.waypoints import ProtocolCurve, Waypoint
 from brushcore.numerics.events.pulloff import Progress, PullOffCurve, SolverError, pull_off
 from brushcore.numerics.platform.threads import fft_threads
 from brushcore.validation import brief
@@ -204,7 +205,7 @@ def run_protocol_curve(params: BrushParams, protocol: tuple[Waypoint, ...],
     Parameters
     ----------
     params, options : the problem and the numerics
-    protocol : waypoints (see `brushcore.numerics.events.protocol`), e.g. `preload_protocol(P)`
+    protocol : waypoints (see `brushcore.numerics.events.waypoints`), e.g. `preload_protocol(P)`
     heights : protrusion z_p per pillar in label order [length] (default 0);
         a larger z reaches the substrate first
     gap_map : extra gap per element, shape (n, n) [length] (default 0): the
