@@ -22,7 +22,8 @@ import numpy as np
 
 from brushcore import BrushParams, SolverOptions, simulate
 from brushcore.data.aggregate import build_sweep
-from brushcore.data.convergence import QUANTITIES, extrapolate, extrapolate_sweep
+from brushcore.data.convergence import QUANTITIES, extrapolate_sweep
+from brushcore.data.extrapolation import extrapolate
 from brushcore.data.convergence_report import convergence_table, to_markdown
 from brushcore.data.io import write_curve
 from brushcore.numerics.platform.threads import pin_threads

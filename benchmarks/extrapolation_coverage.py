@@ -21,7 +21,7 @@ import argparse
 
 import numpy as np
 
-from brushcore.data.convergence import extrapolate
+from brushcore.data.extrapolation import extrapolate
 
 F0 = 1.7
 MESH_ERROR = 0.03

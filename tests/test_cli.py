@@ -439,7 +439,7 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     values (checked with `extrapolate` on the curves' own numbers)."""
     import xarray as xr
 
-    from brushcore.data.convergence import extrapolate
+    from brushcore.data.extrapolation import extrapolate
 
     paths, values = [], []
     for grid in (48, 64, 96):

@@ -8,12 +8,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from brushcore.data.convergence import (
-    ConvergenceOptions,
-    extrapolate,
-    extrapolate_sweep,
-    is_monotone,
-)
+from brushcore.data.convergence import extrapolate_sweep
+from brushcore.data.extrapolation import ConvergenceOptions, extrapolate, is_monotone
 from brushcore.data.convergence_report import convergence_table, write_tables
 from brushcore.validation import ParameterError
 
@@ -482,7 +478,7 @@ def test_an_order_outside_the_trusted_range_is_flagged_where_nothing_else_explai
 
 
 def opts_trusts(order: float) -> bool:
-    from brushcore.data.convergence import ConvergenceOptions
+    from brushcore.data.extrapolation import ConvergenceOptions
 
     return bool(ConvergenceOptions().trusts(order))
 

@@ -361,7 +361,7 @@ def test_square_punch_stiffness_converges_to_the_square_plates_capacitance(squar
     against 1.15230, 9e-5 apart; the disc of equal area would give 1.12838
     (2 a0 E*), 2.1 % less.
     """
-    from brushcore.data.convergence import extrapolate
+    from brushcore.data.extrapolation import extrapolate
 
     sides = sorted(square_punches)
     per_side = [full_contact_stiffness(square_punches[s]) / s for s in sides]
@@ -380,7 +380,7 @@ def test_rotated_square_punch_stiffness_is_the_square_plates(orientation):
     96 added) against 1.15230; at 30 degrees the staircase is irregular
     (1.14612, 1.14861, 1.14924, and 1.15036 at 96: a fit over the four is
     flagged not asymptotic), so the finest grid is held to 3e-3."""
-    from brushcore.data.convergence import extrapolate
+    from brushcore.data.extrapolation import extrapolate
 
     per_root_area, h = [], []
     for side in (32, 48, 64):

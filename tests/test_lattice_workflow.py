@@ -271,6 +271,7 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
     files get two styles in Fig. 7."""
     from brushcore import SolverOptions, file_params, read_curve, simulate
     from brushcore.data import figures
+    from brushcore.data.figures.common import layout_styles
     from brushcore.data.aggregate import build_sweep, given_inputs
     from brushcore.data.io import write_curve
     from brushcore.data.summary import headline_rows
@@ -302,7 +303,7 @@ def test_sweep_and_figures_tell_a_brush_as_made_from_a_flat_one(tmp_path: Path) 
         float(simulate(file_params(plain, 0.01)).adhesive_force_normalized), rel=1e-12)
     fig = figures.rough_preload(sweep, "file_my_array", 16)
     assert "as made (heights given)" in fig.get_suptitle().replace("\n", " ")
-    styles = figures._layout_styles(["regular", "file_a", "file_b"])
+    styles = layout_styles(["regular", "file_a", "file_b"])
     assert len(set(styles.values())) == 3
     # a rigid Fig. 5 brush keeps its row; NaN (fig5.kbar []) leaves it out
     rows = headline_rows(sweep, fig5_layout="file_plain", fig5_n_pillars=16,
@@ -629,11 +630,11 @@ def test_rigid_tick_keeps_clear_of_the_decade_ticks() -> None:
     """"rigid" stands one decade right of the decade tick at or above the
     stiffest finite kbar: with kbar up to 2 that tick is 10 and rigid is at
     100 (at 20 its label ran into "10")."""
-    from brushcore.data.figures import _rigid_x
+    from brushcore.data.figures.common import rigid_x
 
-    assert _rigid_x(np.array([1e-4, 2.0, math.inf])) == pytest.approx(100.0)
-    assert _rigid_x(np.array([1e-4, 1e-2, math.inf])) == pytest.approx(0.1)
-    assert _rigid_x(np.array([math.inf])) == 1.0
+    assert rigid_x(np.array([1e-4, 2.0, math.inf])) == pytest.approx(100.0)
+    assert rigid_x(np.array([1e-4, 1e-2, math.inf])) == pytest.approx(0.1)
+    assert rigid_x(np.array([math.inf])) == 1.0
 
 
 def test_summary_quotes_the_configs_fig5_brush(shape_sweep, shape_curves) -> None:

@@ -98,7 +98,7 @@ def test_mesh_convergence_of_stiffness(rigid_punches):
     """The stiffness converges to 2 a0 E* at first order in h / a0: extrapolated
     from a = 10, 20, 40 elements it is 1 within 1e-3 (measured 0.99987, order
     1.01), with the errors shrinking grid by grid."""
-    from brushcore.data.convergence import extrapolate
+    from brushcore.data.extrapolation import extrapolate
 
     radii = (10, 20, 40)
     ratios = [full_contact_stiffness(rigid_punches[a]) / (2 * _a0(rigid_punches[a])) for a in radii]

@@ -16,6 +16,7 @@ from brushcore.validation import is_real, normalise, require
 APPROACH, START, RETRACT = -1, 0, 1
 KINDS = ("force", "displacement", "separation")
 
+
 @dataclass(frozen=True)
 class Waypoint:
     """One leg of a protocol: move d until the target is reached.

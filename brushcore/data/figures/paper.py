@@ -1,0 +1,399 @@
+"""The paper's Figures 5-8 drawn from a sweep dataset, and `lattices`, which
+compares layouts and pillar shapes of the same N.
+
+Each function takes the dataset of `brushcore.data.aggregate.build_sweep`
+and returns a `matplotlib.figure.Figure`.  Brushes or layouts absent from a
+sweep are skipped, and a panel with nothing to show says so instead of
+failing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import xarray as xr
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
+from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
+
+from brushcore.model import theory
+from brushcore.model.lattices import hexagonal_lattice
+from brushcore.model.shapes import parse_shape_label
+from brushcore.data.aggregate import SHAPE_DIM
+from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index,
+                                  shape_slice, snapshots)
+from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
+from brushcore.data.figures.common import (FAD_LABEL, HEX_LABEL, HEX_LINE, K_LABEL, LAYOUT_COLORS,
+                                           SHAPE_MARKERS, SNAPSHOT_CMAP, W_LABEL,
+                                           break_before_rigid, brush_colors, kbar_axes, kbar_text,
+                                           kbar_x, layout_styles, new_figure, no_data, panel_title,
+                                           rigid_ticks, rigid_x, shape_text, sweep_layouts,
+                                           sweep_phi)
+
+
+#: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
+SOFT_WORK_FLOOR = 0.3
+
+
+def _case(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float,
+          seed: int) -> xr.Dataset | None:
+    """One case of a sweep without a grid dimension, or None when absent."""
+    try:
+        case = sweep.sel(layout=layout, n_pillars=n_pillars, seed=seed)
+    except KeyError:
+        return None
+    at = kbar_index(case["kbar"].values, kbar)
+    return None if at is None else case.isel(kbar=at)
+
+
+def _curve(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int):
+    """(d, F) normalised of one run without padding, or None when absent."""
+    case = _case(sweep, layout, n_pillars, kbar, seed)
+    if case is None:
+        return None
+    d = case["displacement_normalized"].values
+    f = case["force_normalized"].values
+    ok = np.isfinite(d) & np.isfinite(f)
+    return (d[ok], f[ok]) if ok.any() else None
+
+
+def _grid_used(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float,
+               seed: int) -> int | None:
+    """The grid `finest_grid` drew a case at, or None (a sweep without grids)."""
+    case = _case(sweep[["grid_used"]], layout, n_pillars, kbar, seed) \
+        if "grid_used" in sweep else None
+    value = math.nan if case is None else float(case["grid_used"])
+    return int(value) if math.isfinite(value) else None
+
+
+def fig5(
+    sweep: xr.Dataset,
+    *,
+    n_pillars: int = 256,
+    kbar: Sequence[float] = (0.455, 0.005, 0.001),
+    layout: str = "regular",
+    seed: int = 0,
+    shape: str = "disc",
+) -> Figure:
+    """Fig. 5: F-d curves of one brush at a few kbar, contact snapshots beside.
+
+    Numbered dots on each curve mark the steps of the snapshots to its right
+    (red: attached element, grey: detached, white: no pillar): the label map
+    itself, so squares, ellipses and lattices show as they were meshed.
+    `shape` (a `shape_label`) picks the pillars where the sweep holds
+    several shapes and names them in the title; of a sweep with rough
+    cases the flat brushes are drawn.
+    """
+    if SHAPE_DIM in sweep.dims:
+        sweep = shape_slice(sweep, shape)
+    sweep = finest_grid(flat_slice(sweep, None))  # one curve per case: the best-resolved one
+    cases = [k for k in kbar if _curve(sweep, layout, n_pillars, k, seed) is not None]
+    n_snap = int(sweep.sizes.get("snapshot", 0))
+    rows = max(len(cases), 1)
+    fig = new_figure(3.2 + 1.3 * n_snap, 2.4 * rows)
+    grid = fig.add_gridspec(rows, 1 + n_snap, width_ratios=[3.0] + [1.0] * n_snap)
+    side = math.isqrt(n_pillars)
+    name = f"{side} x {side}" if layout == "regular" and side * side == n_pillars else str(n_pillars)
+    pillars = "" if shape == "disc" else f" ({shape_text(shape)})"
+    fig.suptitle(f"{layout} brush, N = {name} pillars{pillars}")
+    if not cases:
+        no_data(fig.add_subplot(grid[0, :]), f"no flat {layout} runs with N = {n_pillars}")
+        return fig
+    for row, k in enumerate(cases):
+        d, f = _curve(sweep, layout, n_pillars, k, seed)
+        ax = fig.add_subplot(grid[row, 0])
+        ax.plot(d, f, color="C0", lw=1.2)
+        # A preloaded case is drawn as its loop: approach (F < 0), then retraction.
+        loop = ", from the preload" if float(np.min(f)) < 0.0 else ""
+        ax.set_title(f"({chr(ord('a') + row)}) " + r"$\bar k$" + f" = {kbar_text(k)}{loop}",
+                     loc="left")
+        ax.set_xlabel(r"$\bar d = d / d_K$")
+        ax.set_ylabel(r"$\bar F = F / F_K$")
+        snap = snapshots(sweep, layout, n_pillars, k, seed, grid=_grid_used(
+            sweep, layout, n_pillars, k, seed))
+        if snap is None:
+            if n_snap:  # the sweep keeps one grid's maps (`build_sweep`): say so
+                grids = sorted({int(g) for g in sweep["case_grid"].values}) \
+                    if "case_grid" in sweep else []
+                kept = f" (kept on n = {', '.join(map(str, grids))} only)" if grids else ""
+                empty = fig.add_subplot(grid[row, 1:])
+                empty.set_axis_off()
+                no_data(empty, f"no contact snapshots of this case in the sweep{kept}")
+            continue
+        # Numbered in the order of their steps: a protocol's file keeps the
+        # "maximum force" map after "separated", though it comes first.
+        stored = [int(s) for s in snap["snapshot_step"].values]
+        order = sorted(range(len(stored)), key=lambda j: (stored[j] < 0, stored[j]))
+        steps = [stored[j] for j in order]
+        for slot, j in enumerate(order):
+            image_ax = fig.add_subplot(grid[row, 1 + slot])
+            image_ax.set_axis_off()
+            if stored[j] < 0:
+                continue
+            image_ax.imshow(snap["contact_snapshot"].values[j] + 1, cmap=SNAPSHOT_CMAP,
+                            vmin=0, vmax=2, interpolation="nearest", origin="lower")
+            image_ax.set_title(f"{slot + 1}: {snap['snapshot_label'].values[j]}", fontsize=7)
+        # One dot per distinct step; snapshots sharing a step share its label ("1,2").
+        for step in sorted({s for s in steps if 0 <= s < d.size}):
+            label = ",".join(str(j + 1) for j, s in enumerate(steps) if s == step)
+            ax.plot(d[step], f[step], "o", ms=4, color="C3")
+            ax.annotate(label, (d[step], f[step]), textcoords="offset points",
+                        xytext=(3, 3), fontsize=7)
+    if n_snap:  # the maps' colour key
+        fig.legend(handles=[Patch(color=SNAPSHOT_CMAP(2), label="attached"),
+                            Patch(color=SNAPSHOT_CMAP(1), label="detached")],
+                   loc="upper right", ncols=2, fontsize=7, frameon=False)
+    return fig
+
+
+def _shape_note(sweep: xr.Dataset) -> str:
+    """" (disc pillars)" where the sweep is one shape of several (`shape_slice`)."""
+    shape = sweep.attrs.get(SHOWN_SHAPE)
+    return f" ({shape} pillars)" if shape else ""
+
+
+def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, object]]:
+    layouts = sweep_layouts(sweep)
+    fig = new_figure(4.2 * max(len(layouts), 1), 3.6)
+    # One y range for every layout: the panels are read against each other.
+    axes = fig.subplots(1, max(len(layouts), 1), squeeze=False, sharey=True)[0]
+    fig.suptitle(title + _shape_note(sweep))
+    return fig, dict(zip(layouts, axes))
+
+
+def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, xr.DataArray]]:
+    """(N, seed-mean of `name` against kbar) for every brush of a layout that ran."""
+    series = [(int(n), seed_mean(sweep, name, layout, int(n))) for n in sweep.n_pillars.values]
+    return [(n, s) for n, s in series if s.size]
+
+
+def fig6(sweep: xr.Dataset) -> Figure:
+    """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
+
+    The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
+    punch F_ad = 1 is dotted; a hexagonal panel adds each N's lattice at its
+    local filling factor (`theory.hexagonal_rigid_limit`, dash-dot).  With
+    several seeds the bars span min to max.
+    Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
+    to the finite kbar.
+    """
+    sweep = finest_grid(sweep)
+    fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
+    colors = brush_colors(sweep.n_pillars.values)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    x_inf = rigid_x(kbars)
+    for index, (layout, ax) in enumerate(axes.items()):
+        phi = sweep_phi(sweep, layout)
+        brushes = _brush_series(sweep, "adhesive_force_normalized", layout)
+        for n, series in brushes:
+            runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
+            runs = runs.sel(kbar=series.kbar)
+            low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
+            x, y, lo, hi = break_before_rigid(x_inf, kbar_x(series.kbar, x_inf), series,
+                                               low, high)
+            seeds = int(runs.notnull().any("kbar").sum())  # seeds this brush ran
+            ax.errorbar(x, y, yerr=[y - lo, hi - y], marker="o", ms=4, capsize=2,
+                        color=colors[n], label=f"N = {n}" + (
+                            f" (mean, min-max of {seeds} seeds)" if seeds > 1 else ""))
+        kbar_axes(ax, panel_title(index, layout), FAD_LABEL, kbars, x_inf)
+        if not brushes:
+            no_data(ax, f"no flat {layout} runs")
+            continue
+        if math.isfinite(phi):
+            ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
+                       label=rf"rigid limit $\varphi^{{-1/4}}$ = {theory.rigid_limit(phi):.2f}")
+            if layout == "hexagonal":  # N that no lattice fills stand denser
+                for i, (n, _) in enumerate(brushes):
+                    ax.axhline(theory.hexagonal_rigid_limit(phi, n), color=colors[n],
+                               ls=HEX_LINE, lw=1.0, label=HEX_LABEL if i == 0 else None)
+        ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
+        ax.legend(fontsize=7)
+    return fig
+
+
+def fig7(sweep: xr.Dataset) -> Figure:
+    """Fig. 7: soft-plateau adhesive force against N, log-log, with N^(1/4).
+
+    The plateau value is F_ad at the softest kbar run for each brush; a
+    brush whose two softest kbar differ by more than `PLATEAU_RTOL` has not
+    reached it (`brushcore.data.summary.on_plateau`) and is drawn in grey
+    with its layout's marker, left out of the fit.  Each layout gets its own
+    fit F = c N^(1/4), drawn in its colour, with 1/c (the paper's 1.2-1.3)
+    and the free exponent printed on the plot.
+    """
+    sweep = finest_grid(sweep)
+    fig = new_figure(4.6, 3.8)
+    ax = fig.add_subplot()
+    ax.set_title("Soft plateau of the adhesive force" + _shape_note(sweep))
+    fitted: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # layout -> plateau (N, F)
+    styles = layout_styles(sweep_layouts(sweep))
+    off = []  # (N, F) of brushes whose softest kbar is not on the plateau
+    for layout in sweep_layouts(sweep):
+        points = [(int(n), *soft_plateau(sweep, layout, int(n)),
+                   on_plateau(sweep, layout, int(n))) for n in sweep.n_pillars.values]
+        points = [point for point in points if math.isfinite(point[2])]
+        off += [(layout, n, f) for n, _, f, reached in points if not reached]
+        points = [(n, k, f) for n, k, f, reached in points if reached]
+        if not points:
+            continue
+        n, k, f = map(np.asarray, zip(*points))
+        fitted[layout] = (n, f)
+        ax.plot(n, f, styles[layout][1], ms=6, mfc="none",
+                color=styles[layout][0], label=f"{layout} (min " + r"$\bar k$"
+                + f" = {k.min():g})")
+    for layout in dict.fromkeys(lay for lay, _, _ in off):  # grey, the layout's marker
+        n_off, f_off = zip(*[(n, f) for lay, n, f in off if lay == layout])
+        ax.plot(n_off, f_off, styles[layout][1], ms=6, color="0.55",
+                label=f"{layout}: not on a plateau (not fitted)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    # Plain 1-2-5 ticks: decade-only log ticks say little over a range like 64 ... 2304.
+    for axis, subs in ((ax.xaxis, (1.0, 2.0, 5.0)), (ax.yaxis, np.arange(1.0, 10.0))):
+        axis.set_major_locator(LogLocator(subs=subs))
+        axis.set_major_formatter(ScalarFormatter())
+        axis.set_minor_formatter(NullFormatter())
+    ax.set_xlabel("number of pillars N")
+    ax.set_ylabel(FAD_LABEL + " (soft plateau)")
+    drawn = [int(v) for n, _ in fitted.values() for v in n] + [n for _, n, _ in off]
+    if not drawn:
+        no_data(ax, "no flat runs")
+        return fig
+    span = np.geomspace(min(drawn) / 1.5, max(drawn) * 1.5, 50)
+    ax.plot(span, theory.soft_limit(span), "k-", lw=1.2, label=r"$N^{1/4}$ (eq. 6)")
+    if not fitted:  # nothing to fit: say so, and still explain the grey points
+        ax.text(0.03, 0.97, "no brush on its soft plateau: no fit", transform=ax.transAxes,
+                va="top", fontsize=8)
+        ax.legend(fontsize=7, loc="lower right")
+        return fig
+    # One fit per layout (the paper's 1.2-1.3 is a range; pooled layouts
+    # would put one layout's prefactor offset into the other's slope).
+    lines = [r"$N^{1/4}/\bar F_{ad}$ = 1/c (paper 1.2-1.3):"]
+    for layout, (n, f) in fitted.items():
+        fit = fit_soft_prefactor(n, f)
+        ax.plot(span, fit["prefactor"] * theory.soft_limit(span), "--", lw=1,
+                color=styles[layout][0],
+                label=rf"{layout} fit ${fit['prefactor']:.3f}\,N^{{1/4}}$")
+        line = f"{layout} {fit['ratio']:.2f}"
+        if math.isfinite(fit["exponent"]):
+            line += f", free exponent {fit['exponent']:.3f}"
+        if len(set(n.tolist())) == 1:
+            line += f" (one N only, {int(n[0])}: no test of the exponent)"
+        lines.append(line)
+    ax.text(0.03, 0.97, "\n".join(lines), transform=ax.transAxes, va="top", fontsize=7,
+            bbox={"facecolor": "white", "alpha": 0.85, "edgecolor": "none"})
+    ax.legend(fontsize=7, loc="lower right")
+    return fig
+
+
+def fig8(sweep: xr.Dataset) -> Figure:
+    """Fig. 8: work of separation against kbar per N, with the soft limit of eqs. 25-26.
+
+    Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
+    (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch.
+    Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
+    to the finite kbar.
+    """
+    sweep = finest_grid(sweep)
+    fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
+    colors = brush_colors(sweep.n_pillars.values)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    x_inf = rigid_x(kbars)
+    for index, (layout, ax) in enumerate(axes.items()):
+        phi = sweep_phi(sweep, layout)
+        brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
+        for n, series in brushes:
+            ax.plot(*break_before_rigid(x_inf, kbar_x(series.kbar, x_inf), series), "o-",
+                    ms=4, color=colors[n], label=f"N = {n}")
+            if math.isfinite(phi):
+                # Only where the springs' energy matters; it falls as 1/kbar (0 if rigid).
+                kbar = series.kbar.values
+                soft = np.asarray(theory.soft_work(n, sweep_phi(sweep, layout, n), kbar))
+                keep = soft >= SOFT_WORK_FLOOR
+                ax.plot(kbar[keep], soft[keep], "--", lw=1, color=colors[n])
+        ax.set_yscale("log")
+        kbar_axes(ax, panel_title(index, layout), W_LABEL, kbars, x_inf)
+        if not brushes:
+            no_data(ax, f"no flat {layout} runs")
+            continue
+        ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
+        ax.plot([], [], "k--", lw=1,
+                label=r"soft limit $2\sqrt{\varphi/\pi}/(\sqrt{N}\bar k)$ (eqs. 25-26)")
+        ax.legend(fontsize=7)
+    return fig
+
+
+def _shape_labels(sweep: xr.Dataset) -> list[str]:
+    """Pillar shapes of a sweep: its shape coordinate, or discs only."""
+    return [str(v) for v in sweep[SHAPE_DIM].values] if SHAPE_DIM in sweep.dims else ["disc"]
+
+
+def _lattice_series(sweep: xr.Dataset, n_pillars: int) -> list[tuple[str, str, xr.DataArray]]:
+    """(layout, shape, F_ad on (kbar, seed)) of every brush of N pillars that ran."""
+    out = []
+    for shape in _shape_labels(sweep):
+        one = shape_slice(sweep, shape)["adhesive_force_normalized"]
+        for layout in sweep_layouts(sweep):
+            runs = one.sel(layout=layout, n_pillars=n_pillars)
+            runs = runs.dropna("kbar", how="all")
+            if runs.sizes["kbar"]:
+                out.append((layout, shape, runs))
+    return out
+
+
+def lattices(sweep: xr.Dataset) -> Figure:
+    """Adhesive force against kbar for every (layout, shape) of the same N.
+
+    One panel per N run with more than one layout or shape.  Colour is the
+    layout, marker and line style the pillar shape; with several seeds
+    (random layouts) the dots are the mean and the bars span min to max.
+    Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
+    to the finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, dashed) and
+    the soft limit N^(1/4) of discs (eq. 6, dotted: other shapes let go below
+    Kendall's force); grey dash-dot: the hexagonal lattice's rigid limit at its
+    local filling factor phi / fill (`theory.hexagonal_rigid_limit`).
+
+    Parameters
+    ----------
+    sweep : flat brushes of a sweep with every shape (`flat_slice(sweep, None)`).
+    """
+    sweep = finest_grid(sweep[["adhesive_force_normalized"]])
+    series = {int(n): _lattice_series(sweep, int(n)) for n in sweep.n_pillars.values}
+    compared = {n: s for n, s in series.items() if len(s) > 1} or \
+        {n: s for n, s in series.items() if s}
+    fig = new_figure(5.2 * max(len(compared), 1), 4.0)
+    axes = fig.subplots(1, max(len(compared), 1), squeeze=False)[0]
+    fig.suptitle("Adhesive force of lattices and pillar shapes of the same N")
+    if not compared:
+        no_data(axes[0], "no runs")
+        return fig
+    phi = sweep_phi(sweep)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    x_inf = rigid_x(kbars)
+    for index, (ax, (n, brushes)) in enumerate(zip(axes, compared.items())):
+        for layout, shape, runs in brushes:
+            x, mean, low, high = break_before_rigid(
+                x_inf, kbar_x(runs.kbar.values, x_inf), runs.mean("seed", skipna=True),
+                runs.min("seed", skipna=True), runs.max("seed", skipna=True))
+            marker, line = SHAPE_MARKERS.get(parse_shape_label(shape)["shape"], ("^", "-."))
+            ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker=marker, ls=line, ms=4,
+                        capsize=2, color=LAYOUT_COLORS.get(layout, f"C{3 + index}"),
+                        mfc="none" if shape != "disc" else None,
+                        label=f"{layout}, {shape_text(shape)}")
+        if math.isfinite(phi):
+            ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
+                       label=r"rigid limit $\varphi^{-1/4}$")
+            if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
+                ax.axhline(theory.hexagonal_rigid_limit(phi, n), color="0.45",
+                           ls=HEX_LINE, lw=1.0, label=HEX_LABEL)
+        # Kendall's force per pillar: squares and ellipses let go below it
+        ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8,
+                   label=r"soft limit $N^{1/4}$ (discs)")
+        ax.set_xscale("log")
+        rigid_ticks(ax, kbars, x_inf)
+        ax.set_title(f"({chr(ord('a') + index)}) N = {n}", loc="left")
+        ax.set_xlabel(K_LABEL)
+        ax.set_ylabel(FAD_LABEL)
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # off the data
+    return fig

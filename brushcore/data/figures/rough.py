@@ -1,0 +1,296 @@
+"""Figures of rough, graded and preloaded brushes: F_ad against roughness
+and preload from a sweep, and one protocol curve's loops and load sharing.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import numpy as np
+import xarray as xr
+from matplotlib.figure import Figure
+
+from brushcore.model import theory
+from brushcore.model.inputs import parse_protocol
+from brushcore.model.layout_file import curve_layout
+from brushcore.data.views import (finest_grid)
+from brushcore.data.figures.common import (FAD_LABEL, SNAPSHOT_CMAP, kbar_text, new_figure,
+                                           no_data, sweep_phi)
+
+
+#: The rough figure draws the elastic foundation's soft limit at kbar up to
+#: this: every pillar still attached at F_ad, which stiffer brushes are not.
+SOFT_LIMIT_KBAR = 0.01
+
+
+def _rough_series(sweep: xr.Dataset, name: str, layout: str, n: int, kbar: float,
+                  **at: float) -> tuple[xr.DataArray, xr.DataArray, xr.DataArray]:
+    """Seed mean, min and max of a rough-sweep variable for one brush and kbar."""
+    runs = sweep[name].sel(layout=layout, n_pillars=n, kbar=kbar, kbar_spread=0.0, **at)
+    return (runs.mean("seed", skipna=True), runs.min("seed", skipna=True),
+            runs.max("seed", skipna=True))
+
+
+def _rough_ready(sweep: xr.Dataset, fig: Figure) -> bool:
+    if "roughness" in sweep.dims and 0.0 in sweep.kbar_spread.values:
+        return True
+    no_data(fig.add_subplot(), "no rough runs in this sweep")
+    return False
+
+
+def _given(sweep: xr.Dataset, layout: str) -> str:
+    """What a brush as made was given ("heights kbar_values"; ``given_inputs``),
+    "" for a brush of drawn or no heights."""
+    if "given_inputs" not in sweep or layout not in sweep.layout.values:
+        return ""
+    values = np.ravel(sweep["given_inputs"].sel(layout=layout).values)
+    return " ".join(sorted({name for v in values for name in str(v).split()}))
+
+
+#: A brush's given arrays (`BrushParams.given_inputs`) in a title's words:
+#: kbar_values stand for --kbar-file and --kbar-factors alike.
+GIVEN_WORDS = {"kbar_values": "pillar stiffnesses", "gap_map": "gap map"}
+
+
+def _rough_brush_title(what: str, layout: str, n_pillars: int, given: str,
+                       width: float) -> str:
+    """A rough figure's title, wrapped to its ``width`` [in]: a rough brush,
+    or a brush as made with what it was given."""
+    words = ", ".join(GIVEN_WORDS.get(name, name) for name in given.split())
+    brush = (f"the {layout} brush as made ({words} given)" if given
+             else f"a rough {layout} brush")
+    return textwrap.fill(f"{what} {brush}, N = {n_pillars}", max(30, int(11 * width)))
+
+
+def _heights_text(roughness: float, given: str) -> str:
+    """A panel's heights: "roughness S d_K", or "heights given"."""
+    return "heights given" if "heights" in given.split() else (
+        f"roughness {roughness:g} " + r"$d_K$")
+
+
+def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
+                    ) -> Figure:
+    """Adhesive force against roughness per kbar, one panel per preload.
+
+    Bars span the seeds.  Dashed lines are the soft limit (elastic foundation,
+    every pillar attached, large N): N^(1/4) G(S d_K / lambda) with G
+    `theory.gaussian_spread_pull_off` and lambda `theory.foundation_stretch`,
+    drawn for kbar <= `SOFT_LIMIT_KBAR` where it applies.
+    """
+    sweep = finest_grid(sweep)  # one value per case: the best-resolved one
+    fig = new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)), 3.6)
+    if not _rough_ready(sweep, fig):
+        return fig
+    preloads = [float(p) for p in sweep.preload.values]
+    axes = fig.subplots(1, len(preloads), squeeze=False)[0]
+    phi = sweep_phi(sweep, layout, n_pillars)
+    kbars = [float(k) for k in sweep.kbar.values]
+    colors = {k: f"C{i}" for i, k in enumerate(kbars)}
+    s_axis = np.asarray(sweep.roughness.values, dtype=float)
+    given = _given(sweep, layout)  # heights given, not drawn: no Gaussian soft limit
+    soft_drawn = False
+    protocol = sweep.attrs.get("protocol_normalized")  # its loads stand for the preload
+    for ax, preload in zip(axes, preloads):
+        for kbar in kbars:
+            mean, low, high = _rough_series(sweep, "adhesive_force_normalized", layout,
+                                            n_pillars, kbar, preload=preload)
+            if not np.isfinite(mean.values).any():
+                continue
+            ax.errorbar(s_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
+                        capsize=2, color=colors[kbar], label=rf"$\bar k$ = {kbar_text(kbar)}")
+            if np.isfinite(kbar) and kbar <= SOFT_LIMIT_KBAR and s_axis.max() > 0 and not given:
+                span = np.linspace(0.0, s_axis.max(), 60)
+                lam = float(theory.foundation_stretch(n_pillars, phi, kbar))
+                soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
+                ax.plot(span, theory.soft_limit(n_pillars) * np.asarray(soft), "--", lw=1,
+                        color=colors[kbar])
+                soft_drawn = True
+        ax.set_title(f"preload {preload:g} " + r"$F_K$" if protocol is None else
+                     "last retraction of\n" + textwrap.fill(protocol, 36), fontsize=8)
+        ax.set_xlabel(r"roughness $S$ [$d_K$]")
+        ax.set_ylabel(FAD_LABEL)
+    if soft_drawn:
+        axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
+    _side_legend(fig, axes)
+    fig.suptitle(_rough_brush_title("Adhesive force of", layout, n_pillars, given,
+                                    fig.get_figwidth()))
+    return fig
+
+
+def _side_legend(fig: Figure, axes) -> None:
+    """One legend for panels that share their lines, right of them, where it
+    covers no data (a legend per panel sat on the curves)."""
+    handles: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    if handles:
+        # centred: at the top it ran into the title of a one-panel figure
+        fig.legend(list(handles.values()), list(handles), loc="outside right center", fontsize=7)
+
+
+def _no_false_zoom(ax, span: float = 0.05) -> None:
+    """Keep a y axis from magnifying differences below ``span`` of its values
+    (a flat brush's F_ad at two preloads differs by CG's 1e-7, which
+    matplotlib's autoscale and offset label drew as a steep drop)."""
+    lo, hi = ax.get_ylim()
+    scale = max(abs(lo), abs(hi))
+    if hi - lo < span * scale:
+        middle = 0.5 * (lo + hi)
+        ax.set_ylim(middle - 0.5 * span * scale, middle + 0.5 * span * scale)
+    ax.ticklabel_format(axis="y", useOffset=False)
+
+
+def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
+                  ) -> Figure:
+    """Adhesive force against preload per kbar, one panel per roughness."""
+    sweep = finest_grid(sweep)  # one value per case: the best-resolved one
+    fig = new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
+    if not _rough_ready(sweep, fig):
+        return fig
+    given = _given(sweep, layout)
+    # a panel per roughness this brush ran (a brush given heights: S = 0 alone)
+    ran = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n_pillars,
+                                                 kbar_spread=0.0)
+    roughs = [float(r) for r in sweep.roughness.values
+              if np.isfinite(ran.sel(roughness=r).values).any()] or [0.0]
+    axes = fig.subplots(1, len(roughs), squeeze=False)[0]
+    kbars = [float(k) for k in sweep.kbar.values]
+    p_axis = np.asarray(sweep.preload.values, dtype=float)
+    protocol = sweep.attrs.get("protocol_normalized")  # one protocol: preload 0 alone
+    first = _first_load(protocol)
+    if first is not None:  # the load its first waypoint presses to, not "preload 0"
+        p_axis = np.full_like(p_axis, first)
+    for ax, rough in zip(axes, roughs):
+        for i, kbar in enumerate(kbars):
+            mean, low, high = _rough_series(sweep, "adhesive_force_normalized", layout,
+                                            n_pillars, kbar, roughness=rough)
+            if not np.isfinite(mean.values).any():
+                continue
+            ax.errorbar(p_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
+                        capsize=2, color=f"C{i}", label=rf"$\bar k$ = {kbar_text(kbar)}")
+        ax.set_title(_heights_text(rough, given) if protocol is None else
+                     _heights_text(rough, given) + ", last retraction of\n"
+                     + textwrap.fill(protocol, 36), fontsize=8 if protocol else 9)
+        ax.set_xlabel(r"preload [$F_K$]" if protocol is None else
+                      r"load of the protocol's first waypoint [$F_K$]" if first is not None
+                      else r"preload [$F_K$] (0: the protocol starts with a displacement)")
+        ax.set_ylabel(FAD_LABEL)
+        _no_false_zoom(ax)
+    _side_legend(fig, axes)
+    fig.suptitle(_rough_brush_title("Adhesive force against preload of", layout, n_pillars,
+                                    given, fig.get_figwidth()))
+    return fig
+
+
+def _first_load(protocol: str | None) -> float | None:
+    """The preload [F_K] a protocol's first waypoint presses to
+    ("force:-2.0, ..." gives 2), or None (no protocol, or it starts
+    otherwise)."""
+    if not protocol:
+        return None
+    first = parse_protocol(protocol)[0]
+    return -first.value if first.kind == "force" else None
+
+
+def _pull_ranges(curve: xr.Dataset) -> list[tuple[int, int]]:
+    """(first, last) step of every retraction branch; files without ``pull_*``
+    (written before 2026-12-06) give their last one, ``retraction``."""
+    if "pull_first_step" in curve:
+        return list(zip(curve["pull_first_step"].values.tolist(),
+                        curve["pull_last_step"].values.tolist()))
+    back = np.flatnonzero(curve["retraction"].values) if "retraction" in curve else []
+    return [(int(back[0]), int(back[-1]))] if len(back) else []
+
+
+def rough_loop(curve: xr.Dataset) -> Figure:
+    """The approach-retract loop (every cycle of a protocol) with the contact
+    at the first waypoint (the preload) and at F_ad.
+
+    Left: F / F_K against d / d_K, approaches and retractions in two colours
+    (compression is negative), the preload and each retraction's F_ad
+    marked.  Right: the contact maps the curve file keeps at those two
+    stages (red attached, grey detached pillar elements).
+    """
+    fig = new_figure(10.5, 3.6)
+    ax, *maps = fig.subplots(1, 3, width_ratios=[1.6, 1, 1])
+    d = curve["displacement_normalized"].values
+    f = curve["force_normalized"].values
+    pulls = _pull_ranges(curve) or [(0, d.size - 1)]
+    # Approaches run from the end of one pull (first touch) to the start of the next.
+    starts = [0] + [last for _, last in pulls]
+    ends = [first for first, _ in pulls] + [d.size - 1]
+    for k, (a, b) in enumerate(zip(starts, ends)):
+        if b > a:
+            ax.plot(d[a:b + 1], f[a:b + 1], color="C0", lw=1,
+                    label="approach" if k == 0 else None)
+    for k, (a, b) in enumerate(pulls):
+        ax.plot(d[a:b + 1], f[a:b + 1], color="C3", lw=1, label="retraction" if k == 0 else None)
+        i = a + int(np.argmax(f[a:b + 1]))
+        if f[i] > 0:
+            name = rf"$\bar F_{{ad}}$ = {f[i]:.3g}" if len(pulls) == 1 else \
+                rf"retraction {k}: $\bar F_{{ad}}$ = {f[i]:.3g}"
+            ax.plot(d[i], f[i], "^", color="k" if k == len(pulls) - 1 else "0.5", label=name)
+    i_pre = int(np.nanargmin(f))
+    ax.plot(d[i_pre], f[i_pre], "kv", label=rf"largest load {-f[i_pre]:.3g} $F_K$"
+            if len(pulls) > 1 else rf"preload {-f[i_pre]:.3g} $F_K$")
+    ax.axhline(0.0, color="0.6", lw=0.5)
+    ax.set_xlabel(r"$\bar d = d / d_K$")
+    ax.set_ylabel(r"$\bar F = F / F_K$ (tensile > 0)")
+    ax.legend(fontsize=7)
+    labels = [str(s) for s in curve["snapshot_label"].values] if "snapshot_label" in curve else []
+    first = labels[0] if labels and labels[0] != "maximum force" else "preload"
+    for axm, stage in zip(maps, (first, "maximum force")):
+        axm.set_axis_off()
+        if stage not in labels:
+            no_data(axm, f"no map at {stage}")
+            continue
+        state = curve["contact_snapshot"].isel(snapshot=labels.index(stage)).values
+        axm.imshow(state + 1, cmap=SNAPSHOT_CMAP, vmin=0, vmax=2, origin="lower",
+                   interpolation="nearest")
+        title = {"preload": "the preload", "maximum force": r"$F_{ad}$"}.get(stage, stage)
+        axm.set_title("contact at " + title, fontsize=9)
+    a = curve.attrs
+    fig.suptitle(f"{curve_layout(a)} brush, N = {a.get('n_pillars')}, "
+                 rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, "
+                 + _heights_text(float(a.get('roughness', 0.0)), str(a.get("given_inputs", "")))
+                 + f", seed {a.get('seed')}")
+    return fig
+
+
+def load_sharing(curve: xr.Dataset) -> Figure:
+    """Force of every pillar at F_ad against its height.
+
+    Forces are in units of the mean pillar force at F_ad (F_ad / N), heights
+    in d_K; colour is the pillar's kbar.  Equal load sharing is the line at 1;
+    a rough stiff brush loads its tallest pillars, a soft one spreads the load.
+    A flat pull-off's file holds the forces alone: its pillars stand at
+    height 0 on the brush's kbar.
+    """
+    fig = new_figure(5.0, 3.8)
+    ax = fig.subplots()
+    if "pillar_force_at_adhesive_force" not in curve:
+        no_data(ax, "no per-pillar forces in this curve")
+        return fig
+    force = curve["pillar_force_at_adhesive_force"].values
+    mean = float(curve["adhesive_force"]) / force.size
+    flat = "pillar_height_normalized" not in curve
+    height = np.zeros(force.size) if flat else curve["pillar_height_normalized"].values
+    kbar = (np.full(force.size, float(curve.attrs["kbar"])) if flat
+            else curve["pillar_kbar"].values)
+    finite = np.isfinite(kbar)
+    art = ax.scatter(height, force / mean, c=np.where(finite, kbar, np.nan), s=12,
+                     cmap="viridis", label="pillars")
+    if finite.any() and np.ptp(kbar[finite]) > 0:
+        fig.colorbar(art, ax=ax, label=r"pillar $\bar k$")
+    ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="equal sharing")
+    ax.axhline(0.0, color="0.7", lw=0.5)
+    ax.set_xlabel(r"pillar height $z_p / d_K$")
+    ax.set_ylabel(r"pillar force at $F_{ad}$ / ($F_{ad}/N$), tensile > 0")
+    ax.legend(fontsize=7)
+    a = curve.attrs
+    ax.set_title(f"N = {a.get('n_pillars')}, " + rf"$\bar k$ = {float(a.get('kbar')):g}, "
+                 + _heights_text(float(a.get('roughness', 0.0)), str(a.get("given_inputs", ""))),
+                 fontsize=9)
+    return fig
