@@ -74,9 +74,19 @@ def test_sweep_keeps_every_parameter(curve_files):
 def test_convergence_is_cf_clean(curve_files, tmp_path):
     from brushcore.data.convergence import extrapolate_sweep, write_dataset
 
+    import warnings
+
+    import xarray as xr
+
     path = tmp_path / "convergence.nc"
-    write_dataset(extrapolate_sweep(build_sweep(curve_files)), path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", xr.SerializationWarning)  # no NaN cast silently
+        write_dataset(extrapolate_sweep(build_sweep(curve_files)), path)
     assert cf_errors(path, tmp_path) == []
+    with xr.open_dataset(path) as conv:  # a count, as documented: integers, no fill
+        for q in ("adhesive_force_normalized", "work_of_separation_normalized"):
+            assert conv[f"{q}_n_grids"].dtype.kind == "i"
+            assert "_FillValue" not in conv[f"{q}_n_grids"].encoding
 
 
 def test_sweep_with_shapes_and_hexagonal_is_cf_clean(curve_files, tmp_path):

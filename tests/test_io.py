@@ -46,3 +46,79 @@ def test_an_atomic_write_removes_what_a_killed_one_left(tmp_path):
     write_text_atomic(out, "a,b\n")
     assert out.read_text() == "a,b\n"
     assert not stale.exists() and live.exists()
+
+
+def test_none_is_a_declared_fill_that_xarray_skips(tmp_path) -> None:
+    """"None" in an integer variable (a step map outside the pillars, the
+    branch before the first waypoint, a stage never reached) is its netCDF
+    _FillValue: `xr.open_dataset` reads NaN there, so the mean detachment
+    step is the pillars' (0.89 for 14.1 with the -1s counted, a 16-pillar
+    brush at 64^2), while `read_curve` keeps the numbers as `simulate` made
+    them, its digest checks and the curve writes again as it was."""
+    import warnings
+
+    import numpy as np
+    import xarray as xr
+
+    from brushcore import BrushParams, Waypoint, simulate
+    from brushcore.data.io import read_curve, write_curve
+    from brushcore.model.curve import FILL_VALUES
+
+    flat = simulate(BrushParams("regular", 16, 0.455, 64))
+    with warnings.catch_warnings():  # it never pulls: said, and wanted here
+        warnings.simplefilter("ignore")
+        pressed = simulate(BrushParams("regular", 16, 0.1, 64),
+                           protocol=[Waypoint("force", -1.0), Waypoint("force", -2.0)])
+    for name, curve in (("flat", flat), ("pressed", pressed)):
+        path = tmp_path / f"{name}.nc"
+        write_curve(curve, path)
+        with xr.open_dataset(path) as ds:
+            for var in set(FILL_VALUES) & set(curve.data_vars):
+                raw = curve[var].values
+                none = raw == FILL_VALUES[var]
+                assert np.array_equal(np.isnan(ds[var].values), none), (name, var)
+                assert np.array_equal(ds[var].values[~none], raw[~none]), (name, var)
+            step = flat.detachment_step.values if name == "flat" else None
+            if step is not None:
+                assert float(ds.detachment_step.mean()) == step[step >= 0].mean()
+                assert float(ds.detachment_step.mean()) > 5 * step.mean()
+        back = read_curve(path)
+        for var in set(FILL_VALUES) & set(curve.data_vars):
+            assert back[var].dtype == curve[var].dtype, (name, var)
+            assert np.array_equal(back[var].values, curve[var].values), (name, var)
+            assert "_FillValue" not in back[var].attrs
+        write_curve(back, tmp_path / f"{name}_again.nc")
+        assert read_curve(tmp_path / f"{name}_again.nc").identical(back)
+    # a protocol that never pulls has no maximum force: its map is all fill,
+    # not a map of a detached brush (the brush stays in full contact)
+    assert int(pressed.snapshot_step.values[-1]) == -1
+    assert (pressed.contact_snapshot.values[-1] == FILL_VALUES["contact_snapshot"]).all()
+    assert int(pressed.attached_pillars.values[-1]) == 16
+
+
+def test_a_sweeps_snapshot_padding_is_fill_and_left_out(tmp_path) -> None:
+    """A case with fewer snapshots (a protocol's 3 beside a pull-off's 5) is
+    padded with maps of the fill, not of the flag "no pillar";
+    `views.snapshots` returns the case's own snapshots only."""
+    import numpy as np
+    import xarray as xr
+
+    from brushcore import BrushParams, simulate
+    from brushcore.data.aggregate import build_sweep, write_sweep
+    from brushcore.data.views import snapshots
+
+    flat = simulate(BrushParams("regular", 4, 0.01, 48))
+    rough = simulate(BrushParams("regular", 4, 0.01, 48, roughness=0.3, preload=1.0, seed=1))
+    sweep = build_sweep([flat, rough], keep_snapshots=[("regular", 4)])
+    write_sweep(sweep, tmp_path / "sweep.nc")
+    with xr.open_dataset(tmp_path / "sweep.nc") as ds:
+        mine = snapshots(ds, "regular", 4, 0.01, seed=1, roughness=0.3, preload=1.0)
+        assert mine.snapshot_label.values.tolist() == \
+            rough.snapshot_label.values.tolist()
+        assert np.array_equal(mine.contact_snapshot.values, rough.contact_snapshot.values)
+        assert np.array_equal(mine.snapshot_step.values, rough.snapshot_step.values)
+        full = snapshots(ds, "regular", 4, 0.01)
+        assert full.sizes["snapshot"] == 5 == ds.sizes["snapshot"]
+        padded = ds.contact_snapshot.isel(case=int(np.flatnonzero(
+            ds.case_roughness.values == 0.3)[0]), snapshot=slice(3, None))
+        assert bool(np.isnan(padded.values).all())  # the fill, not -1 (no pillar)

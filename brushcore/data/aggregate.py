@@ -32,7 +32,7 @@ import xarray as xr
 
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID, BrushParams, narrowest_radius
-from brushcore.model.curve import mark_element_units
+from brushcore.model.curve import FILL_VALUES, mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
@@ -717,7 +717,7 @@ def _snapshots(
     keys = [k for k in keys if k.grid == finest]
     n_snap = max(with_snaps[k].sizes["snapshot"] for k in keys)
     ny, nx = with_snaps[keys[0]].sizes["y"], with_snaps[keys[0]].sizes["x"]
-    snap = np.full((len(keys), n_snap, ny, nx), -1, dtype=np.int8)
+    snap = np.full((len(keys), n_snap, ny, nx), FILL_VALUES["contact_snapshot"], dtype=np.int8)
     step = np.full((len(keys), n_snap), -1, dtype=np.int32)
     label = np.full((len(keys), n_snap), "", dtype=object)
     detach = np.full((len(keys), ny, nx), -1, dtype=np.int32)
@@ -737,8 +737,10 @@ def _snapshots(
         "contact_snapshot": xr.DataArray(
             snap, dims=(*dims, "y", "x"), attrs={
                 **first["contact_snapshot"].attrs,
-                "comment": "a case with fewer snapshots than the others is padded with -1 "
-                           "maps, whose snapshot_step is -1 and snapshot_label empty"}
+                "comment": "-2 (the fill): no such snapshot (a case with fewer snapshots than "
+                           "the others is padded with such maps, whose snapshot_step is the "
+                           "fill too and snapshot_label empty), or a stage the run never "
+                           "reached"}
         ),
         "snapshot_step": xr.DataArray(step, dims=dims, attrs=dict(first["snapshot_step"].attrs)),
         "snapshot_label": xr.DataArray(label.astype(str), dims=dims,
@@ -825,7 +827,9 @@ def mixed_runs(sweep: xr.Dataset) -> str:
 
 
 def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, object]]:
-    """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int64.
+    """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int64
+    (fill -1, read back as NaN), the curves' "none" of snapshots and step maps
+    as its fill (`brushcore.model.curve.FILL_VALUES`).
 
     One chunk per curve keeps NaN padding and unrun cases nearly free on disk.
     """
@@ -833,6 +837,8 @@ def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, objec
     for name, var in sweep.data_vars.items():
         if name in COUNT_VARIABLES:
             enc[name] = {"dtype": "int64", "_FillValue": np.int64(-1)}
+        elif name in FILL_VALUES:  # the curves' "none" (snapshots and step maps)
+            enc[name] = {"_FillValue": np.asarray(FILL_VALUES[name], dtype=var.dtype)[()]}
         whole = {"step", "y", "x"} & set(var.dims)
         if var.dtype.kind not in "fi" or not whole:
             continue  # small scalars and labels: default storage

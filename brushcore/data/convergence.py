@@ -434,7 +434,8 @@ def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
     CF: no fill on coordinates; flags as int8 with the fill -1 where their
     case has no value (a flag of 0 there would read as a case that passed),
     grid numbers and counts as int64 with the fill -1, which xarray reads
-    back as NaN; ``{q}_n_grids`` is 0 there, a true count.
+    back as NaN; ``{q}_n_grids`` is 0 there, a true count, stored without a
+    fill (xarray reads it as integers).
     """
     from brushcore.data.aggregate import COUNT_VARIABLES
     from brushcore.data.io import write_dataset_atomic
@@ -447,6 +448,11 @@ def write_dataset(conv: xr.Dataset, path: str | Path) -> None:
             out[name] = var.where(ran).assign_attrs(var.attrs)
             enc[name] = {"dtype": "int8", "_FillValue": np.int8(-1)}
         elif name.endswith(INTEGER_SUFFIXES) or name in COUNT_VARIABLES:
-            # one type however the study was run (from a file's sweep or in memory)
-            enc[name] = {"dtype": "int64", "_FillValue": np.int64(-1)}
+            # one type however the study was run (from a file's sweep or in memory);
+            # {q}_n_grids is a count everywhere (0 where none ran): no fill, so
+            # that it reads back as integers
+            count = name.endswith("_n_grids") and not bool(var.isnull().any())
+            if count:
+                out[name] = var.astype(np.int64)
+            enc[name] = {"dtype": "int64", "_FillValue": None if count else np.int64(-1)}
     write_dataset_atomic(out, path, enc)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from brushcore.model.curve import FILL_VALUES
 from brushcore.validation import ParameterError
 
 #: Variables and attributes a curve file must have to be aggregated.
@@ -38,8 +39,10 @@ class CurveFileError(ValueError):
 def _encoding(ds: xr.Dataset) -> dict:
     enc: dict[str, dict] = {name: {"_FillValue": None} for name in ds.coords}  # CF: none
     for name, v in ds.data_vars.items():
+        if name in FILL_VALUES:  # "none" as its fill (`brushcore.model.curve.FILL_VALUES`)
+            enc[name] = {"_FillValue": np.asarray(FILL_VALUES[name], dtype=v.dtype)[()]}
         if v.ndim >= 2:  # maps and snapshots compress ~50x
-            enc[name] = {"zlib": True, "complevel": 4}
+            enc[name] = {**enc.get(name, {}), "zlib": True, "complevel": 4}
     return enc
 
 
@@ -248,10 +251,16 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
     """
     path = Path(path)
     try:
-        with xr.open_dataset(path, engine="netcdf4") as ds:
+        # The "none" of FILL_VALUES stays a number, as in memory (xarray's
+        # default reads it as NaN, and the values as floats).
+        with xr.open_dataset(path, engine="netcdf4",
+                             mask_and_scale={name: False for name in FILL_VALUES}) as ds:
             ds = ds.load()
     except Exception as exc:  # netCDF4 raises OSError, RuntimeError, ValueError...
         raise CurveFileError(f"{path}: cannot be read as a netCDF curve file ({exc})") from exc
+    for name in FILL_VALUES:  # as written: the fill an encoding, not an attribute
+        if name in ds.variables and "_FillValue" in ds[name].attrs:
+            ds[name].encoding["_FillValue"] = ds[name].attrs.pop("_FillValue")
     check_curve(ds, str(path))
     return ds
 

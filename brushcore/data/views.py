@@ -116,7 +116,9 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
     -------
     xarray.Dataset or None
         ``contact_snapshot(snapshot, y, x)`` (1 attached, 0 detached, -1 no
-        pillar), ``snapshot_step`` and ``snapshot_label`` of that case.
+        pillar; NaN, the fill, for a stage the run never reached, read
+        through xarray), ``snapshot_step`` and ``snapshot_label`` of that
+        case: its own snapshots, without the padding of cases with fewer.
     """
     unknown = set(rough) - set(ROUGH_DIMS)
     if unknown:
@@ -142,7 +144,10 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
     if idx.size == 0:
         return None
     names = [n for n in ("contact_snapshot", "snapshot_step", "snapshot_label") if n in sweep]
-    return sweep[names].isel(case=int(idx[0]))
+    case = sweep[names].isel(case=int(idx[0]))
+    if "snapshot_label" in case:  # not the padding of a case with fewer snapshots
+        case = case.isel(snapshot=np.flatnonzero(case["snapshot_label"].values != ""))
+    return case
 
 
 def finest_grid(sweep: xr.Dataset, ran: str = "adhesive_force_normalized") -> xr.Dataset:

@@ -69,6 +69,15 @@ SYMBOLS = ("A: real contact area (pillar elements x h^2); a0 = sqrt(A / pi): rad
 SNAPSHOT_LABELS = ("start", "before maximum", "maximum force", "after maximum",
                    "last contact")
 
+#: Integer variables whose value means "none" (CF _FillValue, so that xarray
+#: reads it as NaN and a mean of steps skips it): a step map outside the
+#: pillars or where the element never (de)tached, the waypoint before the
+#: first one, and a snapshot of a stage the run never reached (a protocol
+#: that never pulls has no maximum force), whose map is all fill; the
+#: contact maps' -1 is a flag (no pillar), so their fill is -2.
+FILL_VALUES = {"detachment_step": -1, "attachment_step": -1, "branch": -1,
+               "snapshot_step": -1, "contact_snapshot": -2}
+
 
 def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
     """Steps for the contact snapshots of Fig. 5 (see SNAPSHOT_LABELS).
@@ -117,6 +126,15 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
 def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
     """A CF variable: values with long_name, units and any extra attributes."""
     return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
+
+
+def _filled(name: str, dims, data: np.ndarray, long_name: str, **extra) -> xr.Variable:
+    """A dimensionless integer variable ``name`` whose `FILL_VALUES` entry
+    means "none": declared as its netCDF _FillValue (`brushcore.data.io`
+    writes it), kept as a number in memory."""
+    var = _var(dims, data, long_name, "1", **extra)
+    var.encoding["_FillValue"] = np.asarray(FILL_VALUES[name], dtype=var.dtype)[()]
+    return var
 
 
 def _step_variables(displacement: np.ndarray, force: np.ndarray, area: np.ndarray,
@@ -489,12 +507,14 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     data = {
         **_step_variables(curve.displacement, curve.force, area, curve.attached_pillars,
                           ds_, fs, "pull-off displacement d"),
-        "detachment_step": _var(("y", "x"), detach, "first step at which the element is "
-                               "detached", "1", comment="-1 outside pillars"),
-        "contact_snapshot": _var(("snapshot", "y", "x"), states, "contact state", "1",
-                                flag_values=np.array([-1, 0, 1], dtype=np.int8),
-                                flag_meanings="no_pillar detached attached"),
-        "snapshot_step": _var("snapshot", snaps, "step of the snapshot", "1"),
+        "detachment_step": _filled("detachment_step", ("y", "x"), detach,
+                                   "first step at which the element is detached",
+                                   comment="-1 (the fill) outside pillars"),
+        "contact_snapshot": _filled("contact_snapshot", ("snapshot", "y", "x"), states,
+                                    "contact state",
+                                    flag_values=np.array([-1, 0, 1], dtype=np.int8),
+                                    flag_meanings="no_pillar detached attached"),
+        "snapshot_step": _filled("snapshot_step", "snapshot", snaps, "step of the snapshot"),
         "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
                                       {"long_name": "stage of the pull-off"}),
         **_pillar_results(labels, h, curve.pillar_force_at_peak, curve.displacement[last]),
@@ -588,6 +608,8 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     names = _snapshot_names(protocol)
     steps = list(curve.waypoint_step) + [i_max]
     states = np.stack([on_grid(m.astype(np.int8), -1, np.int8) for m in masks])
+    if i_max < 0:  # no tensile step, no map of one (`FILL_VALUES`)
+        states[-1] = FILL_VALUES["contact_snapshot"]
     preload_step = int(curve.waypoint_step[0])
     in_contact = int(np.count_nonzero(np.bincount(
         pillar_of, weights=curve.attached_at_waypoint[0], minlength=n_pillars)))
@@ -603,9 +625,9 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     data = {
         **_step_variables(d, f, area, curve.attached_pillars, ds_, fs,
                           "displacement d of the backing plate"),
-        "branch": _var("step", curve.branch.astype(np.int32),
-                      "index of the protocol waypoint being followed", "1",
-                      comment="-1 at first touch"),
+        "branch": _filled("branch", "step", curve.branch.astype(np.int32),
+                          "index of the protocol waypoint being followed",
+                          comment="-1 (the fill) at first touch"),
         "direction": _var("step", curve.direction.astype(np.int8), "direction of motion",
                          "1", flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
                          flag_meanings="approach first_touch retraction"),
@@ -613,17 +635,22 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                           "step belongs to the last retraction branch", "1",
                           flag_values=np.array([0, 1], dtype=np.int8),
                           flag_meanings="other last_retraction"),
-        "attachment_step": _var(("y", "x"), on_grid(curve.attach_step, -1, np.int32),
-                               "last step at which the element attached", "1",
-                               comment="-1 outside pillars or never in contact"),
-        "detachment_step": _var(("y", "x"), on_grid(curve.detach_step, -1, np.int32),
-                               "first step without the element after its last detachment",
-                               "1", comment="-1 outside pillars, never detached"),
-        "contact_snapshot": _var(("snapshot", "y", "x"), states, "contact state", "1",
-                                flag_values=np.array([-1, 0, 1], dtype=np.int8),
-                                flag_meanings="no_pillar detached attached"),
-        "snapshot_step": _var("snapshot", np.asarray(steps, dtype=np.int32),
-                             "step of the snapshot", "1"),
+        "attachment_step": _filled("attachment_step", ("y", "x"),
+                                   on_grid(curve.attach_step, -1, np.int32),
+                                   "last step at which the element attached",
+                                   comment="-1 (the fill) outside pillars or never in contact"),
+        "detachment_step": _filled("detachment_step", ("y", "x"),
+                                   on_grid(curve.detach_step, -1, np.int32),
+                                   "first step without the element after its last detachment",
+                                   comment="-1 (the fill) outside pillars, never detached"),
+        "contact_snapshot": _filled("contact_snapshot", ("snapshot", "y", "x"), states,
+                                    "contact state",
+                                    flag_values=np.array([-1, 0, 1], dtype=np.int8),
+                                    flag_meanings="no_pillar detached attached",
+                                    comment="-2 (the fill): a stage the run never reached"),
+        "snapshot_step": _filled("snapshot_step", "snapshot", np.asarray(steps, dtype=np.int32),
+                                 "step of the snapshot",
+                                 comment="-1 (the fill): a stage the run never reached"),
         "snapshot_label": xr.Variable("snapshot", np.array(names),
                                       {"long_name": "stage of the protocol"}),
         # Given arrays as given, bit for bit (x * d_K / d_K is not always x):
@@ -769,7 +796,8 @@ def _pillar_results(labels: np.ndarray, h: float, force_at_peak: np.ndarray,
                                               "pillar force at F_ad (tensile positive)", "N"),
         "pillar_let_go_displacement": _var("pillar", let_go,
                                           "d at which the pillar's last element detached",
-                                          "m", comment="NaN: never in contact"),
+                                          "m", comment="NaN: never in contact, or still attached at "
+                                          "the end"),
     }
 
 

@@ -124,7 +124,9 @@ def fig5(
             continue
         # Numbered in the order of their steps: a protocol's file keeps the
         # "maximum force" map after "separated", though it comes first.
-        stored = [int(s) for s in snap["snapshot_step"].values]
+        # (a stage never reached reads as NaN, the fill, through xarray: -1 here)
+        stored = [int(s) if np.isfinite(s) else -1
+                  for s in np.asarray(snap["snapshot_step"].values, dtype=float)]
         order = sorted(range(len(stored)), key=lambda j: (stored[j] < 0, stored[j]))
         steps = [stored[j] for j in order]
         for slot, j in enumerate(order):
