@@ -1286,6 +1286,35 @@ def test_large_loads_tighten_the_tolerance():
     assert load_options(SolverOptions(precision="mixed"), 1e4).rtol == 1e-6
 
 
+def test_loads_a_displacement_or_a_gap_map_reaches_tighten_the_tolerance():
+    """A protocol pressed by a displacement, or heights given as a gap map,
+    reaches loads no force waypoint announces: the tolerance follows what
+    the run reached (run again, said) and the gap map's scatter.  Rigid 16
+    pillars, roughness 5 d_K, pressed to 1000 F_K (64^2): the dissipated
+    energy was 0.6662 by displacement at rtol 1e-4 against 0.6358 by force
+    (rtol 1e-8); the README's roughness-300 case given as a gap map and a
+    displacement waypoint gave -11.97 W_K for +0.398 (an input helper's
+    probes, 2026-12-07)."""
+    params = BrushParams("regular", 16, math.inf, 64, roughness=5.0, seed=0)
+    force = simulate(params, protocol=[Waypoint("force", -1000.0), Waypoint("separation")])
+    turn = float(force.displacement_normalized.values[int(np.argmin(force.force.values))])
+    with pytest.warns(UserWarning, match="reached a load of 1e[+]03 F_K.*run again at rtol 1e-08"):
+        pressed = simulate(params, protocol=[Waypoint("displacement", turn),
+                                             Waypoint("separation")])
+    assert pressed.attrs["rtol"] == pytest.approx(force.attrs["rtol"], rel=1e-6)
+    assert force.attrs["rtol"] == pytest.approx(1e-8)
+    assert float(pressed.dissipated_energy_normalized) == pytest.approx(
+        float(force.dissipated_energy_normalized), rel=1e-3)
+    # the same offsets as a gap map: their scatter sets the tolerance before the run
+    heights = force.pillar_height_normalized.values
+    labels = build_labels(params)
+    gap = np.where(labels >= 0, -heights[np.maximum(labels, 0)], 0.0) * 60.0
+    mapped = simulate(BrushParams("regular", 16, math.inf, 64, gap_map=gap),
+                      protocol=[Waypoint("force", -1.0), Waypoint("separation")])
+    assert np.std(gap[labels >= 0]) > 100.0
+    assert mapped.attrs["rtol"] < 1e-4 * (10.0 / 100.0) ** 2
+
+
 def test_given_heights_and_springs_reach_their_own_pillars():
     """Per-pillar inputs through the public API land on their pillars (label
     order) with the right units: a soft pillar lets go once its spring

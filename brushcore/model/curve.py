@@ -20,13 +20,13 @@ from brushcore.model.inputs import PROTOCOL_LOADS, load_beyond_range, protocol_t
 from brushcore.model.labelmap import count_touching_pairs, pillar_element_counts
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap, smallest_radius_elements
-from brushcore.model.params import BrushParams
+from brushcore.model.params import MAX_ROUGH, BrushParams
 from brushcore.model.provenance import (git_commit, parameter_hash, software_versions, source,
                                         version)
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.scales import unit_scales
-from brushcore.model.solve import (element_offsets, fft_library_used, load_options, run,
-                                   run_protocol_curve, single_transforms, spring_options,
+from brushcore.model.solve import (LOAD_SPAN, element_offsets, fft_library_used, load_options,
+                                   run, run_protocol_curve, single_transforms, spring_options,
                                    stiffness_span)
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.options import SolverOptions
@@ -554,16 +554,41 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                 warnings.warn(note, stacklevel=3)
         waypoints = tuple(Waypoint(w.kind, w.value * (fs if w.kind == "force" else ds_))
                           for w in protocol)
-    # How far loads and height scatter reach, in F_K and d_K (a displacement
-    # waypoint is no measure: soft springs stretch far at small stresses).
+    # How far loads and height scatter (given heights or a gap map) reach, in
+    # F_K and d_K (a displacement waypoint is no measure: soft springs stretch
+    # far at small stresses; the loads it reaches are checked after the run).
     forces = [abs(w.value) / fs for w in waypoints if w.kind == "force"]
-    span = max([params.preload, params.roughness, float(np.std(inputs.heights)) / ds_, *forces])
-    options = load_options(options, span)  # the attrs record the rtol that ran
-    options = spring_options(options, stiffness_span(inputs.compliance, labels, params.h,
-                                                     params.e_star))
-    _, op, curve, applications = run_protocol_curve(
-        params, waypoints, options, heights=inputs.heights, gap_map=inputs.gap_map,
-        compliance=inputs.compliance, progress=progress, labels=labels)
+    gaps = (0.0 if inputs.gap_map is None
+            else float(np.std(np.asarray(inputs.gap_map)[labels >= 0])) / ds_)
+    span = max([params.preload, params.roughness, float(np.std(inputs.heights)) / ds_, gaps,
+                *forces])
+    asked = options
+    stiffness = stiffness_span(inputs.compliance, labels, params.h, params.e_star)
+    options = spring_options(load_options(asked, span), stiffness)  # the attrs record it
+
+    def run_at(opts: SolverOptions):
+        return run_protocol_curve(
+            params, waypoints, opts, heights=inputs.heights, gap_map=inputs.gap_map,
+            compliance=inputs.compliance, progress=progress, labels=labels)
+
+    _, op, curve, applications = run_at(options)
+    reached = float(np.max(np.abs(curve.force), initial=0.0)) / fs
+    if reached > span:  # displacement waypoints pressed harder than the span said
+        tighter = spring_options(load_options(asked, reached), stiffness)
+        if tighter.rtol < options.rtol:
+            warnings.warn(
+                f"the protocol's displacement waypoints reached a load of {reached:.3g} F_K, "
+                f"beyond the {max(span, LOAD_SPAN):g} its tolerance was set for: run again at "
+                f"rtol {tighter.rtol:.3g} (the loop energy's error grows as rtol x load^2; "
+                f"a force waypoint sets it before the run)", stacklevel=3)
+            options = tighter
+            _, op, curve, applications = run_at(options)
+        if reached > MAX_ROUGH:
+            warnings.warn(
+                f"the protocol's displacement waypoints reached a load of {reached:.3g} F_K, "
+                f"beyond the range of loads whose energies the solver's tolerance keeps "
+                f"accurate ({PROTOCOL_LOADS}): read its dissipated energy with care",
+                stacklevel=3)
     wall = time.perf_counter() - t0
     h = params.h
     ws = scales.work
