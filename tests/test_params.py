@@ -327,3 +327,25 @@ def test_a_parameter_set_reads_as_the_call_that_makes_it():
         "BrushParams('random', 64, math.inf, 256, seed=3)"
     given = BrushParams("regular", 4, 0.1, 32, heights=np.array([0.1, 0.0, -0.1, 0.0]))
     assert repr(given) == "BrushParams('regular', 4, 0.1, 32, heights=<4 values>)"
+
+
+def test_a_brush_of_finite_pillars_is_not_filed_as_rigid() -> None:
+    """kbar names a brush given every pillar's kbar (a sweep files it there):
+    inf over finite pillars filed a soft brush (F_ad 1.03497, W 18.5 W_K)
+    in the rigid column, through the API where the CLI refuses it; mixed
+    pillars are named by a finite number, rigid ones alone may be inf."""
+    import math
+
+    import numpy as np
+    import pytest
+
+    from brushcore import BrushParams, ParameterError
+
+    soft = [0.01, 0.02, 0.01, 0.01]
+    with pytest.raises(ParameterError, match=r"kbar=inf is invalid \(0 of 4 pillars are rigid\)"):
+        BrushParams("regular", 4, math.inf, 32, kbar_values=soft)
+    with pytest.raises(ParameterError, match=r"kbar=inf is invalid \(1 of 4"):
+        BrushParams("regular", 4, math.inf, 32, kbar_values=[math.inf, 1.0, 1.0, 1.0])
+    assert BrushParams("regular", 4, 0.0125, 32, kbar_values=soft).kbar == 0.0125
+    assert BrushParams("regular", 4, 1.0, 32, kbar_values=[math.inf, 1.0, 1.0, 1.0]).kbar == 1.0
+    assert np.isinf(BrushParams("regular", 4, math.inf, 32, kbar_values=[math.inf] * 4).kbar)

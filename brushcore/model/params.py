@@ -132,7 +132,8 @@ class BrushParams:
         in label order (see `brushcore.model.layout.regular_centres`; larger reaches the
         substrate first); exclusive with ``roughness``.
     kbar_values : kbar of each pillar in [1e-9, inf], label order; exclusive
-        with ``kbar_spread`` (``kbar`` then only names the brush).
+        with ``kbar_spread`` (``kbar`` then only names the brush: finite
+        where any pillar is, as a sweep files the brush under it).
     gap_map : extra gap of every element, shape (grid, grid), in units of
         d_K, each in [-1e3, 1e3], added below the pillar heights: element
         offset z_i = z_p - gap_i (a spherical tip is r^2 / 2R, a tilt a
@@ -313,6 +314,14 @@ class BrushParams:
                  "0 when heights are given (they are exclusive)")
         require(self.kbar_values is None or self.kbar_spread == 0, "kbar_spread",
                  self.kbar_spread, "0 beside kbar_values (the two are exclusive)")
+        if self.kbar_values is not None and math.isinf(self.kbar):
+            # the name a sweep files the brush under: not rigid for soft pillars
+            rigid = np.isinf(self.kbar_values)
+            require(bool(rigid.all()), "kbar", self.kbar,
+                    "a finite name where any pillar's kbar_values is finite (their mean, "
+                    "as the CLI records it; a sweep files the brush under kbar), inf only "
+                    "where every pillar is rigid",
+                    f"{int(rigid.sum())} of {self.n_pillars} pillars are rigid")
         object.__setattr__(self, "inputs_digest", digest.hexdigest()[:16]
                            if any(getattr(self, k) is not None for k in ARRAY_FIELDS) else "")
 
