@@ -468,3 +468,25 @@ def test_a_label_map_read_back_would_refuse_is_not_written(tmp_path: Path) -> No
                                              r"4\).*draw it on a finer grid"):
         save_label_map(labels, tmp_path / "r220.npy")
     assert not (tmp_path / "r220.npy").exists()
+
+
+def test_a_table_the_reader_would_refuse_is_not_saved(tmp_path) -> None:
+    """`save_pillar_table` checks a table as `read_pillar_table` will: a
+    negative radius is refused naming the file and the line, before the file
+    exists (it was written, and refused only when read back); a .npy name is
+    refused (it was written as x.npy.csv); missing folders are made."""
+    from dataclasses import replace
+
+    import pytest
+
+    from brushcore import BrushParams, ParameterError, generated_table
+
+    table = generated_table(BrushParams("regular", 4, 0.01, 64))
+    with pytest.raises(ParameterError, match=r"neg\.csv' is invalid \(line 3: radius = -0\.0977"):
+        save_pillar_table(replace(table, radii=-table.radii), tmp_path / "neg.csv")
+    with pytest.raises(ParameterError, match=r"it ends in \.npy\): allowed a \.csv file"):
+        save_pillar_table(table, tmp_path / "x.npy")
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # nothing, no temporary
+    saved = save_pillar_table(table, tmp_path / "new" / "folder" / "brush")
+    assert saved == tmp_path / "new" / "folder" / "brush.csv"
+    assert read_pillar_table(saved).n_pillars == 4

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -356,16 +357,27 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     ----------
     table : the pillars (`brushcore.model.layout.generated_table` gives a
         generated layout's)
-    path : the ``.csv`` file to write (the suffix is added if missing)
+    path : the ``.csv`` file to write (the suffix is added where there is
+        none; missing folders are made)
 
     Returns
     -------
     The path written.  Values are written to full precision (repr), so a
     table of a generated layout draws its label map exactly.
+
+    Raises
+    ------
+    ParameterError
+        Named ``layout_file``, before anything is written where ``path``
+        has another suffix, and with nothing left behind where the table
+        breaks a rule that `read_pillar_table` reads it by (a radius <= 0,
+        a pillar outside the square, two that overlap, ...).
     """
     path = Path(path)
-    if path.suffix.lower() != SUFFIX:
+    if not path.suffix:
         path = path.with_name(path.name + SUFFIX)
+    elif path.suffix.lower() != SUFFIX:  # x.npy is a label map's name, not a table's
+        raise _refuse(path, f"a {SUFFIX} file (a pillar table)", f"it ends in {path.suffix}")
     shaped = table.aspects is not None
     columns = [table.centres[:, 1], table.centres[:, 0], table.radii]
     lines = ["# pillar table: one disc a line, in label order; x, y, radius in units of L"
@@ -376,5 +388,17 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     if shaped:
         columns += [table.aspects, table.orientations]
     lines += [", ".join(repr(float(value)) for value in row) for row in zip(*columns)]
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # Checked as it will be read, before it takes the name: a table the
+    # reader refuses is no table to hand on (the refusal names ``path``).
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{SUFFIX}")  # the umask's mode
+    try:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        try:
+            _read(tmp)
+        except ParameterError as exc:
+            raise _refuse(path, exc.allowed, exc.reason) from None
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path
