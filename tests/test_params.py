@@ -349,3 +349,33 @@ def test_a_brush_of_finite_pillars_is_not_filed_as_rigid() -> None:
     assert BrushParams("regular", 4, 0.0125, 32, kbar_values=soft).kbar == 0.0125
     assert BrushParams("regular", 4, 1.0, 32, kbar_values=[math.inf, 1.0, 1.0, 1.0]).kbar == 1.0
     assert np.isinf(BrushParams("regular", 4, math.inf, 32, kbar_values=[math.inf] * 4).kbar)
+
+
+def test_public_calls_refuse_wrong_arguments_by_name(tmp_path) -> None:
+    """Wrong arguments to public calls are refused naming the argument, not
+    by an AttributeError or TypeError from inside (an input helper's six
+    probes)."""
+    import numpy as np
+    import pytest
+    from brushcore import (BrushParams, ParameterError, file_params, positive_work,
+                           unit_scales, write_curve)
+    from brushcore.model.inputs import with_input_files
+
+    params = BrushParams("regular", 4, 0.01, 32)
+    refused = [
+        (lambda: unit_scales({"a": 1}), ParameterError, r"params='dict' is invalid"),
+        (lambda: with_input_files(params, "h4.txt"), ParameterError,
+         r"files='h4.txt' is invalid \(a str, not a mapping\)"),
+        (lambda: file_params("m.npy", kbar=1.0, layout="regular"), ParameterError,
+         r"layout='regular' is invalid"),
+        (lambda: write_curve({"a": 1}, tmp_path / "a.nc"), ParameterError,
+         r"ds='dict' is invalid"),
+        (lambda: BrushParams.from_attrs({}), ParameterError,
+         r"\(layout, n_pillars, kbar, grid missing\)"),
+        (lambda: positive_work(np.zeros(3), np.zeros(4)), ValueError,
+         r"shapes \(3,\) and \(4,\)"),
+    ]
+    for call, kind, message in refused:
+        with pytest.raises(kind, match=message):
+            call()
+    assert list(tmp_path.iterdir()) == []

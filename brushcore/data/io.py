@@ -209,6 +209,8 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     See `write_dataset_atomic`: a killed job leaves either no file or a
     complete one, never half of one.
     """
+    if not isinstance(ds, xr.Dataset):
+        raise ParameterError("ds", type(ds).__name__, "a curve Dataset (brushcore.simulate's)")
     ds = ds.copy(deep=False)  # the caller's attrs stay as they were
     ds.attrs[DIGEST_ATTR] = content_digest(ds)
     return write_dataset_atomic(ds, path, _encoding(ds))

@@ -242,6 +242,9 @@ def with_input_files(base: BrushParams,
         Named as `INPUT_FILES` names the file, with its path as the value,
         where a file does not fit or a value it gives falls out of range.
     """
+    if not isinstance(files, Mapping):  # a bare path: which file is it?
+        raise ParameterError("files", str(files), f"a mapping of {sorted(INPUT_FILES)} to paths",
+                             f"a {type(files).__name__}, not a mapping")
     given = {name: path for name, path in files.items() if path is not None}
     unknown = sorted(set(given) - set(INPUT_FILES))
     if unknown:  # kbar_values is the field a kbar_file sets: the likely slip

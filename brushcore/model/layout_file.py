@@ -271,6 +271,9 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
         a given n_pillars, grid or phi differs from the file's, or a table
         comes without a grid.
     """
+    if "layout" in kwargs:  # it is "file": a keyword twice, said in Python's words
+        raise ParameterError("layout", kwargs["layout"], "none beside file_params, which "
+                             "makes the file's layout")
     if is_table(path):
         return _table_params(path, kbar, kwargs)
     if not Path(path).is_dir() and Path(path).suffix.lower() not in SUFFIXES:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import MISSING, asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -339,6 +339,12 @@ class BrushParams:
             per-element arrays, which only the curve's variables hold (use
             `from_curve`), and as the constructor for values out of range.
         """
+        require(isinstance(attrs, Mapping), "attrs", type(attrs).__name__,
+                "a mapping of a curve file's attributes (ds.attrs)")
+        missing = [name for name in REQUIRED_ATTRS if name not in attrs]
+        require(not missing, "attrs", f"<{len(attrs)} attributes>",
+                f"a curve file's attributes, {', '.join(REQUIRED_ATTRS)} among them",
+                f"{', '.join(missing)} missing")
         digest = attrs.get("inputs_digest", "")
         require(digest == "", "inputs_digest", digest,
                 "'' (no per-pillar arrays) for from_attrs",
@@ -489,6 +495,11 @@ ARRAY_FIELDS = ("heights", "kbar_values", "gap_map")
 #: Fields `as_attrs` leaves out: the arrays (curve variables, represented by
 #: ``inputs_digest``) and where a run ran (``backend``), not what it solved.
 NOT_ATTRIBUTES = (*ARRAY_FIELDS, "backend")
+
+
+#: The fields without a default, which every curve file's attributes hold.
+REQUIRED_ATTRS = tuple(f.name for f in fields(BrushParams) if f.init and f.default is MISSING
+                       and f.default_factory is MISSING)
 
 
 def _fields_of(attrs: Mapping[str, object]) -> dict[str, object]:

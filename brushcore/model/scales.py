@@ -12,6 +12,7 @@ import numpy as np
 from brushcore.model import theory
 from brushcore.model.layout import build_labels
 from brushcore.model.params import BrushParams
+from brushcore.validation import require
 
 
 def unit_scales(params: BrushParams, labels: np.ndarray | None = None) -> theory.KendallScales:
@@ -27,6 +28,8 @@ def unit_scales(params: BrushParams, labels: np.ndarray | None = None) -> theory
     ParameterError
         As `build_labels`, where the grid does not draw the brush.
     """
+    require(isinstance(params, BrushParams), "params", type(params).__name__,
+            "a BrushParams (the brush)")
     labels = build_labels(params) if labels is None else labels
     area = float(np.count_nonzero(labels >= 0)) * params.h * params.h
     return theory.kendall_scales(area, params.e_star, params.dgamma)

@@ -125,6 +125,10 @@ def positive_work(displacement: np.ndarray, force: np.ndarray) -> float:
     Segments that cross zero are split at the crossing; vertical drops (at
     fixed d) contribute nothing.
     """
+    displacement, force = np.asarray(displacement), np.asarray(force)
+    if displacement.ndim != 1 or displacement.shape != force.shape:
+        raise ValueError(f"displacement and force must be 1-D of one length: shapes "
+                         f"{displacement.shape} and {force.shape}")
     d0, d1 = displacement[:-1], displacement[1:]
     f0, f1 = force[:-1], force[1:]
     dd = d1 - d0
