@@ -122,3 +122,27 @@ def test_a_sweeps_snapshot_padding_is_fill_and_left_out(tmp_path) -> None:
         padded = ds.contact_snapshot.isel(case=int(np.flatnonzero(
             ds.case_roughness.values == 0.3)[0]), snapshot=slice(3, None))
         assert bool(np.isnan(padded.values).all())  # the fill, not -1 (no pillar)
+
+
+def test_a_curve_opened_with_xarray_writes_again_as_it_was(tmp_path) -> None:
+    """`xr.open_dataset` reads the fills as NaN (floats); `write_curve` of
+    such a Dataset (attributes edited, say) writes the numbers back, so
+    that `read_curve` finds its digest and the values `simulate` made."""
+    import numpy as np
+    import xarray as xr
+
+    from brushcore import BrushParams, simulate
+    from brushcore.data.io import read_curve, write_curve
+
+    curve = simulate(BrushParams("regular", 4, 0.01, 48, roughness=0.2, preload=1.0, seed=1))
+    write_curve(curve, tmp_path / "a.nc")
+    with xr.open_dataset(tmp_path / "a.nc") as opened:
+        edited = opened.load()
+    assert edited.detachment_step.dtype.kind == "f"
+    edited.attrs["comment"] = "edited"
+    write_curve(edited, tmp_path / "b.nc")
+    back = read_curve(tmp_path / "b.nc")
+    for name in ("detachment_step", "attachment_step", "branch", "snapshot_step",
+                 "contact_snapshot"):
+        assert back[name].dtype == curve[name].dtype, name
+        assert np.array_equal(back[name].values, curve[name].values), name

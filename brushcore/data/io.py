@@ -203,6 +203,20 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _unmasked(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` with the `FILL_VALUES` variables as numbers again where
+    `xr.open_dataset` read them (NaN at the fill, floats): a curve read
+    that way and written again holds what `simulate` wrote, digest included."""
+    for name, fill in FILL_VALUES.items():
+        var = ds.variables.get(name)
+        if var is not None and var.dtype.kind == "f":
+            dtype = np.dtype(var.encoding.get("dtype", np.int32))
+            values = np.where(np.isnan(var.values), fill, var.values).astype(dtype)
+            ds[name] = xr.Variable(var.dims, values, var.attrs,
+                                   {"_FillValue": np.asarray(fill, dtype=dtype)[()]})
+    return ds
+
+
 def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     """Write a curve Dataset to netCDF4 atomically, with its content digest.
 
@@ -211,7 +225,7 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     """
     if not isinstance(ds, xr.Dataset):
         raise ParameterError("ds", type(ds).__name__, "a curve Dataset (brushcore.simulate's)")
-    ds = ds.copy(deep=False)  # the caller's attrs stay as they were
+    ds = _unmasked(ds.copy(deep=False))  # the caller's attrs stay as they were
     ds.attrs[DIGEST_ATTR] = content_digest(ds)
     return write_dataset_atomic(ds, path, _encoding(ds))
 

@@ -188,6 +188,8 @@ class _Engine:
         # force and pillar forces recorded there are corrected by.
         self._drift: tuple[np.ndarray, np.ndarray] | None = None
         self._fix: np.ndarray | None = None
+        # Float32 transforms: a tie between events must be sure (`_stress_event`).
+        self.sure_ties = op.can_refine
         self.cg_iters = 0
         self.events = 0
         n = self.total
@@ -531,7 +533,11 @@ class _Engine:
             margin = margins(SETTLE_SAFETY, e, float(xp.max(e)), xp)
             margin = margin + band_margin(band, sig + t * sig1, xp)
             margin = margin + rate * float(margin[first] / rate[first])  # t's own error
-            if not bool(xp.any(~reach & (below < margin))):
+            # float32's ties are coincidences: each inside the tie by its margin
+            # (as `pulloff.settles` with sure_ties)
+            unsure = self.sure_ties and bool(xp.any(
+                reach & (below > 0) & (below + margin > self.options.tie_rtol * self.sigma_c)))
+            if not (bool(xp.any(~reach & (below < margin))) or unsure):
                 return t, reach, rtol
             rtol, band = max(rtol * 0.01, SETTLE_FLOOR), 0.0
             self._tighten(rtol)
