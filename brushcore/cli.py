@@ -281,9 +281,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",
                      help="stop CG at the tolerance even where an element lies within its "
                           "error of sigma_c or of the next event's cut")
-    sim.add_argument("--threads", type=int, default=1,
+    sim.add_argument("--threads", type=int, default=None,
                      help="threads of the FFTs, BLAS and the preconditioners' stacked "
-                          f"inverses, in [1, {MAX_THREADS}]")
+                          f"inverses, in [1, {MAX_THREADS}] (default: the environment's "
+                          "BRUSHCORE_THREADS, else 1)")
     sim.add_argument("--backend", choices=USER_BACKENDS, default="cpu",
                      help="where to solve: cpu (NumPy) or gpu (CuPy, needs "
                           "pip install 'brushcore[gpu]' and a CUDA card (12.x wheels; see "
@@ -419,7 +420,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from brushcore.model.inputs import (INPUT_FILES, parse_protocol, recorded_kbar,
                                         with_input_files)
     from brushcore.model.pillar_table import is_table
-    from brushcore.numerics.platform.threads import pin_threads
+    from brushcore.numerics.platform.threads import fft_threads, pin_threads
 
     progress = None if args.quiet else _Progress()
     started = time.time()
@@ -458,6 +459,8 @@ def _simulate(args: argparse.Namespace) -> int:
                                 fft_library=args.fft_library)
         protocol = None if args.protocol is None else parse_protocol(args.protocol)
         check_protocol_preload(args.preload, protocol)  # before the layout's line
+        if args.threads is None:  # as the Python API: the environment's, else 1
+            args.threads = fft_threads()
         if not 1 <= args.threads <= MAX_THREADS:
             raise ParameterError("threads", args.threads, f"an integer in [1, {MAX_THREADS}]")
         check_output_path(args.out)

@@ -659,3 +659,19 @@ def test_a_run_that_may_take_long_says_so_before_it_starts(tmp_path, capsys, mon
     assert err.index("grid 1024:") < err.index("this run may take") and not out.exists()
     assert main([*base, "--grid", "256"]) == 130
     assert "this run may take" not in capsys.readouterr().err
+
+
+def test_threads_default_to_the_environments(tmp_path) -> None:
+    """Without --threads the command takes BRUSHCORE_THREADS, as the Python
+    API does (it pinned 1 whatever the variable said, a reproducibility
+    helper's find); a bad value is refused naming the variable."""
+    env = {**os.environ, "BRUSHCORE_THREADS": "two"}
+    cmd = [sys.executable, "-m", "brushcore.cli", "simulate", "--layout", "regular",
+           "--pillars", "4", "--kbar", "0.1", "--grid", "32", "--quiet",
+           "--out", str(tmp_path / "t.nc")]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env)
+    assert res.returncode == 2 and "BRUSHCORE_THREADS" in res.stderr, res.stderr
+    assert not (tmp_path / "t.nc").exists()
+    res = subprocess.run([*cmd, "--threads", "1"], capture_output=True, text=True,
+                         timeout=120, env=env)
+    assert res.returncode == 0, res.stderr
