@@ -171,6 +171,23 @@ def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, 
     return [(n, s) for n, s in series if s.size]
 
 
+def _kbar_figure(sweep: xr.Dataset, title: str) -> tuple:
+    """What Figs. 6 and 8 start from: the sweep at each case's finest grid,
+    the figure and its panel per layout, a colour per N, the kbar values and
+    the x of the rigid column (`rigid_x`)."""
+    sweep = finest_grid(sweep)
+    fig, axes = _per_brush_panels(sweep, title)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    return sweep, fig, axes, brush_colors(sweep.n_pillars.values), kbars, rigid_x(kbars)
+
+
+def _panels(sweep: xr.Dataset, axes: dict, name: str):
+    """Per layout of ``axes``: its index, name, axes, filling factor and the
+    seed-mean series of ``name`` per N (`_brush_series`)."""
+    for index, (layout, ax) in enumerate(axes.items()):
+        yield index, layout, ax, sweep_phi(sweep, layout), _brush_series(sweep, name, layout)
+
+
 def fig6(sweep: xr.Dataset) -> Figure:
     """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
 
@@ -181,14 +198,9 @@ def fig6(sweep: xr.Dataset) -> Figure:
     Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
     to the finite kbar.
     """
-    sweep = finest_grid(sweep)
-    fig, axes = _per_brush_panels(sweep, "Adhesive force against pillar stiffness")
-    colors = brush_colors(sweep.n_pillars.values)
-    kbars = np.asarray(sweep.kbar.values, dtype=float)
-    x_inf = rigid_x(kbars)
-    for index, (layout, ax) in enumerate(axes.items()):
-        phi = sweep_phi(sweep, layout)
-        brushes = _brush_series(sweep, "adhesive_force_normalized", layout)
+    sweep, fig, axes, colors, kbars, x_inf = _kbar_figure(
+        sweep, "Adhesive force against pillar stiffness")
+    for index, layout, ax, phi, brushes in _panels(sweep, axes, "adhesive_force_normalized"):
         for n, series in brushes:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
             runs = runs.sel(kbar=series.kbar)
@@ -293,18 +305,12 @@ def fig8(sweep: xr.Dataset) -> Figure:
     """Fig. 8: work of separation against kbar per N, with the soft limit of eqs. 25-26.
 
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
-    (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch.
-    Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
-    to the finite kbar.
+    (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch;
+    rigid pillars stand apart at "rigid", as in `fig6`.
     """
-    sweep = finest_grid(sweep)
-    fig, axes = _per_brush_panels(sweep, "Work of separation against pillar stiffness")
-    colors = brush_colors(sweep.n_pillars.values)
-    kbars = np.asarray(sweep.kbar.values, dtype=float)
-    x_inf = rigid_x(kbars)
-    for index, (layout, ax) in enumerate(axes.items()):
-        phi = sweep_phi(sweep, layout)
-        brushes = _brush_series(sweep, "work_of_separation_normalized", layout)
+    sweep, fig, axes, colors, kbars, x_inf = _kbar_figure(
+        sweep, "Work of separation against pillar stiffness")
+    for index, layout, ax, phi, brushes in _panels(sweep, axes, "work_of_separation_normalized"):
         for n, series in brushes:
             ax.plot(*break_before_rigid(x_inf, kbar_x(series.kbar, x_inf), series), "o-",
                     ms=4, color=colors[n], label=f"N = {n}")
