@@ -341,9 +341,9 @@ class BrushParams:
         """
         require(isinstance(attrs, Mapping), "attrs", type(attrs).__name__,
                 "a mapping of a curve file's attributes (ds.attrs)")
-        missing = [name for name in REQUIRED_ATTRS if name not in attrs]
+        missing = [name for name in REQUIRED_FIELDS if name not in attrs]
         require(not missing, "attrs", f"<{len(attrs)} attributes>",
-                f"a curve file's attributes, {', '.join(REQUIRED_ATTRS)} among them",
+                f"a curve file's attributes, {', '.join(REQUIRED_FIELDS)} among them",
                 f"{', '.join(missing)} missing")
         digest = attrs.get("inputs_digest", "")
         require(digest == "", "inputs_digest", digest,
@@ -498,7 +498,7 @@ NOT_ATTRIBUTES = (*ARRAY_FIELDS, "backend")
 
 
 #: The fields without a default, which every curve file's attributes hold.
-REQUIRED_ATTRS = tuple(f.name for f in fields(BrushParams) if f.init and f.default is MISSING
+REQUIRED_FIELDS = tuple(f.name for f in fields(BrushParams) if f.init and f.default is MISSING
                        and f.default_factory is MISSING)
 
 
