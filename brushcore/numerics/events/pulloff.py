@@ -456,6 +456,16 @@ def pull_off(op: BrushOperator, sigma_c: float, h: float, options: SolverOptions
     # unit-displacement stresses, warm started from zero
     sigma1, error, _, z = solve(xp.zeros(total, dtype=xp.float64))
     while op.size:
+        if op.can_refine:
+            # Float32 transforms: the event's d from a residual in double.  d
+            # sets the threshold of its whole cascade, and float32's error in
+            # the peak (6.3e-6 of it, invisible to the float32 z) flipped a
+            # round's element 2.6e-6 from it: random 1620 at kbar 1e-5 (512^2)
+            # on its other branch on some FFTW plans (W 3.4e-4 off exact
+            # mode).  One double application an event: +2.5-11 % on random
+            # curves measured (README, "Mixed precision").
+            with op.refined():
+                z = op.precondition(xp.ones(op.size, dtype=xp.float64) - op.apply(sigma1))
         peak, corrected = _event_peak(sigma1, z, xp)
         if not np.isfinite(peak) or peak <= 0.0 or not corrected > 0.0:
             raise SolverError(f"no tensile stress at event {events} (max sigma_1 = {peak!r}) "
