@@ -32,7 +32,7 @@ import xarray as xr
 
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID, BrushParams, narrowest_radius
-from brushcore.model.curve import FILL_VALUES, mark_element_units
+from brushcore.model.curve import FILL_VALUES, fill_value, mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
@@ -718,9 +718,9 @@ def _snapshots(
     n_snap = max(with_snaps[k].sizes["snapshot"] for k in keys)
     ny, nx = with_snaps[keys[0]].sizes["y"], with_snaps[keys[0]].sizes["x"]
     snap = np.full((len(keys), n_snap, ny, nx), FILL_VALUES["contact_snapshot"], dtype=np.int8)
-    step = np.full((len(keys), n_snap), -1, dtype=np.int32)
+    step = np.full((len(keys), n_snap), FILL_VALUES["snapshot_step"], dtype=np.int32)
     label = np.full((len(keys), n_snap), "", dtype=object)
-    detach = np.full((len(keys), ny, nx), -1, dtype=np.int32)
+    detach = np.full((len(keys), ny, nx), FILL_VALUES["detachment_step"], dtype=np.int32)
     for i, key in enumerate(keys):
         c = with_snaps[key]
         m = c.sizes["snapshot"]
@@ -838,7 +838,7 @@ def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, objec
         if name in COUNT_VARIABLES:
             enc[name] = {"dtype": "int64", "_FillValue": np.int64(-1)}
         elif name in FILL_VALUES:  # the curves' "none" (snapshots and step maps)
-            enc[name] = {"_FillValue": np.asarray(FILL_VALUES[name], dtype=var.dtype)[()]}
+            enc[name] = {"_FillValue": fill_value(name, var.dtype)}
         whole = {"step", "y", "x"} & set(var.dims)
         if var.dtype.kind not in "fi" or not whole:
             continue  # small scalars and labels: default storage

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.model.curve import FILL_VALUES
+from brushcore.model.curve import FILL_VALUES, fill_value
 from brushcore.validation import ParameterError
 
 #: Variables and attributes a curve file must have to be aggregated.
@@ -40,7 +40,7 @@ def _encoding(ds: xr.Dataset) -> dict:
     enc: dict[str, dict] = {name: {"_FillValue": None} for name in ds.coords}  # CF: none
     for name, v in ds.data_vars.items():
         if name in FILL_VALUES:  # "none" as its fill (`brushcore.model.curve.FILL_VALUES`)
-            enc[name] = {"_FillValue": np.asarray(FILL_VALUES[name], dtype=v.dtype)[()]}
+            enc[name] = {"_FillValue": fill_value(name, v.dtype)}
         if v.ndim >= 2:  # maps and snapshots compress ~50x
             enc[name] = {**enc.get(name, {}), "zlib": True, "complevel": 4}
     return enc
@@ -213,7 +213,7 @@ def _unmasked(ds: xr.Dataset) -> xr.Dataset:
             dtype = np.dtype(var.encoding.get("dtype", np.int32))
             values = np.where(np.isnan(var.values), fill, var.values).astype(dtype)
             ds[name] = xr.Variable(var.dims, values, var.attrs,
-                                   {"_FillValue": np.asarray(fill, dtype=dtype)[()]})
+                                   {"_FillValue": fill_value(name, dtype)})
     return ds
 
 

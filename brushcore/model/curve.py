@@ -79,6 +79,12 @@ FILL_VALUES = {"detachment_step": -1, "attachment_step": -1, "branch": -1,
                "snapshot_step": -1, "contact_snapshot": -2}
 
 
+def fill_value(name: str, dtype) -> np.generic:
+    """The `FILL_VALUES` entry of ``name`` as a scalar of ``dtype`` (what
+    netCDF's _FillValue of an integer variable must be)."""
+    return np.asarray(FILL_VALUES[name], dtype=dtype)[()]
+
+
 def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
     """Steps for the contact snapshots of Fig. 5 (see SNAPSHOT_LABELS).
 
@@ -133,7 +139,7 @@ def _filled(name: str, dims, data: np.ndarray, long_name: str, **extra) -> xr.Va
     means "none": declared as its netCDF _FillValue (`brushcore.data.io`
     writes it), kept as a number in memory."""
     var = _var(dims, data, long_name, "1", **extra)
-    var.encoding["_FillValue"] = np.asarray(FILL_VALUES[name], dtype=var.dtype)[()]
+    var.encoding["_FillValue"] = fill_value(name, var.dtype)
     return var
 
 
