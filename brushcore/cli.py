@@ -16,7 +16,7 @@ import re
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -55,8 +55,28 @@ _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
 def _path(text: str) -> Path:
     """A file path as typed; an empty one is refused (Path("") would be ".")."""
     if not text:
-        raise argparse.ArgumentTypeError("an empty path; allowed a file path")
+        raise argparse.ArgumentTypeError("an empty path; allowed a path")
     return Path(text)
+
+
+def _integer(allowed: str) -> Callable[[str], int]:
+    """An integer flag's reader: "64" and "64.0" give 64, as the config and
+    the Python API take 64.0; "4.5", "four" and "inf" are refused naming
+    ``allowed`` (the flag's range), which argparse's ``int`` does not."""
+    def read(text: str) -> int:
+        try:
+            return int(text)
+        except ValueError:
+            pass
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not value.is_integer():
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer; allowed {allowed}")
+        return int(value)
+    read.__name__ = "integer"
+    return read
 
 
 def _output(text: str) -> str:
@@ -106,8 +126,10 @@ class _Parser(argparse.ArgumentParser):
                     break
                 flag = token.split("=", 1)[0]
                 if flag.startswith("-") and not _NUMBER.match(flag) and flag not in known:
-                    close = difflib.get_close_matches(flag, sorted(known), n=1)
-                    hint = f" (did you mean {close[0]}?)" if close else ""
+                    # a flag cut short is a prefix of what was meant (--pil: --pillars)
+                    close = ([k for k in sorted(known) if k.startswith(flag) and len(flag) > 2]
+                             or difflib.get_close_matches(flag, sorted(known), n=1))
+                    hint = f" (did you mean {' or '.join(close[:3])}?)" if close else ""
                     self.error(f"unknown argument {flag}{hint}")
                 if flag in known:
                     seen.setdefault(self._option_string_actions[flag].dest, []).append(flag)
@@ -179,18 +201,19 @@ def build_parser() -> argparse.ArgumentParser:
     conv.add_argument("--out-dir", type=_path, required=True, metavar="DIR",
                       help="folder for sweep.nc and convergence.* (made if missing)")
     sim.add_argument("--layout", choices=LAYOUTS, required=True, help="pillar layout")
-    sim.add_argument("--pillars", type=int, action=_Given,
+    sim.add_argument("--pillars", type=_integer("a whole number of pillars >= 1"), action=_Given,
                      help="number of pillars N (required, except for --layout file: the "
                           "file's)")
     sim.add_argument("--kbar", type=_kbar, default=None,
                      help=f"spring stiffness k/(E* L), in [{MIN_KBAR:g}, inf]; 'inf' for rigid "
                           "pillars (required, except with --kbar-file: then the file's mean)")
-    sim.add_argument("--grid", type=int, action=_Given,
+    sim.add_argument("--grid", type=_integer(f"an integer in [{MIN_GRID}, {MAX_GRID}]"),
+                     action=_Given,
                      help=f"elements per side n, in [{MIN_GRID}, {MAX_GRID}] (required, except "
                           "for a label map or image: the file's; a pillar table needs it)")
     sim.add_argument("--phi", type=float, default=0.12, action=_Given,
                      help="filling factor (0, 0.5] (--layout file: the file's)")
-    sim.add_argument("--seed", type=int, default=0,
+    sim.add_argument("--seed", type=_integer(f"an integer in [0, {MAX_SEED}]"), default=0,
                      help=f"seed of the random layout and of drawn heights (--roughness) and "
                           f"stiffnesses (--kbar-spread), in [0, {MAX_SEED}]")
     sim.add_argument("--min-gap", type=float, default=1.0,
@@ -281,7 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",
                      help="stop CG at the tolerance even where an element lies within its "
                           "error of sigma_c or of the next event's cut")
-    sim.add_argument("--threads", type=int, default=None,
+    sim.add_argument("--threads", type=_integer(f"an integer in [1, {MAX_THREADS}]"), default=None,
                      help="threads of the FFTs, BLAS and the preconditioners' stacked "
                           f"inverses, in [1, {MAX_THREADS}] (default: the environment's "
                           "BRUSHCORE_THREADS, else 1)")
@@ -412,7 +435,7 @@ TERMINATED = "terminated; nothing written"
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from brushcore.model.cost import cost_note
+    from brushcore.model.cost import cost_note, memory_note
     from brushcore.model.curve import (FirstTouchWarning, check_protocol_preload,
                                        preload_contact, simulate)
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
@@ -485,6 +508,9 @@ def _simulate(args: argparse.Namespace) -> int:
         cost = cost_note(params, options, protocol)
         if cost:  # a long run said before it starts, not discovered
             print(cost, file=sys.stderr)
+        memory = memory_note(params, options, protocol)
+        if memory:  # a warning, not a refusal: the peak is scaled, not known
+            warnings.warn(memory)
         if options.lookahead:  # opt-in and documented, but a number could be quoted unread
             warnings.warn(f"--lookahead {options.lookahead:g} batches the events within "
                           f"{100 * options.lookahead:g} % of the next one: approximate (W and "
@@ -516,6 +542,10 @@ def _simulate(args: argparse.Namespace) -> int:
         return 2
     except (ConvergenceError, SolverError) as exc:
         _error(f"solver failed: {exc}", progress)
+        return 1
+    except MemoryError:  # what memory_note could only warn of
+        _error(f"out of memory at --grid {args.grid}: a smaller grid, or a machine with more "
+               "memory; nothing written", progress)
         return 1
     except KeyboardInterrupt:
         _error(INTERRUPTED, progress)

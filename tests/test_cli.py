@@ -86,8 +86,17 @@ BAD = [
     (["--roughness", "1e30"], r"--roughness 1e\+30 .*\[0, 1000\]"),  # hung the approach
     (["--h", "1e-200"], r"--h 1e-200 .*\[1e-30, 1e\+30\]"),
     (["--n-pillars", "16"], "unknown argument --n-pillars .*did you mean --pillars"),
-    (["--pillars", "abc"], r"argument --pillars: invalid int value: 'abc' \(see 'brushcore "
-                           r"simulate --help'\)"),
+    (["--pillars", "abc"], r"argument --pillars: 'abc' is not an integer; allowed a whole "
+                           r"number of pillars >= 1 \(see 'brushcore simulate --help'\)"),
+    (["--grid", "64.5"], r"argument --grid: '64.5' is not an integer; allowed an integer in "
+                         r"\[4, 8192\]"),
+    (["--pil", "16"], r"unknown argument --pil \(did you mean --pillars\?\)"),  # not --phi
+    (["--heights", "no-such-heights.txt"], r"--heights no-such-heights.txt is invalid "
+                                           r"\(no such file\): allowed a readable"),
+    # no grid draws them inside the square: "a finer grid" is not said
+    (["--shape", "ellipse", "--aspect", "10", "--phi", "0.4", "--grid", "256"],
+     r"reaches beyond the 256 x 256 square\): allowed a smaller phi, fewer pillars, a more "
+     r"compact shape$"),
     (["--kbar", "-inf"], r"--kbar -inf is invalid"),  # a value, not an unknown flag
     (["--heights", ""], r"argument --heights: an empty path"),  # not the folder "."
 
@@ -675,3 +684,59 @@ def test_threads_default_to_the_environments(tmp_path) -> None:
     res = subprocess.run([*cmd, "--threads", "1"], capture_output=True, text=True,
                          timeout=120, env=env)
     assert res.returncode == 0, res.stderr
+
+
+def test_integer_flags_take_whole_numbers_in_any_notation(tmp_path):
+    """--grid 64.0 runs as the config's grid: 64.0 and BrushParams(grid=64.0) do."""
+    out = tmp_path / "a.nc"
+    assert main(["simulate", "--layout", "random", "--pillars", "4.0", "--kbar", "1",
+                 "--grid", "64.0", "--seed", "1e1", "--out", str(out), "--quiet"]) == 0
+    ds = read_curve(out)
+    assert (ds.attrs["n_pillars"], ds.attrs["grid"], ds.attrs["seed"]) == (4, 64, 10)
+
+
+def test_a_pillar_table_in_metres_is_told_its_unit(tmp_path, capsys):
+    """A table of 5-um discs written in metres spans no element on any grid:
+    the error says a table's lengths are in units of L, not "fewer pillars"."""
+    table = tmp_path / "metres.csv"
+    table.write_text("x,y,radius\n2e-5,2e-5,5e-6\n6e-5,6e-5,5e-6\n")
+    assert main(["simulate", "--layout", "file", "--layout-file", str(table), "--kbar", "1",
+                 "--grid", "64", "--out", str(tmp_path / "a.nc"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "none up to 8192 resolves these pillars: a table's x, y and radius are in units " \
+           "of L" in err, err
+    assert "fewer pillars" not in err and not (tmp_path / "a.nc").exists()
+
+
+def test_threads_beyond_the_cpus_are_warned_of(monkeypatch):
+    from brushcore.numerics.platform import threads
+
+    for var in threads._VARS:  # restored after the test, as the limits below
+        monkeypatch.setenv(var, os.environ.get(var, "1"))
+    before = threads.fft_threads()
+    cpus = threads.usable_cpus()
+    try:
+        with pytest.warns(UserWarning, match=f"{cpus + 1} threads on {cpus} usable CPU"):
+            assert threads.pin_threads(cpus + 1) == cpus + 1
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            threads.pin_threads(cpus)
+    finally:
+        threads.pin_threads(before)
+
+
+def test_a_run_that_may_not_fit_in_memory_is_warned_of():
+    """The largest peak measured for the kind, scaled as n^2: random 1620's
+    2.69 GiB at 2048^2 makes 43 GiB at 8192^2; said only beyond what is
+    available, and not on a GPU."""
+    from brushcore import SolverOptions
+    from brushcore.model import cost
+
+    params = BrushParams(layout="random", n_pillars=64, kbar=1e-3, grid=8192)
+    need = cost.expected_peak_bytes(params, SolverOptions())
+    assert need == pytest.approx(2.69 * 2**30 * 16)
+    note = cost.memory_note(params, SolverOptions(), available=24e9)
+    assert note.startswith("this run may need up to about 46 GB of memory") and "24 GB" in note
+    assert cost.memory_note(params, SolverOptions(), available=need * 1.01) == ""
+    gpu = BrushParams(layout="random", n_pillars=64, kbar=1e-3, grid=8192, backend="gpu")
+    assert cost.memory_note(gpu, SolverOptions(), available=1e9) == ""

@@ -248,10 +248,14 @@ def test_values_no_brush_reads_are_said_at_plan_time(repo_copy: Path, tmp_path: 
     assert "'kbar_spread' holds [0.3], which no brush of the sweep runs" in text, text
     assert "'roughness' holds [0.2] and 'preload' holds 0.0: a rough brush's approach" in text
     assert "'seeds' holds [3]" not in text, text  # roughness draws from every seed
-    config.write_text(yaml.safe_dump({"regular": [4], "random": [], "seeds": [0, 3]}))
+    # one value written two ways (0.1 * 0.1) would run twice
+    config.write_text(yaml.safe_dump({"regular": [4], "random": [], "seeds": [0, 3],
+                                      "kbar": [0.01, 0.1 * 0.1]}))
     text = output(snakemake(repo_copy, "-n", "--cores", "2", "--configfile",
                             "config/test.yaml", str(config)))
     assert "'seeds' holds [3], which no brush of the sweep draws from" in text, text
+    assert ("config key 'kbar': 0.01 and 0.010000000000000002 differ by 2e-16 (relative): "
+            "they run as two cases") in text, text
     # a tensile first waypoint (a preload of the wrong sign?) pulls off the first touch
     config.write_text(yaml.safe_dump({
         "regular": [4], "random": [], "kbar": [0.01], "roughness": [0.0, 0.3],

@@ -51,6 +51,53 @@ EXACT_RTOL = 1e-6
 NOTE_FROM_S = 300.0
 
 
+#: The largest peak memory measured per kind [bytes] on one grid (README,
+#: "Speed and memory"): "mirror" the soft 48 x 48 brush at 2048^2 (0.81
+#: GiB), "whole" random 1620 at k 1e-5 at 2048^2 (2.69 GiB, its per-pillar
+#: blocks), "rough" the rough 8 x 8 brush at 1024^2 (3.4 GB).  Other grids
+#: scale it as n^2 (the transforms' buffers; the blocks grow slower, so
+#: beyond the grid it errs high).
+LARGEST_PEAK_BYTES = {"mirror": (2048, 0.81 * 2**30), "whole": (2048, 2.69 * 2**30),
+                      "rough": (1024, 3.4e9)}
+
+
+def expected_peak_bytes(params: BrushParams, options: SolverOptions,
+                        protocol: Sequence[object] | None = None) -> float:
+    """The largest peak memory measured for the run's kind, scaled to its
+    grid as n^2 [bytes]: an order of magnitude, for `memory_note`."""
+    grid, peak = LARGEST_PEAK_BYTES[curve_kind(params, options, protocol)]
+    return peak * (params.grid / grid) ** 2
+
+
+def available_bytes() -> float:
+    """Memory available to a new process [bytes] (Linux's MemAvailable);
+    inf where the system does not say."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return math.inf
+
+
+def memory_note(params: BrushParams, options: SolverOptions,
+                protocol: Sequence[object] | None = None,
+                available: float | None = None) -> str:
+    """A warning where the run may need more memory than ``available``
+    (default: this machine's, `available_bytes`) [bytes]; "" otherwise and
+    on a GPU, whose memory the solver budgets itself."""
+    need = expected_peak_bytes(params, options, protocol)
+    free = available_bytes() if available is None else available
+    if need <= free or params.backend != "cpu":
+        return ""
+    grid, _ = LARGEST_PEAK_BYTES[curve_kind(params, options, protocol)]
+    return (f"this run may need up to about {need / 1e9:.2g} GB of memory (the largest "
+            f"peak of its kind measured at {grid}^2, scaled as grid^2), more than the "
+            f"{free / 1e9:.2g} GB available: a smaller grid, or a machine with more memory")
+
+
 def slowest_curve_s(kind: str, grid: int) -> float:
     """The slowest curve of ``kind`` on ``grid`` [s, one thread]: measured,
     interpolated on a log-log scale between measured grids, or scaled by

@@ -75,7 +75,7 @@ def table_rows(path: Path, name: str, header: bool = True, comma_warning: bool =
         text = path.read_text(encoding="utf-8-sig")  # a BOM is no character of line 1
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterError(name, str(path), "a readable text or .npy file",
-                             type(exc).__name__ + ": " + str(exc).split(":")[0]) from None
+                             unreadable(exc)) from None
     names, rows, hint, points = None, [], "", False
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.split("#", 1)[0]
@@ -289,9 +289,24 @@ def with_input_files(base: BrushParams,
                              exc.allowed, exc.reason) from None
 
 
+def unreadable(exc: Exception) -> str:
+    """Why a file could not be read, in words (not "FileNotFoundError: [Errno 2]")."""
+    if isinstance(exc, FileNotFoundError):
+        return "no such file"
+    if isinstance(exc, IsADirectoryError):
+        return "a folder"
+    if isinstance(exc, PermissionError):
+        return "permission denied"
+    if isinstance(exc, UnicodeDecodeError):
+        return f"not UTF-8 text (byte {exc.start})"
+    return str(getattr(exc, "strerror", None) or exc) or type(exc).__name__
+
+
 def npy_problem(exc: Exception) -> str:
     """What `np.load(..., allow_pickle=False)` found wrong, without NumPy's
     advice to load pickles unsafely (never right for an input file)."""
+    if isinstance(exc, OSError):
+        return unreadable(exc)
     text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     if "allow_pickle" in text or "pickled" in text:
         return "it holds Python objects or is not a .npy file"

@@ -45,7 +45,15 @@ def random_gap(params: BrushParams) -> float:
 
 
 class LayoutError(ValueError):
-    """Generated pillars overlap or leave the square; `build_labels` names the parameters."""
+    """Generated pillars overlap or leave the square; `build_labels` names the parameters.
+
+    ``grid_helps``: whether a finer grid could draw the layout (pillars that
+    meet on the grid), not one that leaves the square on every grid.
+    """
+
+    def __init__(self, message: str, grid_helps: bool = True) -> None:
+        super().__init__(message)
+        self.grid_helps = grid_helps
 
 
 def regular_centres(n_pillars: int, side: float) -> np.ndarray:
@@ -229,7 +237,7 @@ def shapes_label_map(centres: np.ndarray, shapes: Sequence[PillarShape], areas: 
         ey, ex = (e / h for e in shape.half_extents(area))
         if cy - ey < -slack or cx - ex < -slack or cy + ey > n + slack or cx + ex > n + slack:
             raise LayoutError(f"pillar {p} at ({cy * h:.4g}, {cx * h:.4g}) reaches beyond "
-                              f"the {side:.4g} x {side:.4g} square")
+                              f"the {side:.4g} x {side:.4g} square", grid_helps=False)
         i0, i1 = max(0, int(math.floor(cy - ey)) - 1), min(n, int(math.ceil(cy + ey)) + 1)
         j0, j1 = max(0, int(math.floor(cx - ex)) - 1), min(n, int(math.ceil(cx + ex)) + 1)
         yy = (np.arange(i0, i1)[:, None] + 0.5 - cy) * h
@@ -450,7 +458,8 @@ def _checked_labels(params: BrushParams) -> np.ndarray:
                                      params.grid, params.h)
         except LayoutError as exc:
             raise ParameterError("phi", params.phi, "a smaller phi, fewer pillars, a more "
-                                 "compact shape or a finer grid", str(exc)) from None
+                                 "compact shape" + (" or a finer grid" if exc.grid_helps
+                                                    else ""), str(exc)) from None
         check_not_touching(labels, "phi", params.phi)
     check_discretisation(params, labels)
     return labels

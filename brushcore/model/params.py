@@ -230,8 +230,12 @@ class BrushParams:
                  (f"grid >= {needed}"
                   + ("" if self.allow_coarse else " (or allow_coarse to run it anyway)"))
                  if needed <= MAX_GRID else
-                 f"none up to {MAX_GRID} resolves these pillars: fewer pillars or a larger "
-                 "filling factor",
+                 f"none up to {MAX_GRID} resolves these pillars: "
+                 + ("a table's x, y and radius are in units of L, the square's side (in "
+                    "metres or microns? divide them by L)"
+                    # a pillar table (`pillar_table.is_table`, which imports this module)
+                    if self.layout_file.lower().endswith(".csv") else
+                    "fewer pillars or a larger filling factor"),
                  f"{what} spans {r:.3g} elements, under the {floor:.3g} "
                  + ("that cover an element centre" if self.allow_coarse else
                     "needed for a meaningful detachment criterion"))

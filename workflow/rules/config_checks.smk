@@ -42,6 +42,7 @@ def check_config(config, schema_path):
             )
         _integral_counts(config)
         _shape_settings_used(config, schema)
+        _warn_near_duplicates(config)
         return
     where = ".".join(str(p) for p in error.absolute_path)
     if error.validator == "additionalProperties":
@@ -306,6 +307,40 @@ def _first_nan(value, where=""):
         if found is not None:
             return found
     return None
+
+
+#: Numbers of one list closer than this (relative) are one value written two
+#: ways: 0.1 * 3 and np.arange give 0.30000000000000004 beside 0.3.
+NEAR_DUPLICATE_RTOL = 1e-9
+
+
+def _near_duplicates(values):
+    """The first pair of distinct finite numbers in ``values`` within
+    `NEAR_DUPLICATE_RTOL` of each other, or None."""
+    numbers = sorted(
+        v
+        for v in values
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    )
+    for a, b in zip(numbers, numbers[1:]):
+        if a != b and abs(b - a) <= NEAR_DUPLICATE_RTOL * max(abs(a), abs(b)):
+            return a, b
+    return None
+
+
+def _warn_near_duplicates(value, where=""):
+    """Warn where a list holds one number written two ways: each runs as its
+    own case, twice the work, and the sweep gets two coordinates an ulp apart."""
+    if isinstance(value, (list, tuple)):
+        pair = _near_duplicates(value)
+        if pair is not None:
+            a, b = pair
+            logger.warning(
+                f"config key '{where}': {a!r} and {b!r} differ by {abs(b - a) / abs(b):.1g} "
+                "(relative): they run as two cases with two files; write them as one value"
+            )
+    for key, item in _children(value):
+        _warn_near_duplicates(item, f"{where}.{key}" if where else str(key))
 
 
 class ConfigError(ValueError):
