@@ -693,6 +693,9 @@ def test_integer_flags_take_whole_numbers_in_any_notation(tmp_path):
                  "--grid", "64.0", "--seed", "1e1", "--out", str(out), "--quiet"]) == 0
     ds = read_curve(out)
     assert (ds.attrs["n_pillars"], ds.attrs["grid"], ds.attrs["seed"]) == (4, 64, 10)
+    from brushcore.numerics.platform.threads import fft_threads
+
+    assert ds.attrs["threads"] == fft_threads()  # what its bits hang on: recorded
 
 
 def test_a_pillar_table_in_metres_is_told_its_unit(tmp_path, capsys):

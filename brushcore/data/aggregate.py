@@ -103,7 +103,7 @@ SHARED_ATTRIBUTES = ("min_gap", "e_star", "dgamma", "h", "units_convention", "sy
 #: ... and those that may differ (numerics): kept as attributes, distinct values joined by "; ".
 SOLVER_ATTRIBUTES = ("rtol", "max_iter", "tie_rtol", "lookahead", "cascade", "symmetry",
                      "precision", "fft_precision", "fft_library", "fft_library_used",
-                     "preconditioner",
+                     "preconditioner", "threads",
                      "early_decisions",
                      "settle_decisions", "allow_coarse")
 #: Per retraction branch of a sweep whose curves follow a given protocol

@@ -29,6 +29,7 @@ from brushcore.model.solve import (LOAD_SPAN, element_offsets, fft_library_used,
                                    run, run_protocol_curve, single_transforms, spring_options,
                                    stiffness_span)
 from brushcore.numerics.platform.backend import resolve_backend
+from brushcore.numerics.platform.threads import fft_threads
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.waypoints import (APPROACH, RETRACT, START, Waypoint,
                                                  loop_energy, positive_work, preload_protocol)
@@ -228,6 +229,10 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
             params, options, folded=symmetry_fold > 1) else "double"),
         # whose transforms the whole grid ran on (a quadrant: FFTW's DCTs)
         "fft_library_used": fft_library_used(params, options, backend, symmetry_fold),
+        # what a rerun's bits hang on besides code and inputs (FFTW's threaded
+        # plans; FFTW's wisdom too, which no short digest names: a killed and
+        # resumed sweep held other wisdom than one run through, same plans)
+        "threads": fft_threads(),
         "device_name": backend.device_name,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),
