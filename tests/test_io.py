@@ -122,6 +122,11 @@ def test_a_sweeps_snapshot_padding_is_fill_and_left_out(tmp_path) -> None:
         padded = ds.contact_snapshot.isel(case=int(np.flatnonzero(
             ds.case_roughness.values == 0.3)[0]), snapshot=slice(3, None))
         assert bool(np.isnan(padded.values).all())  # the fill, not -1 (no pillar)
+        # the maps are placed: the curves' element centres, in the curves' units
+        for axis in ("y", "x"):
+            assert np.array_equal(ds[axis].values, flat[axis].values)
+            assert ds[axis].attrs["units"] == flat[axis].attrs["units"] == "m"
+        assert np.array_equal(mine.x.values, (np.arange(48) + 0.5) * 1.0)
 
 
 def test_a_curve_opened_with_xarray_writes_again_as_it_was(tmp_path) -> None:

@@ -745,6 +745,9 @@ def _snapshots(
         "snapshot_step": xr.DataArray(step, dims=dims, attrs=dict(first["snapshot_step"].attrs)),
         "snapshot_label": xr.DataArray(label.astype(str), dims=dims,
                                        attrs={"long_name": "stage of the pull-off or protocol"}),
+        # one grid and one h (a shared attribute): the curves' own element centres
+        "y": xr.DataArray(first["y"].values, dims="y", attrs=dict(first["y"].attrs)),
+        "x": xr.DataArray(first["x"].values, dims="x", attrs=dict(first["x"].attrs)),
         "case_layout": xr.DataArray(np.array([k.layout for k in keys]), dims="case",
                                     attrs={"long_name": "layout of the snapshot case"}),
         "case_n_pillars": xr.DataArray(np.array([k.n_pillars for k in keys]), dims="case",
