@@ -100,3 +100,20 @@ def test_extreme_units_keep_float32_out_of_overflow():
     assert ref.attrs["fft_precision"] == "single" and far.attrs["fft_precision"] == "double"
     for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
         assert float(far[name]) == pytest.approx(float(ref[name]), rel=1e-5), name
+
+
+def test_snapshot_stages_do_not_depend_on_the_unit_system():
+    """The halfway stages are chosen on element counts: on areas in m^2 the
+    exact tie of 1963.5 elements between 1964 and 1963 rounded to step 2 in
+    SI (E* 2 MPa, 0.05 J/m^2, 1 um) and to step 0 with h = 1 (a units
+    auditor's case: random 16, seed 3, rigid, 128^2)."""
+    base = BrushParams("random", 16, math.inf, 128, seed=3)
+    ref = simulate(base)
+    si = simulate(replace(base, e_star=2e6, dgamma=0.05, h=1e-6))
+    assert ref.snapshot_step.values.tolist() == si.snapshot_step.values.tolist()
+    assert np.array_equal(ref.contact_snapshot.values, si.contact_snapshot.values)
+    # the pick is the first stage of the tie, as before on h = 1
+    counts = ref.contact_area.values / ref.attrs["h"] ** 2
+    half = 0.5 * (counts[0] + counts[int(ref.snapshot_step[2])])
+    picked = int(ref.snapshot_step[1])
+    assert abs(counts[picked] - half) == np.min(np.abs(counts[:picked + 1] - half))

@@ -90,7 +90,8 @@ def snapshot_steps(area: np.ndarray, force: np.ndarray) -> np.ndarray:
     """Steps for the contact snapshots of Fig. 5 (see SNAPSHOT_LABELS).
 
     Between the start and the maximum, and between the maximum and the last
-    contact, the stage whose contact area is halfway is chosen.
+    contact, the stage whose contact ``area`` is halfway is chosen (the first
+    of a tie: give element counts, which a unit system cannot round).
     """
     i_max = int(np.argmax(force))
     i_last = int(np.flatnonzero(area > 0)[-1])
@@ -507,7 +508,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     i_max = int(np.argmax(curve.force))
     f_ad = float(curve.force[i_max])
     work = positive_work(curve.displacement, curve.force)  # as a protocol's branch
-    snaps = snapshot_steps(area, curve.force)
+    # on element counts: halfway areas tie exactly (1963.5 between 1964 and
+    # 1963), and h^2 in metres rounded the tie to another step than h = 1
+    snaps = snapshot_steps(curve.attached_elements, curve.force)
     pillar = detach >= 0
     states = np.where(pillar[None], (detach[None] > snaps[:, None, None]).astype(np.int8),
                       np.int8(-1)).astype(np.int8)

@@ -57,7 +57,8 @@ class SolverOptions:
         `brushcore.numerics.events.pulloff.PRECISION_BAND` more margin, and a solve
         unsettled only by it goes on in double.  Float32 breaks the ties of
         mirror images, so "auto" is "mixed" only for layouts without exact
-        symmetries (random ones) at rtol >= 1e-6, else "double"; "mixed"
+        symmetries (random ones) at rtol >= 1e-6 in units that float32
+        holds (`brushcore.model.solve.float32_safe`), else "double"; "mixed"
         needs rtol >= 1e-6.  GPU runs are always double.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round
