@@ -570,10 +570,17 @@ def _simulate(args: argparse.Namespace) -> int:
             left = float(pull.pull_contact_area_at_end) / area
             print(f"retraction {k}: F_ad/F_K = {float(pull.pull_adhesive_force_normalized):.4f}"
                   f"  W/W_K = {float(pull.pull_work_of_separation_normalized):.4f}"
+                  f"  cycle energy/W_K = {float(pull.pull_cycle_energy_normalized):.4f}"
                   f"  in contact at its end: {left:.1%} of the pillar area"
                   + ("  (a partial retraction: F_ad is the largest force it reached, "
                      "not a pull-off)" if left > 0 and math.isfinite(
                          float(pull.pull_adhesive_force_normalized)) else ""))
+    if "dissipated_energy_normalized" in ds and pressed:  # a protocol's energy, in its words
+        ends = float(ds.contact_area[-1]) > 0  # in contact: stored energy besides the losses
+        print(f"integral of F dd over the protocol/W_K = "
+              f"{float(ds.dissipated_energy_normalized):.4f}"
+              + (" (the energy lost plus the elastic energy stored at its end, in contact)"
+                 if ends else " (the energy dissipated)"))
     return 0
 
 

@@ -401,6 +401,28 @@ def test_exactly_tangent_discs_are_refused_whatever_their_angle(tmp_path: Path) 
     assert found > 100
 
 
+@pytest.mark.parametrize("rows", [
+    "0.1, 0.5, 0.05\n0.4, 0.5, 0.25",  # 0.4 - 0.1 = 0.30000000000000004 > 0.05 + 0.25
+    "0.5, 0.15, 0.15\n0.5, 0.45, 0.15",
+    "0.5, 0.5, 0.06, 4, 0\n0.5, 0.56, 0.06, 4, 0",  # ellipses along their minor axes
+    "0.5, 0.5, 0.06, 4, 90\n0.56, 0.5, 0.06, 4, 90",
+    "0.3, 0.5, 0.06, 4, 0\n0.52, 0.5, 0.1, 1, 0",  # an ellipse's tip on a disc
+], ids=["discs x", "discs y", "ellipses y", "ellipses x", "ellipse and disc"])
+def test_pillars_written_tangent_are_refused_where_decimals_round_apart(
+        tmp_path: Path, rows: str) -> None:
+    """Tangent in decimals, 1 ulp apart in floats: these five ran (a geometry
+    auditor's finds, touching on some grids and not on others), where the
+    same pairs at 45 degrees were refused."""
+    header = "x, y, radius" + (", aspect, orientation" if rows.count(",") > 4 else "")
+    with pytest.raises(ParameterError, match="overlap|touch"):
+        read_pillar_table(_table(tmp_path, f"{header}\n{rows}\n"))
+    apart = rows.replace("0.4, 0.5, 0.25", "0.4, 0.5, 0.2499999").replace(
+        "0.45, 0.15", "0.4500001, 0.15").replace("0.56, 0.06", "0.5600001, 0.06").replace(
+        "0.56, 0.5, 0.06", "0.5600001, 0.5, 0.06").replace("0.52, 0.5", "0.5200001, 0.5")
+    assert apart != rows
+    read_pillar_table(_table(tmp_path, f"{header}\n{apart}\n"))  # 1e-7 apart: accepted
+
+
 def test_the_narrowest_pillar_is_recorded_for_the_resolution_flags(tmp_path: Path) -> None:
     """`smallest_radius_elements`, which the under-resolved flags read: a
     generated brush's radius rule (an ellipse's semi-minor axis r/sqrt(4)),

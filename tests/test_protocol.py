@@ -1414,3 +1414,28 @@ def test_mirror_images_reach_sigma_c_together():
     assert got.attrs["events"] == want.attrs["events"] == 361
     assert abs(float(got.work_of_separation_normalized) / w - 1.0) < 1e-6
     assert abs(float(unsettled.work_of_separation_normalized) / w - 1.0) > 1e-3
+
+
+def test_a_tensile_target_beyond_the_pull_off_is_said():
+    """force:5 on a brush that lets go at 1.60 F_K ends its leg at separation
+    (the Waypoint's rule), said in a warning; a reachable force:1 is not;
+    the integral of F dd is labelled as stored energy besides the losses
+    where a protocol ends in contact (an energy auditor's finds)."""
+    params = BrushParams("regular", 16, 0.01, 64, roughness=0.3)
+
+    def run(target: float, end: tuple[Waypoint, ...] = (Waypoint("separation"),)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            ds = simulate(params, protocol=[Waypoint("force", -2.0), Waypoint("force", target),
+                                            Waypoint("force", -2.0), *end])
+        return ds, [str(w.message) for w in caught]
+
+    far, said = run(5.0)
+    assert any("waypoint 1 (force:5) was not reached: the brush let go first" in w
+               for w in said), said
+    assert float(far.force_normalized[int(far.snapshot_step[1])]) == 0.0  # at separation
+    assert float(far.adhesive_force_normalized) < 5.0
+    near, said = run(1.0)
+    assert not any("was not reached" in w for w in said), said
+    assert float(near.force_normalized[int(near.snapshot_step[1])]) == pytest.approx(1.0)
+    assert "ends in contact adds the elastic energy" in far.dissipated_energy.attrs["comment"]

@@ -131,6 +131,12 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
     return attrs
 
 
+#: What ``dissipated_energy`` is where a protocol does not end in separation.
+DISSIPATED_COMMENT = ("the energy dissipated where the protocol runs from first touch to "
+                      "separation; a protocol that ends in contact adds the elastic energy "
+                      "stored at its end")
+
+
 def _var(dims, data, name: str, units: str, **extra) -> xr.Variable:
     """A CF variable: values with long_name, units and any extra attributes."""
     return xr.Variable(dims, data, {"long_name": name, "units": units, **extra})
@@ -456,7 +462,9 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
     and ``retraction`` (1 on the last retraction branch, where
     ``adhesive_force`` and ``work_of_separation`` = integral of max(F, 0) dd
     are taken); per pillar also its height and kbar; and the scalars
-    ``dissipated_energy`` (the integral of F dd over the whole loop) and
+    ``dissipated_energy`` (the integral of F dd over the whole protocol: the
+    energy dissipated where it ends in separation, else that plus the elastic
+    energy stored at its end) and
     ``pillars_in_contact_at_preload``.
 
     Per pillar (dimension ``pillar``, label order: attribute ``pillar_order``)
@@ -619,6 +627,13 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                       "Waypoint('separation'), or 'separation' in --protocol or a config's "
                       "protocol)",
                       stacklevel=3)
+    unreached = [k for k, w in enumerate(waypoints) if w.kind == "force" and w.value > 0
+                 and curve.attached_elements[curve.waypoint_step[k]] == 0]
+    if unreached:  # a tensile target beyond the pull-off: the leg ended at separation
+        warnings.warn("; ".join(f"waypoint {k} (force:{waypoints[k].value / fs:g}) was not "
+                                f"reached" for k in unreached)
+                      + ": the brush let go first, at its adhesive force, and the leg ended "
+                      "at separation (F = 0)", stacklevel=3)
     empty = [k for k, (first, _) in enumerate(curve.pulls)
              if curve.attached_elements[first] == 0]
     if empty:  # e.g. force:2 after a complete pull-off: nothing to pull on
@@ -707,10 +722,13 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                             "work of separation, integral of max(F, 0) dd over the last "
                             "retraction"),
         **_pull_variables(d, f, area, curve.pulls, peaks, fs, ws),
-        "dissipated_energy": _var((), dissipated, "energy dissipated over the protocol, "
-                                 "integral of F dd", "J"),
-        "dissipated_energy_normalized": _var((), dissipated / ws, "dissipated energy / W_K",
-                                            "1"),
+        # the energy lost only from first touch to separation: a protocol that
+        # ends pressed holds elastic energy besides (12.1 W_K after a press alone)
+        "dissipated_energy": _var((), dissipated, "integral of F dd over the protocol",
+                                  "J", comment=DISSIPATED_COMMENT),
+        "dissipated_energy_normalized": _var((), dissipated / ws,
+                                            "integral of F dd over the protocol / W_K", "1",
+                                            comment=DISSIPATED_COMMENT),
         "pillars_in_contact_at_preload": _var((), np.int32(in_contact),
                                              "pillars with attached elements at the end of "
                                              "the first waypoint", "1"),

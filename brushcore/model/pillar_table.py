@@ -293,20 +293,25 @@ def _ellipses_meet(table: PillarTable, p: int, q: int) -> bool:
     for one, other in ((p, q), (q, p)):
         values = _level(table, other, _boundary(table, one, t))
         lowest = float(values.min())
-        if lowest <= 1.0:
+        if lowest <= 1.0 + TANGENT_RTOL:
             return True
         c = float(major[one] / minor[other])
         k = c * step**2 / 4.0
-        if lowest > (0.5 * (k + math.sqrt(k * k + 4.0 * (1.0 + c * k)))) ** 2:
+        if lowest > (0.5 * (k + math.sqrt(k * k + 4.0 * (1.0 + TANGENT_RTOL + c * k)))) ** 2:
             continue  # no dip between samples reaches the other pillar
         best = float(t[int(np.argmin(values))])
         found = optimize.minimize_scalar(
             lambda s: float(_level(table, other, _boundary(table, one, np.array([s])))[0]),
             bounds=(best - step, best + step), method="bounded",
             options={"xatol": 1e-12})
-        if float(found.fun) <= 1.0:
+        if float(found.fun) <= 1.0 + TANGENT_RTOL:
             return True
     return False
+
+
+#: Pillars this close (relative) to tangent touch: a table's decimals
+#: written as tangent land 1 ulp either side (0.4 - 0.1 = 0.30000000000000004).
+TANGENT_RTOL = 1e-12
 
 
 def _check_apart(path: Path, lines: np.ndarray, table: PillarTable) -> None:
@@ -331,7 +336,7 @@ def _check_apart(path: Path, lines: np.ndarray, table: PillarTable) -> None:
     if not p.size:
         return
     distance = np.hypot(*(centres[p] - centres[q]).T)
-    overlap = distance <= r[p] + r[q]  # touching: no grid parts them
+    overlap = distance <= (r[p] + r[q]) * (1.0 + TANGENT_RTOL)  # touching: no grid parts them
     if table.has_ellipses:  # circumscribed discs that meet: ask the ellipses
         round_pair = (table.aspects[p] == 1.0) & (table.aspects[q] == 1.0)
         for i in np.flatnonzero(overlap & ~round_pair):
