@@ -234,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"major / minor axis of --shape ellipse, [1, {MAX_ASPECT:g}]")
     sim.add_argument("--orientation", type=float, default=0.0,
                      help="angle of the ellipse's major axis or a square's side from the "
-                          "x axis [degrees]")
+                          "x axis [degrees], in [-360, 360]")
     sim.add_argument("--layout-file", type=_path,
                      help="label map (.npy: -1 no pillar, 0..N-1 pillar) or image (.png: "
                           "dark pillars on white), of the grid's size, or a pillar table "
@@ -487,6 +487,9 @@ def _simulate(args: argparse.Namespace) -> int:
         if not 1 <= args.threads <= MAX_THREADS:
             raise ParameterError("threads", args.threads, f"an integer in [1, {MAX_THREADS}]")
         check_output_path(args.out)
+        if Path(args.out).suffix.lower() not in (".nc", ".nc4"):  # runs, but hides its kind
+            warnings.warn(f"--out {args.out}: the curve is written as netCDF, which tools "
+                          "(and brushcore converge) find by the suffix .nc")
         labels = build_labels(params)  # layout and discretisation checked before any solve
         area = int((labels >= 0).sum())
         touching = count_touching_pairs(labels)  # random discs on grids coarser than 512
@@ -593,7 +596,8 @@ def _converge(args: argparse.Namespace) -> int:
     if out.exists() and not out.is_dir():
         _error(f"--out-dir {out} is a file: allowed a folder (made if missing)")
         return 2
-    missing = [str(p) for p in args.curves if not p.is_file()]
+    missing = [f"{p} (a folder)" if p.is_dir() else str(p) for p in args.curves
+               if not p.is_file()]
     if missing:  # a path typed wrong: nothing to run again
         _error(f"no such curve file{'s' if len(missing) > 1 else ''}: {', '.join(missing[:10])}"
                + (f" and {len(missing) - 10} more" if len(missing) > 10 else "")

@@ -743,3 +743,14 @@ def test_a_run_that_may_not_fit_in_memory_is_warned_of():
     assert cost.memory_note(params, SolverOptions(), available=need * 1.01) == ""
     gpu = BrushParams(layout="random", n_pillars=64, kbar=1e-3, grid=8192, backend="gpu")
     assert cost.memory_note(gpu, SolverOptions(), available=1e9) == ""
+
+
+def test_a_curve_under_another_suffix_is_warned_of_and_a_folder_named(tmp_path, capsys):
+    out = tmp_path / "curve.txt"
+    with pytest.warns(UserWarning, match=r"--out .*curve.txt: the curve is written as netCDF"):
+        assert main(["simulate", "--layout", "regular", "--pillars", "1", "--kbar", "1",
+                     "--grid", "16", "--out", str(out), "--quiet"]) == 0
+    assert read_curve(out).attrs["n_pillars"] == 1
+    (tmp_path / "conv").mkdir()
+    assert main(["converge", str(tmp_path / "conv"), "--out-dir", str(tmp_path / "o")]) == 2
+    assert f"no such curve file: {tmp_path / 'conv'} (a folder)" in capsys.readouterr().err

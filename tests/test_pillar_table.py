@@ -512,3 +512,48 @@ def test_a_table_the_reader_would_refuse_is_not_saved(tmp_path) -> None:
     saved = save_pillar_table(table, tmp_path / "new" / "folder" / "brush")
     assert saved == tmp_path / "new" / "folder" / "brush.csv"
     assert read_pillar_table(saved).n_pillars == 4
+
+
+def test_orientations_beyond_a_turn_are_refused_and_radians_are_said(tmp_path: Path) -> None:
+    """An angle past +-360 degrees says nothing more (1e308 passed, and the
+    grid rule then blamed the grid); a column of 0.5236 and 1.0472 is
+    30 and 60 degrees written in radians: read as degrees, with a warning."""
+    header = "x, y, radius, aspect, orientation\n"
+    with pytest.raises(ParameterError, match=r"line 3: 'orientation' = 400.0.*\[-360, 360\]"):
+        read_pillar_table(_table(tmp_path, header + "0.3,0.3,0.08,2,30\n0.7,0.7,0.08,2,400\n"))
+    with pytest.raises(ParameterError, match=r"orientation=1e\+308 is invalid: allowed an angle "
+                                             r"in degrees in \[-360, 360\]"):
+        BrushParams("regular", 4, 1.0, 64, shape="square", orientation=1e308)
+    radians = _table(tmp_path, header + "0.3,0.3,0.08,2,0.5236\n0.7,0.7,0.08,2,1.0472\n",
+                     "radians.csv")
+    with pytest.warns(UserWarning, match="every 'orientation' lies within 2 pi and not all "
+                                         "are whole .*read as degrees"):
+        table = read_pillar_table(radians)
+    assert table.orientations.tolist() == [0.5236, 1.0472]
+    with warnings.catch_warnings():  # whole degrees within 2 pi: no word
+        warnings.simplefilter("error")
+        read_pillar_table(_table(tmp_path, header + "0.3,0.3,0.08,2,0\n0.7,0.7,0.08,2,5\n",
+                                 "degrees.csv"))
+
+
+def test_a_label_covering_separate_pieces_is_said_once(tmp_path: Path) -> None:
+    """One label on two footprints runs as one pillar (one spring on both):
+    said once per file, however often a run reads the map."""
+    from brushcore.model.layout_file import read_label_map, split_pillars
+
+    labels = build_labels(BrushParams("random", 16, 1.0, 128, seed=2))
+    assert split_pillars(labels).size == 0
+    joined = labels.copy()
+    joined[joined == 5] = 3
+    joined[joined == 15] = 5  # labels stay 0 ... N-1
+    assert split_pillars(joined).tolist() == [3]
+    path = tmp_path / "joined.npy"
+    np.save(path, joined)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(3):
+            read_label_map(path)
+    said = [str(w.message) for w in caught if "pieces" in str(w.message)]
+    assert said == [f"{path}: label 3 covers pieces that share no element edge; such a label "
+                    "runs as one pillar, one spring on all its pieces: give each piece its "
+                    "own label otherwise"], said

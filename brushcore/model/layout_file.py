@@ -189,7 +189,46 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
                       f"labels up to {n_pillars - 1}, but no element has label {shown}"
                       + (f" and {missing.size - 10} more" if missing.size > 10 else ""))
     check_not_touching(labels, _NAME, str(path))
+    split = split_pillars(labels)
+    said = (str(path.resolve()), path.stat().st_mtime_ns)
+    if split.size and said not in _SAID_SPLIT:  # one spring on two footprints: meant?
+        _SAID_SPLIT.add(said)  # once a file: a run reads its map several times
+        shown = ", ".join(map(str, split[:5])) + " ..." * (split.size > 5)
+        warnings.warn(f"{path}: " + (f"label {shown} covers" if split.size == 1 else
+                                     f"{split.size} labels ({shown}) each cover")
+                      + " pieces that share no element edge; such a label runs as one "
+                      "pillar, one spring on all its pieces: give each piece its own label "
+                      "otherwise", stacklevel=2)
     return labels
+
+
+#: Label maps whose split pillars were said, by (path, mtime).
+_SAID_SPLIT: set[tuple[str, int]] = set()
+
+
+def split_pillars(labels: np.ndarray) -> np.ndarray:
+    """Pillar labels whose elements form more than one edge-connected piece."""
+    from scipy.sparse import coo_matrix  # noqa: PLC0415 - label maps only
+    from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
+
+    index = np.full(labels.shape, -1, dtype=np.int64)
+    inside = labels >= 0
+    index[inside] = np.arange(int(inside.sum()))
+    # edges between edge neighbours of one label: (index left/up, right/down, same)
+    edges = [(index[:, :-1], index[:, 1:], labels[:, :-1] == labels[:, 1:]),
+             (index[:-1], index[1:], labels[:-1] == labels[1:])]
+    rows = np.concatenate([a[same & (a >= 0)] for a, _, same in edges])
+    cols = np.concatenate([b[same & (a >= 0)] for a, b, same in edges])
+    size = int(inside.sum())
+    graph = coo_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(size, size))
+    count, piece = connected_components(graph, directed=False)
+    n_pillars = int(labels.max()) + 1
+    if count == np.unique(labels[inside]).size:  # a piece a label
+        return np.zeros(0, dtype=np.int64)
+    # distinct (label, piece) pairs, counted per label
+    pieces = np.bincount(np.unique(labels[inside].astype(np.int64) * count + piece) // count,
+                         minlength=n_pillars)
+    return np.flatnonzero(pieces > 1)
 
 
 def save_label_map(labels: np.ndarray, path: str | Path) -> Path:

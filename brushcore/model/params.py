@@ -259,8 +259,10 @@ class BrushParams:
                  self.aspect, f"a number in [1, {MAX_ASPECT:g}]")
         require(self.shape == "ellipse" or self.aspect == 1.0, "aspect", self.aspect,
                  "1 unless shape is 'ellipse'")
-        require(is_real(self.orientation) and math.isfinite(self.orientation),
-                 "orientation", self.orientation, "a finite angle in degrees")
+        # beyond a turn an angle says nothing more (1e308 passed, and the grid
+        # rule then blamed the grid for its rounding)
+        require(is_real(self.orientation) and abs(self.orientation) <= 360.0,
+                 "orientation", self.orientation, "an angle in degrees in [-360, 360]")
         require(self.shape in ("square", "ellipse") or self.orientation == 0.0,
                  "orientation", self.orientation, "0 unless shape is 'square' or 'ellipse'")
 

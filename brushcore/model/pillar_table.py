@@ -27,6 +27,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -228,6 +229,8 @@ def _read(path: Path) -> PillarTable:
             raise _refuse(path, "'aspect' >= 1 (semi-major over semi-minor axis; 1 for a "
                           "disc)", f"line {lines[bad[0]]}: 'aspect' = {float(aspects[bad[0]])!r}")
     orientations = data.get("orientation", None if aspects is None else np.zeros_like(r))
+    if "orientation" in data:
+        _check_degrees(path, lines, orientations)
     table = PillarTable(np.column_stack([y, x]), r, aspects, orientations)
     half = table.half_extents()  # (y, x)
     outside = np.flatnonzero((x - half[:, 1] < 0) | (y - half[:, 0] < 0)
@@ -307,6 +310,21 @@ def _ellipses_meet(table: PillarTable, p: int, q: int) -> bool:
         if float(found.fun) <= 1.0 + TANGENT_RTOL:
             return True
     return False
+
+
+def _check_degrees(path: Path, lines: np.ndarray, orientations: np.ndarray) -> None:
+    """Refuse an orientation beyond a turn; warn where the column reads as
+    radians (every angle within 2 pi, not all whole degrees)."""
+    bad = np.flatnonzero(np.abs(orientations) > 360.0)
+    if bad.size:
+        raise _refuse(path, "'orientation' in degrees, in [-360, 360]",
+                      f"line {lines[bad[0]]}: 'orientation' = {float(orientations[bad[0]])!r}")
+    turned = orientations[orientations != 0.0]
+    if turned.size and np.all(np.abs(turned) <= 2.0 * math.pi) \
+            and not np.all(turned == np.round(turned)):
+        warnings.warn(f"{path}: every 'orientation' lies within 2 pi and not all are whole "
+                      f"(e.g. {float(turned[0]):g}): they are read as degrees; multiply "
+                      "radians by 180/pi", stacklevel=4)
 
 
 #: Pillars this close (relative) to tangent touch: a table's decimals
