@@ -547,8 +547,9 @@ def _simulate(args: argparse.Namespace) -> int:
         _error(f"solver failed: {exc}", progress)
         return 1
     except MemoryError:  # what memory_note could only warn of
-        _error(f"out of memory at --grid {args.grid}: a smaller grid, or a machine with more "
-               "memory; nothing written", progress)
+        where = f" at --grid {args.grid}" if args.grid else ""  # else a label map's own
+        _error(f"out of memory{where}: a smaller grid, or a machine with more memory; "
+               "nothing written", progress)
         return 1
     except KeyboardInterrupt:
         _error(INTERRUPTED, progress)

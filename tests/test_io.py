@@ -151,3 +151,49 @@ def test_a_curve_opened_with_xarray_writes_again_as_it_was(tmp_path) -> None:
                  "contact_snapshot"):
         assert back[name].dtype == curve[name].dtype, name
         assert np.array_equal(back[name].values, curve[name].values), name
+
+
+def test_a_curve_however_opened_writes_and_aggregates_as_simulated(tmp_path) -> None:
+    """A diff reviewer's finds: a curve opened with mask_and_scale=False
+    (_FillValue among the attributes) or decode_cf=False failed to write;
+    one whose contact maps lost their encoding was written int32; and
+    build_sweep cast xarray's NaN fills to INT_MIN (steps) and 0 ("detached"
+    maps).  Each now writes the digest `simulate`'s curve has, and
+    aggregates to the same sweep."""
+    import numpy as np
+    import xarray as xr
+
+    from brushcore import BrushParams, Waypoint, simulate
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import read_curve, write_curve
+
+    curve = simulate(BrushParams("regular", 4, 0.01, 32))
+    write_curve(curve, tmp_path / "a.nc")
+    digest = read_curve(tmp_path / "a.nc").attrs["content_sha256"]
+    opened = {}
+    for name, kwargs in (("raw", {"mask_and_scale": False}), ("undecoded", {"decode_cf": False}),
+                         ("masked", {})):
+        with xr.open_dataset(tmp_path / "a.nc", **kwargs) as ds:
+            opened[name] = ds.load()
+    opened["masked"]["contact_snapshot"] = opened["masked"].contact_snapshot * 1  # no encoding
+    for name, ds in opened.items():
+        write_curve(ds, tmp_path / f"{name}.nc")
+        back = read_curve(tmp_path / f"{name}.nc")
+        assert back.contact_snapshot.dtype == np.int8, name
+        assert back.attrs["content_sha256"] == digest, name
+    never = simulate(BrushParams("regular", 4, 0.01, 32, roughness=0.2, seed=1),
+                     protocol=[Waypoint("force", -1.0), Waypoint("force", -2.0)])
+    write_curve(never, tmp_path / "never.nc")
+    with xr.open_dataset(tmp_path / "never.nc") as ds:
+        never_opened = ds.load()
+    keep = [("regular", 4)]
+    for given in (never, never_opened):
+        sweep = build_sweep([given], keep_snapshots=keep)
+        steps = sweep.snapshot_step.values
+        assert steps.min() >= -1 and (steps == -1).sum() == 1  # the never-reached stage
+        maps = sweep.contact_snapshot.values
+        assert (maps[steps == -1] == -2).all()  # the fill, not 0 ("detached")
+    ref, got = (build_sweep([c], keep_snapshots=keep) for c in (curve, opened["masked"]))
+    for name in ("detachment_step", "snapshot_step", "contact_snapshot"):
+        assert np.array_equal(got[name].values, ref[name].values), name
+    assert ref.detachment_step.values.min() == -1

@@ -557,3 +557,16 @@ def test_a_label_covering_separate_pieces_is_said_once(tmp_path: Path) -> None:
     assert said == [f"{path}: label 3 covers pieces that share no element edge; such a label "
                     "runs as one pillar, one spring on all its pieces: give each piece its "
                     "own label otherwise"], said
+
+
+def test_a_table_named_with_decimals_is_saved_under_csv(tmp_path: Path) -> None:
+    """phi0.12 ends a name in a number's decimals, not a file kind (a diff
+    reviewer's find: refused as "it ends in .12"); .npy stays refused."""
+    from brushcore.model.pillar_table import save_pillar_table
+
+    table = generated_table(BrushParams("regular", 4, 1.0, 64))
+    assert save_pillar_table(table, tmp_path / "brush_phi0.12") == tmp_path / "brush_phi0.12.csv"
+    assert save_pillar_table(table, tmp_path / "b.CSV") == tmp_path / "b.CSV"
+    with pytest.raises(ParameterError, match=r"it ends in \.npy"):
+        save_pillar_table(table, tmp_path / "x.npy")
+    assert read_pillar_table(tmp_path / "brush_phi0.12.csv").n_pillars == 4

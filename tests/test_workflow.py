@@ -1039,3 +1039,15 @@ def test_the_command_and_the_workflow_price_a_curve_alike(case, wildcards):
     # a bound of the host's curves: not said of a GPU run
     gpu = BrushParams(kbar=0.01, grid=2048, backend="gpu", **case)
     assert cost.cost_note(gpu, SolverOptions()) == ""
+
+
+def test_near_duplicates_are_floats_one_ulp_apart_not_integers() -> None:
+    """0.1 * 3 beside 0.3 is one value written two ways; seeds such as
+    1700000000 and 1700000001 (timestamps) are two brushes, 6e-10 apart
+    relative (a diff reviewer's find: they were told to merge)."""
+    near = _common_rules()["_near_duplicates"]
+    assert near([0.3, 1.0, 0.1 * 3]) == (0.3, 0.30000000000000004)
+    assert near([1700000000, 1700000001]) is None
+    assert near([12345678901, 12345678902, 0.5]) is None
+    assert near([1e-4, 1.00000001e-4]) is None  # 1e-8 apart: two values meant
+    assert near([True, 1.0, float("inf"), float("inf")]) is None

@@ -36,8 +36,8 @@ from brushcore.model.curve import FILL_VALUES, fill_value, mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
-from brushcore.data.io import (CurveFileError, check_curve, content_digest, read_curve,
-                               write_dataset_atomic)
+from brushcore.data.io import (CurveFileError, as_simulated, check_curve, content_digest,
+                               read_curve, write_dataset_atomic)
 from brushcore.validation import ParameterError, brief
 
 #: Order of the layout coordinate (others follow, sorted).
@@ -246,6 +246,8 @@ def load_curves(paths: Iterable[str | Path | xr.Dataset],
     unreadable = []
     for i, raw in enumerate(paths):
         in_memory = isinstance(raw, xr.Dataset)
+        if in_memory:  # one opened by xarray: its "none" as numbers, as simulate gave
+            raw = as_simulated(raw.copy(deep=False))
         path = Path(IN_MEMORY.format(content_digest(raw)) if in_memory else raw)
         try:
             if in_memory:

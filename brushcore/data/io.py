@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.model.curve import FILL_VALUES, fill_value
+from brushcore.model.curve import FILL_DTYPES, FILL_VALUES, fill_value
 from brushcore.validation import ParameterError
 
 #: Variables and attributes a curve file must have to be aggregated.
@@ -203,17 +203,26 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _unmasked(ds: xr.Dataset) -> xr.Dataset:
-    """``ds`` with the `FILL_VALUES` variables as numbers again where
-    `xr.open_dataset` read them (NaN at the fill, floats): a curve read
-    that way and written again holds what `simulate` wrote, digest included."""
+def as_simulated(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` with the `FILL_VALUES` variables as `simulate` makes them: numbers
+    of their `FILL_DTYPES`, the fill in the encoding.  `xr.open_dataset` reads
+    them as floats with NaN at the fill; ``mask_and_scale=False`` keeps the
+    numbers but puts _FillValue among the attributes (which netCDF's writer
+    refuses beside the encoding's); an operation that drops the encoding
+    leaves contact maps int32.  Each is undone, so that a curve so read is
+    written and aggregated as the one `simulate` returned, digest included.
+    Changes ``ds`` in place; give a shallow copy to keep the caller's."""
     for name, fill in FILL_VALUES.items():
         var = ds.variables.get(name)
-        if var is not None and var.dtype.kind == "f":
-            dtype = np.dtype(var.encoding.get("dtype", np.int32))
-            values = np.where(np.isnan(var.values), fill, var.values).astype(dtype)
-            ds[name] = xr.Variable(var.dims, values, var.attrs,
-                                   {"_FillValue": fill_value(name, dtype)})
+        if var is None:
+            continue
+        dtype = np.dtype(FILL_DTYPES[name])
+        values = var.values
+        if values.dtype.kind == "f":
+            values = np.where(np.isnan(values), fill, values)
+        attrs = {k: v for k, v in var.attrs.items() if k != "_FillValue"}
+        ds[name] = xr.Variable(var.dims, values.astype(dtype), attrs,
+                               {"_FillValue": fill_value(name, dtype)})
     return ds
 
 
@@ -225,7 +234,7 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     """
     if not isinstance(ds, xr.Dataset):
         raise ParameterError("ds", type(ds).__name__, "a curve Dataset (brushcore.simulate's)")
-    ds = _unmasked(ds.copy(deep=False))  # the caller's attrs stay as they were
+    ds = as_simulated(ds.copy(deep=False))  # the caller's attrs stay as they were
     ds.attrs[DIGEST_ATTR] = content_digest(ds)
     return write_dataset_atomic(ds, path, _encoding(ds))
 

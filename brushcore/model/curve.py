@@ -80,6 +80,11 @@ FILL_VALUES = {"detachment_step": -1, "attachment_step": -1, "branch": -1,
                "snapshot_step": -1, "contact_snapshot": -2}
 
 
+#: The dtype `simulate` gives each `FILL_VALUES` variable.
+FILL_DTYPES = {"detachment_step": np.int32, "attachment_step": np.int32, "branch": np.int32,
+               "snapshot_step": np.int32, "contact_snapshot": np.int8}
+
+
 def fill_value(name: str, dtype) -> np.generic:
     """The `FILL_VALUES` entry of ``name`` as a scalar of ``dtype`` (what
     netCDF's _FillValue of an integer variable must be)."""
@@ -627,8 +632,10 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
                       "Waypoint('separation'), or 'separation' in --protocol or a config's "
                       "protocol)",
                       stacklevel=3)
+    # ... from contact: a leg that starts apart has nothing to let go of
     unreached = [k for k, w in enumerate(waypoints) if w.kind == "force" and w.value > 0
-                 and curve.attached_elements[curve.waypoint_step[k]] == 0]
+                 and curve.attached_elements[curve.waypoint_step[k]] == 0
+                 and (k == 0 or curve.attached_elements[curve.waypoint_step[k - 1]] > 0)]
     if unreached:  # a tensile target beyond the pull-off: the leg ended at separation
         warnings.warn("; ".join(f"waypoint {k} (force:{waypoints[k].value / fs:g}) was not "
                                 f"reached" for k in unreached)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -327,6 +328,11 @@ def _check_degrees(path: Path, lines: np.ndarray, orientations: np.ndarray) -> N
                       "radians by 180/pi", stacklevel=4)
 
 
+#: A file kind's suffix (a letter first): ".npy" names another kind of
+#: file, where ".12" ends a number in the name.
+_FILE_KIND = re.compile(r"\.[a-z][a-z0-9]*")
+
+
 #: Pillars this close (relative) to tangent touch: a table's decimals
 #: written as tangent land 1 ulp either side (0.4 - 0.1 = 0.30000000000000004).
 TANGENT_RTOL = 1e-12
@@ -381,7 +387,8 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     table : the pillars (`brushcore.model.layout.generated_table` gives a
         generated layout's)
     path : the ``.csv`` file to write (the suffix is added where there is
-        none; missing folders are made)
+        none or the name ends in a number's decimals, "phi0.12"; another
+        kind of file's suffix, ".npy", is refused; missing folders are made)
 
     Returns
     -------
@@ -397,10 +404,11 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
         a pillar outside the square, two that overlap, ...).
     """
     path = Path(path)
-    if not path.suffix:
-        path = path.with_name(path.name + SUFFIX)
-    elif path.suffix.lower() != SUFFIX:  # x.npy is a label map's name, not a table's
+    kind = path.suffix.lower()
+    if _FILE_KIND.fullmatch(kind) and kind != SUFFIX:  # x.npy: a label map's name
         raise _refuse(path, f"a {SUFFIX} file (a pillar table)", f"it ends in {path.suffix}")
+    if kind != SUFFIX:  # none, or a number's decimals: brush_phi0.12 -> brush_phi0.12.csv
+        path = path.with_name(path.name + SUFFIX)
     shaped = table.aspects is not None
     columns = [table.centres[:, 1], table.centres[:, 0], table.radii]
     lines = ["# pillar table: one disc a line, in label order; x, y, radius in units of L"

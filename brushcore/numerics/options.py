@@ -59,7 +59,8 @@ class SolverOptions:
         mirror images, so "auto" is "mixed" only for layouts without exact
         symmetries (random ones) at rtol >= 1e-6 in units that float32
         holds (`brushcore.model.solve.float32_safe`), else "double"; "mixed"
-        needs rtol >= 1e-6.  GPU runs are always double.
+        needs rtol >= 1e-6 and runs double too beyond those units.  GPU runs
+        are always double.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round
         (`brushcore.numerics.events.pulloff.DECISION_SAFETY`); rounds whose

@@ -317,11 +317,8 @@ NEAR_DUPLICATE_RTOL = 1e-9
 def _near_duplicates(values):
     """The first pair of distinct finite numbers in ``values`` within
     `NEAR_DUPLICATE_RTOL` of each other, or None."""
-    numbers = sorted(
-        v
-        for v in values
-        if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    )
+    # floats only: integers (seeds, counts) a unit apart are distinct at any size
+    numbers = sorted(v for v in values if isinstance(v, float) and math.isfinite(v))
     for a, b in zip(numbers, numbers[1:]):
         if a != b and abs(b - a) <= NEAR_DUPLICATE_RTOL * max(abs(a), abs(b)):
             return a, b

@@ -345,7 +345,9 @@ def _event_peak(sigma1, z, xp) -> tuple[float, float]:
     solver built one: two soft pillars, one 1.4e-6 under sigma_c during the
     other's cascade, where the first solve's peak was 2.9e-6 low (CG's
     tolerance), let go together and W was 2 % off; z at the peak was its
-    error to 2e-4 of it.  The correction costs nothing (z is at hand)."""
+    error to 2e-4 of it.  The correction costs nothing beyond z, which on
+    float32 transforms the caller takes from a residual in double (one
+    application an event: float32's own z cannot see its error)."""
     top = int(xp.argmax(sigma1))
     peak = float(sigma1[top])
     return peak, peak + float(z[top])
