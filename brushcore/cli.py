@@ -169,9 +169,10 @@ class _Version(argparse.Action):
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
                  values: object, option_string: str | None = None) -> None:
-        from brushcore.model.provenance import git_commit, software_versions
+        from brushcore.model.provenance import code_digest, git_commit, software_versions
 
-        print(f"brushcore {version()} (commit {git_commit()})\n{software_versions()}")
+        print(f"brushcore {version()} (commit {git_commit()}, code sha256 {code_digest()})\n"
+              f"{software_versions()}")
         parser.exit()
 
 

@@ -196,11 +196,12 @@ def test_negative_numbers_in_any_notation_are_values(tmp_path):
 def test_version_and_defaults_in_help():
     res = _cli("--version")
     import brushcore
-    from brushcore.model.provenance import git_commit
+    from brushcore.model.provenance import code_digest, git_commit
 
-    # the version, the commit and the libraries, as a curve file records them
+    # the version, the commit, the code and the libraries, as a curve file records them
     assert res.returncode == 0 and re.fullmatch(
-        rf"brushcore {re.escape(brushcore.__version__)} \(commit {re.escape(git_commit())}\)\n"
+        rf"brushcore {re.escape(brushcore.__version__)} \(commit {re.escape(git_commit())}, "
+        rf"code sha256 {code_digest()}\)\n"
         r"python \S+, numpy \S+, scipy \S+, pyfftw \S+.*xarray \S+, netCDF4 \S+\n",
         res.stdout), res
     package = subprocess.run([sys.executable, "-m", "brushcore", "--version"],

@@ -8,6 +8,7 @@ tiny curves (N = 4 on 32^2, well under a second each) for the sweep's
 from __future__ import annotations
 
 import math
+import os
 import re
 from pathlib import Path
 
@@ -383,6 +384,41 @@ def test_a_brush_as_made_runs_through_the_workflow(tmp_path: Path) -> None:
     assert rerun(lambda: None) == 0
     assert rerun(lambda: np.savetxt(work / "arrays" / "heights.txt",
                                     made["heights"] * 0.5)) >= 2
+
+    def put_back_old() -> None:  # cp -p, rsync -a, tar: new content, a time before the curves
+        np.savetxt(work / "arrays" / "heights.txt", made["heights"] * 0.25)
+        os.utime(work / "arrays" / "heights.txt", (1e9, 1e9))
+
+    assert rerun(put_back_old) >= 2  # the content, not the time (a lab helper's find)
+
+
+def test_a_bare_maps_edit_reruns_its_curves(tmp_path: Path) -> None:
+    """A map without heights is no input of its jobs (its curves predate
+    brushes as made), so an edit that keeps N and phi (a pillar moved 3
+    elements) planned nothing and the sweep kept the old F_ad (a lab
+    helper's find): the files' digest is a param of the job."""
+    from brushcore import BrushParams
+    from brushcore.model.layout import build_labels
+    from brushcore.model.layout_file import save_label_map
+    from test_workflow import _common_rules
+
+    labels = build_labels(BrushParams("random", 16, 1.0, 128, seed=1))
+    path = tmp_path / "bare.npy"
+    save_label_map(labels, path)
+    rules = _common_rules()
+    config = {"layout_files": [str(path)], "kbar": [1.0]}
+    before = rules["brush_files"](config, "file_bare")
+    assert before["layout"] == str(path) and len(before["sha256"]) == 64
+    moved = labels.copy()
+    moved[labels == 5] = -1
+    moved[np.roll(labels == 5, 3, axis=1)] = 5
+    assert (moved >= 0).sum() == (labels >= 0).sum()
+    save_label_map(moved, path)
+    os.utime(path, (1e9, 1e9))  # older than any curve
+    rules = _common_rules()
+    after = rules["brush_files"](config, "file_bare")
+    assert after["sha256"] != before["sha256"]
+    assert rules["brush_files"](config, "regular") == ""
 
 
 # -- sweep.nc with a shape dimension, and the figures ------------------------------------

@@ -457,10 +457,15 @@ def test_a_first_waypoint_that_pulls_from_first_touch_is_said_to(tmp_path, capsy
                       r"its adhesive_force is NaN"):
         assert main([*args, "separation, displacement:0.31, force:1, separation", "--heights",
                      str(heights), "--out", str(tmp_path / "twice.nc")]) == 0
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # flat: in full contact at once, nothing to say
+    with warnings.catch_warnings(record=True) as flat:
+        warnings.simplefilter("always")  # flat: in full contact at once, no first touch to say
         assert main([*args, f"{first}, separation", "--out", str(tmp_path / "f.nc")]) == 0
-    assert float(xr.open_dataset(tmp_path / "f.nc").adhesive_force_normalized) > 0
+    said = [str(w.message) for w in flat]
+    f_ad = float(xr.open_dataset(tmp_path / "f.nc").adhesive_force_normalized)
+    assert 0 < f_ad < 2  # so force:2 lies beyond the pull-off, and is said to be
+    assert said == (["waypoint 0 (force:2) was not reached: the brush let go first, at its "
+                     "adhesive force, and the leg ended at separation (F = 0)"]
+                    if first == "force:2" else []), said
 
 
 def test_heights_with_a_common_offset_beside_displacement_waypoints_are_said_to():

@@ -752,7 +752,8 @@ def test_the_version_recorded_is_that_of_the_tree_that_runs(tmp_path, monkeypatc
     tree = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
     assert provenance.version.__wrapped__() == tree["project"]["version"]
     assert provenance.source() == (f"brushcore {provenance.version()} "
-                                   f"(git {provenance.git_commit()})")
+                                   f"(git {provenance.git_commit()}, "
+                                   f"code sha256 {provenance.code_digest()[:16]})")
     fake = tmp_path / "a" / "b" / "provenance.py"  # no pyproject two folders up
     monkeypatch.setattr(provenance, "__file__", str(fake))
     from importlib import metadata
@@ -814,3 +815,34 @@ def test_a_job_that_cannot_write_its_curve_says_so_in_one_line(tmp_path, monkeyp
     assert line in log.read_text() and "Traceback" not in log.read_text()
     assert line in capfd.readouterr().err
     assert not out.exists()
+
+
+def test_the_code_that_ran_is_named_where_git_cannot(tmp_path, monkeypatch) -> None:
+    """An installed wheel says "git unknown" and version 0.1.0 whatever it was
+    built from (an installation helper's find: curves of two commits went
+    through converge without a word): each curve records the SHA-256 of the
+    package's Python files, which an edit anywhere changes, and a sweep of
+    curves from two codes says so as it does for two commits."""
+    import shutil
+
+    import brushcore
+    from brushcore import BrushParams, simulate
+    from brushcore.data.aggregate import build_sweep, mixed_runs
+    from brushcore.model import provenance
+
+    digest = provenance.code_digest()
+    curve = simulate(BrushParams("regular", 1, 1.0, 16))
+    assert curve.attrs["code_sha256"] == digest and len(digest) == 64
+    copy = tmp_path / "brushcore"
+    shutil.copytree(Path(brushcore.__file__).parent, copy,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(provenance, "__file__", str(copy / "model/provenance.py"))
+    assert provenance.code_digest.__wrapped__() == digest  # the same files, anywhere
+    with open(copy / "numerics/linear/cg.py", "a") as fh:
+        fh.write("\n# an edit\n")
+    assert provenance.code_digest.__wrapped__() != digest
+    other = curve.copy()
+    other.attrs = {**curve.attrs, "code_sha256": "0" * 64, "kbar": 0.5, "parameter_hash": "x"}
+    sweep = build_sweep([curve, other])
+    assert "simulation_code_sha256" in mixed_runs(sweep)
+    assert sweep.attrs["simulation_code_sha256"] == ", ".join(sorted([digest, "0" * 64]))

@@ -983,8 +983,9 @@ def test_a_jobs_log_says_what_the_command_says_of_its_curve() -> None:
 def test_the_config_schema_bounds_are_the_solvers():
     """Each bound the schema states is the Python constant the parameters are
     checked against, so a config refused by the one is refused by the other
-    in the same words (the schema once bounded orientation to [-180, 180],
-    which the CLI and the API take as any finite angle)."""
+    in the same words (the schema once bounded orientation to [-180, 180]
+    where the CLI and the API took any finite angle; all three take a turn
+    either way now)."""
     from brushcore.model import params as p
     from brushcore.numerics.options import SolverOptions
     from brushcore.numerics.platform.threads import MAX_THREADS
@@ -996,7 +997,8 @@ def test_the_config_schema_bounds_are_the_solvers():
     assert props["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert props["fig5"]["properties"]["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert (props["aspect"]["minimum"], props["aspect"]["maximum"]) == (1, p.MAX_ASPECT)
-    assert "minimum" not in props["orientation"] and "maximum" not in props["orientation"]
+    assert (props["orientation"]["minimum"], props["orientation"]["maximum"]) == (
+        -p.MAX_ORIENTATION, p.MAX_ORIENTATION)
     assert props["seeds"]["items"]["maximum"] == p.MAX_SEED
     for name in ("roughness", "preload"):
         assert props[name]["items"]["maximum"] == p.MAX_ROUGH

@@ -629,7 +629,7 @@ def _varying_settings(curves: dict, coords: dict[str, np.ndarray],
     differ, this says where.
     Text, "" where no curve ran."""
     out = {}
-    for name in (*SOLVER_ATTRIBUTES, "git_commit", "software_versions"):
+    for name in (*SOLVER_ATTRIBUTES, "git_commit", "code_sha256", "software_versions"):
         if len({str(c.attrs.get(name, "")) for _, c in curves.values()}) < 2:
             continue
         values = np.full(tuple(len(coords[d]) for d in dims), "", dtype=object)
@@ -784,6 +784,8 @@ def _provenance(
               for name, _ in sources]
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
     commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
+    # the code itself, which an installed copy's "git unknown" cannot tell apart
+    codes = sorted({str(c.attrs.get("code_sha256", "not recorded")) for _, c in curves.values()})
     versions = sorted({str(c.attrs.get("brushcore_version", "unknown")) for _, c in curves.values()})
     # files written before it was recorded are said, not left out
     software = sorted({str(c.attrs.get("software_versions", "not recorded"))
@@ -808,6 +810,7 @@ def _provenance(
                   f"{provenance.source()}",
         "simulation_brushcore_versions": ", ".join(versions),
         "simulation_git_commits": ", ".join(commits),
+        "simulation_code_sha256": ", ".join(codes),
         "simulation_software_versions": "; ".join(software),
         "grid": np.array(sorted({k.grid for k in curves}), dtype=np.int64),  # every grid run
         "phi": float(phi) if phi is not None else math.nan,
@@ -819,7 +822,7 @@ def _provenance(
 
 #: Where a sweep's curves may not differ unsaid: the code, and the accuracy
 #: settings (rtol may, by design: large loads tighten it, `solve.load_options`).
-MIXED_ATTRIBUTES = ("simulation_git_commits", "precision", "cascade")
+MIXED_ATTRIBUTES = ("simulation_git_commits", "simulation_code_sha256", "precision", "cascade")
 
 
 def mixed_runs(sweep: xr.Dataset) -> str:

@@ -89,8 +89,8 @@ def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, 
         layout is ``file_<name>``, and it takes "file" from ``files``; its
         N, grid and phi are checked against the file's)
     files : "" for a generated layout, a map's or table's path, or
-        {"layout": path, "heights": ..., ...} for a brush as made
-        (`with_input_files` keys)
+        {"layout": path, "heights": ..., ...} (`with_input_files` keys; a
+        "sha256" key, the workflow's digest of the files, is left out)
     rough : roughness, preload, kbar_spread; None or {} for a flat brush
     shape : shape, aspect, orientation; None or {} for discs
     allow_coarse, backend : as `BrushParams`
@@ -109,6 +109,7 @@ def case_params(layout: str, n_pillars: int, kbar: float, seed: int, grid: int, 
                   **(shape or {}))
     if files:  # a brush of one's own: the file's N, grid and phi checked
         inputs = dict(files) if isinstance(files, Mapping) else {"layout": files}
+        inputs.pop("sha256", None)  # the workflow's digest of the files: reruns, not inputs
         params = file_params(inputs.pop("layout"), kbar, **fields)
         return with_input_files(params, inputs)  # heights, stiffness factors, gap map
     return BrushParams(layout=layout, kbar=kbar, **fields)

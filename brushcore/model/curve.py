@@ -21,8 +21,8 @@ from brushcore.model.labelmap import count_touching_pairs, pillar_element_counts
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import build_labels, random_gap, smallest_radius_elements
 from brushcore.model.params import MAX_ROUGH, BrushParams
-from brushcore.model.provenance import (git_commit, parameter_hash, software_versions, source,
-                                        version)
+from brushcore.model.provenance import (code_digest, git_commit, parameter_hash,
+                                        software_versions, source, version)
 from brushcore.model.rough import pillar_centroids, pillar_inputs
 from brushcore.model.scales import unit_scales
 from brushcore.model.solve import (LOAD_SPAN, element_offsets, fft_library_used, load_options,
@@ -249,6 +249,7 @@ def _run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
         "device_memory_bytes": backend.device_memory_bytes,
         "brushcore_version": version(),
         "git_commit": git_commit(),
+        "code_sha256": code_digest(),  # names the code where git cannot (a wheel)
         "source": source(),
         "software_versions": software_versions(),
         "parameter_hash": parameter_hash(params.as_attrs(), asdict(options), *hashed),

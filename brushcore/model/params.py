@@ -27,6 +27,8 @@ LAYOUTS = ("regular", "random", "hexagonal", "file")
 #: Largest ellipse aspect ratio: beyond it the minor axis of a pillar that
 #: passes the radius rule (on its equal-area radius) spans under an element.
 MAX_ASPECT = 10.0
+#: Largest |orientation| [degrees]: beyond a turn an angle says nothing more.
+MAX_ORIENTATION = 360.0
 
 
 #: The discretisation rule: a pillar radius of at least this many
@@ -261,8 +263,9 @@ class BrushParams:
                  "1 unless shape is 'ellipse'")
         # beyond a turn an angle says nothing more (1e308 passed, and the grid
         # rule then blamed the grid for its rounding)
-        require(is_real(self.orientation) and abs(self.orientation) <= 360.0,
-                 "orientation", self.orientation, "an angle in degrees in [-360, 360]")
+        require(is_real(self.orientation) and abs(self.orientation) <= MAX_ORIENTATION,
+                 "orientation", self.orientation,
+                 f"an angle in degrees in [-{MAX_ORIENTATION:g}, {MAX_ORIENTATION:g}]")
         require(self.shape in ("square", "ellipse") or self.orientation == 0.0,
                  "orientation", self.orientation, "0 unless shape is 'square' or 'ellipse'")
 

@@ -37,6 +37,7 @@ from scipy import optimize
 from scipy.spatial import cKDTree
 
 from brushcore.model.inputs import header_names, table_rows
+from brushcore.model.params import MAX_ORIENTATION
 from brushcore.model.shapes import PillarShape, along_axes, ellipse_half_extents
 from brushcore.validation import ParameterError
 
@@ -316,9 +317,10 @@ def _ellipses_meet(table: PillarTable, p: int, q: int) -> bool:
 def _check_degrees(path: Path, lines: np.ndarray, orientations: np.ndarray) -> None:
     """Refuse an orientation beyond a turn; warn where the column reads as
     radians (every angle within 2 pi, not all whole degrees)."""
-    bad = np.flatnonzero(np.abs(orientations) > 360.0)
+    bad = np.flatnonzero(np.abs(orientations) > MAX_ORIENTATION)
     if bad.size:
-        raise _refuse(path, "'orientation' in degrees, in [-360, 360]",
+        raise _refuse(path, f"'orientation' in degrees, in [-{MAX_ORIENTATION:g}, "
+                      f"{MAX_ORIENTATION:g}]",
                       f"line {lines[bad[0]]}: 'orientation' = {float(orientations[bad[0]])!r}")
     turned = orientations[orientations != 0.0]
     if turned.size and np.all(np.abs(turned) <= 2.0 * math.pi) \

@@ -52,9 +52,21 @@ def git_commit() -> str:
     return sha + ("+dirty" if dirty else "")
 
 
+@lru_cache(maxsize=1)
+def code_digest() -> str:
+    """SHA-256 over the package's Python files (their paths and bytes): the
+    code that ran, named where git cannot (an installed wheel reports "git
+    unknown" and version 0.1.0 whatever commit it was built from)."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def source() -> str:
-    """CF's ``source`` attribute: the software and commit that made a file."""
-    return f"brushcore {version()} (git {git_commit()})"
+    """CF's ``source`` attribute: the software, commit and code digest that made a file."""
+    return f"brushcore {version()} (git {git_commit()}, code sha256 {code_digest()[:16]})"
 
 
 #: The libraries a curve's numbers pass through (MKL's FFT and spmv where

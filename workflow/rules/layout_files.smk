@@ -7,6 +7,7 @@ config_checks.smk, `_rough_tags` and `parse_rough_tag` of cases.smk).
 """
 
 import functools
+import hashlib
 import math
 import re
 from pathlib import Path
@@ -146,14 +147,34 @@ def _file_rough_tags(config, kbar, brush):
 
 
 def brush_files(config, layout):
-    """The rule's `layout_file` param: "" for generated layouts, the map's path
-    for a bare map, and for a brush as made {"layout": map, key: file, ...},
-    so that swapping which file gives which input reruns its curves (the
-    inputs alone see the same set of unchanged files)."""
+    """The rule's `layout_file` param: "" for generated layouts, else
+    {"layout": map, key: file, ..., "sha256": the files' contents}, so that
+    swapping which file gives which input reruns its curves (the inputs
+    alone see the same set of unchanged files), and so does any edit of a
+    file's content: a bare map is no input (`simulate_inputs`), and a file
+    put back with its old time (cp -p, rsync -a, tar) is older than the
+    curves; both left stale curves (a lab helper's finds, 2026-12-07)."""
     brush = file_brushes(config).get(layout)
-    if not brush or not brush.inputs:
-        return brush.path if brush else ""
-    return {"layout": brush.path, **dict(sorted(brush.inputs.items()))}
+    if not brush:
+        return ""
+    files = {"layout": brush.path, **dict(sorted(brush.inputs.items()))}
+    return {**files, "sha256": contents_digest(tuple(files.items()))}
+
+
+def contents_digest(files):
+    """SHA-256 over ((key, path), ...) and each file's bytes, read once a file
+    version (by its time and size) however many jobs ask."""
+    digest = hashlib.sha256()
+    for key, path in files:
+        stat = Path(path).stat()
+        digest.update(f"{key}={path}:".encode())
+        digest.update(_file_sha256(path, stat.st_mtime_ns, stat.st_size).encode())
+    return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=None)
+def _file_sha256(path, mtime_ns, size):
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def simulate_inputs(config):

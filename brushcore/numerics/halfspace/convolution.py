@@ -44,8 +44,9 @@ _WISDOM_LOCK = threading.Lock()
 def cache_dir() -> Path:
     """This machine's brushcore cache (``BRUSHCORE_WISDOM_DIR``, else
     ``$XDG_CACHE_HOME/brushcore`` or ``~/.cache/brushcore``)."""
+    # an empty variable as unset: "" put the cache in the working folder
     return Path(os.environ.get("BRUSHCORE_WISDOM_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME", os.path.expanduser("~/.cache")), "brushcore"))
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "brushcore"))
 
 
 #: Wisdom with its checksum (`_save_wisdom`); the file before it, a bare
