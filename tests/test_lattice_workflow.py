@@ -767,6 +767,6 @@ def test_a_coarse_study_is_said_by_the_narrowest_disc_and_only_where_refined(
                      str(config))
     text = output(proc)
     assert proc.returncode == 0, text
-    assert re.search(r"radius under 4 elements, .*\(N = 4 on 48: 2\.4 elements "
+    assert re.search(r"radius under 4 elements, .*\(file_small_disc N = 4 on 48: 2\.4 elements "
                      r"\(coarsest_under_resolved; n = 80 gives 4\)\)", text), text
     assert "N = 16" not in text, text  # the map: one grid, no study of it

@@ -303,7 +303,7 @@ def test_three_grids_plan_the_convergence_rule(repo_copy: Path, tmp_path: Path) 
     assert "run on two grids" not in text, text
     # r = 3.1 on 32^2: the study's flag, said before any job
     assert ("the convergence study's coarsest grid gives pillars a radius under 4 elements, "
-            "so their fits will be flagged as it says (N = 4 on 32: 3.1 elements "
+            "so their fits will be flagged as it says (regular N = 4 on 32: 3.1 elements "
             "(coarsest_under_resolved; n = 41 gives 4))") in text, text
     # two grids: a refinement, and no study, which planning says
     config.write_text(config.read_text().replace("- 48\n", ""))
@@ -324,9 +324,10 @@ def test_convergence_config_plans_the_study(repo_copy: Path) -> None:
     assert re.search(r"^convergence\s+1\s*$", text, flags=re.MULTILINE), text
     assert "_grid2048_" in text and "N64_kbar1e-06_seed0_grid2048" not in text
     # 16 x 16 and 24 x 24 start at r = 3.1 and 2.1 on 256^2, 48 x 48 at 2.1 on 512^2
-    assert re.search(r"coarsest grid gives pillars a radius under 4 elements, .*\(N = 256 on "
-                     r"256: 3\.1 elements \(coarsest_under_resolved; n = \d+ gives 4\); "
-                     r"N = 576 on 256: 2\.1 .*; N = 2304 on 512: 2\.1 elements", text), text
+    assert re.search(r"coarsest grid gives pillars a radius under 4 elements, .*\(regular "
+                     r"N = 256 on 256: 3\.1 elements \(coarsest_under_resolved; n = \d+ gives "
+                     r"4\); regular N = 576 on 256: 2\.1 .*; regular N = 2304 on 512: 2\.1 "
+                     r"elements", text), text
 
 
 def test_random_convergence_config_plans_the_study(repo_copy: Path) -> None:

@@ -336,7 +336,8 @@ def _check_one_file_per_layout(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -
             raise AggregationError(
                 f"curve files {first} and {second} are both brush {layout} but were drawn "
                 "from files of different content (layout_file_sha256): rename one file, "
-                "or rerun the curves of the older one")
+                "or delete the curves of the older content and make them again (the "
+                "workflow remakes missing curves: snakemake, or brushcore simulate)")
 
 
 def _check_one_brush_per_case(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) -> None:
@@ -367,8 +368,10 @@ def _check_one_brush_per_case(curves: dict[CaseKey, tuple[Path, xr.Dataset]]) ->
                 f"curve files {first} (grid {grid}) and {path} (grid {key.grid}) are "
                 f"{str(case).removesuffix(' on 0^2')} but not one brush: they were given "
                 f"other per-pillar arrays ({before_words}; {words}), so a study across "
-                "their grids would mix two brushes; rerun every grid with the same "
-                "--heights, --kbar-factors or --kbar-file (and a gap map on each or none)")
+                "their grids would mix two brushes; make every grid with the same "
+                "per-pillar files (the workflow's layout_files entry: heights, kbar_factors, "
+                "gap_map; the command's --heights, --kbar-factors, --kbar-file, --gap-map; "
+                "a gap map on each grid or none), deleting the curves made from others")
 
 
 def _common_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:

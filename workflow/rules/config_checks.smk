@@ -654,9 +654,10 @@ def _warn_coarse_study(radii):
         if len(radius) < 3:  # no study of this brush
             continue
         low, high = min(radius), max(radius)
+        which = brush[:2]  # (layout, N): two brushes of one N are told apart
         if (
             radius[low] < UNDER_RESOLVED_RADIUS
-            and radius[low] < coarse.get(brush[1], (math.inf,))[0]
+            and radius[low] < coarse.get(which, (math.inf,))[0]
         ):
             flag = (
                 "under_resolved"
@@ -664,12 +665,14 @@ def _warn_coarse_study(radii):
                 else "coarsest_under_resolved"
             )
             need = math.ceil(low * UNDER_RESOLVED_RADIUS / radius[low])
-            coarse[brush[1]] = (radius[low], low, need, flag)
+            coarse[which] = (radius[low], low, need, flag)
     if coarse:
         text = "; ".join(
-            f"N = {n} on {g}: {r:.2g} elements ({flag}; n = {need} gives "
+            f"{layout} N = {n} on {g}: {r:.2g} elements ({flag}; n = {need} gives "
             f"{UNDER_RESOLVED_RADIUS:g})"
-            for n, (r, g, need, flag) in sorted(coarse.items())
+            for (layout, n), (r, g, need, flag) in sorted(
+                coarse.items(), key=lambda item: (item[0][1], item[0][0])
+            )
         )
         logger.warning(
             f"config: the convergence study's coarsest grid gives pillars a radius under "
