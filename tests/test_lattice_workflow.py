@@ -743,6 +743,11 @@ def test_paper_figures_of_a_rough_only_sweep_say_no_flat_runs() -> None:
                        (figures.fig8, "no flat regular runs"), (figures.fig7, "no flat runs")):
         texts = [t.get_text() for ax in draw(sweep).axes for t in ax.texts]
         assert said in texts, (draw.__name__, texts)
+    # brushes as made alone leave no layout at all: said, not a blank panel (a lab's find)
+    none = sweep.isel(layout=slice(0, 0))
+    for draw in (figures.fig6, figures.fig8):
+        texts = [t.get_text() for ax in draw(none).axes for t in ax.texts]
+        assert any(t.startswith("no flat runs (brushes given heights") for t in texts), texts
 
 
 def test_a_coarse_study_is_said_by_the_narrowest_disc_and_only_where_refined(

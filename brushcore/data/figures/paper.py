@@ -162,6 +162,9 @@ def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, 
     # One y range for every layout: the panels are read against each other.
     axes = fig.subplots(1, max(len(layouts), 1), squeeze=False, sharey=True)[0]
     fig.suptitle(title + _shape_note(sweep))
+    if not layouts:  # a sweep of brushes as made alone: said, not a blank panel
+        no_data(axes[0], "no flat runs (brushes given heights, stiffnesses or a gap map\n"
+                         "are drawn in rough_*.png)")
     return fig, dict(zip(layouts, axes))
 
 
