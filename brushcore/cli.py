@@ -293,7 +293,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "the rest double (needs --rtol >= 1e-6; it moves a solution by up "
                           "to ~1.5e-5 of its peak stress, enough to reorder soft random "
                           "pillars); auto = mixed for random layouts at --rtol >= 1e-6, "
-                          "else double")
+                          "else double; both run double in units float32 cannot hold "
+                          "(stress, displacement scale or --h beyond 1e+-15)")
     sim.add_argument("--fft-library", choices=("auto", "fftw", "mkl"),
                      default=SolverOptions.fft_library,
                      help="whose FFTs the whole grid runs on: mkl needs "

@@ -117,6 +117,11 @@ def test_a_sweeps_snapshot_padding_is_fill_and_left_out(tmp_path) -> None:
             rough.snapshot_label.values.tolist()
         assert np.array_equal(mine.contact_snapshot.values, rough.contact_snapshot.values)
         assert np.array_equal(mine.snapshot_step.values, rough.snapshot_step.values)
+        # a rough case of a sweep without one is no case (the flat brush's maps came back)
+        flat_only = build_sweep([flat], keep_snapshots=[("regular", 4)])
+        assert snapshots(flat_only, "regular", 4, 0.01, roughness=0.3) is None
+        assert snapshots(flat_only, "regular", 4, 0.01, shape="square") is None
+        assert snapshots(flat_only, "regular", 4, 0.01) is not None
         full = snapshots(ds, "regular", 4, 0.01)
         assert full.sizes["snapshot"] == 5 == ds.sizes["snapshot"]
         padded = ds.contact_snapshot.isel(case=int(np.flatnonzero(

@@ -403,8 +403,9 @@ def _provenance(sweep: xr.Dataset) -> dict[str, object]:
     }
     if "source_digest_sha256" in sweep.attrs:
         out["sweep_source_digest_sha256"] = sweep.attrs["source_digest_sha256"]
-    if "simulation_git_commits" in sweep.attrs:  # the code of the curves, not of this study
-        out["simulation_git_commits"] = sweep.attrs["simulation_git_commits"]
+    for name in ("simulation_git_commits", "simulation_code_sha256"):
+        if name in sweep.attrs:  # the code of the curves, not of this study
+            out[name] = sweep.attrs[name]
     # Not the sweep's units_convention ("h in m"): every value here is
     # normalised, and the coordinate h is h / L = 1/n.
     for name in ("e_star", "dgamma"):

@@ -132,14 +132,20 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         & np.isclose(sweep["case_kbar"], kbar, rtol=1e-9, atol=0.0)
         & (sweep["case_seed"] == seed)
     )
+    # a case key the sweep has no coordinate for holds its one value: disc and flat
+    # (a sweep of flat brushes asked for roughness 0.3 returned the flat brush's maps)
     if f"case_{SHAPE_DIM}" in sweep.variables:
         hit = hit & (sweep[f"case_{SHAPE_DIM}"] == shape)
+    elif shape != "disc":
+        return None
     if grid is not None and "case_grid" in sweep.variables:
         hit = hit & (sweep["case_grid"] == int(grid))
     for name in ROUGH_DIMS:
         if f"case_{name}" in sweep.variables:
             hit = hit & np.isclose(sweep[f"case_{name}"], float(rough.get(name, 0.0)),
                                    rtol=1e-9, atol=0.0)
+        elif float(rough.get(name, 0.0)) != 0.0:
+            return None
     idx = np.flatnonzero(hit.values)
     if idx.size == 0:
         return None

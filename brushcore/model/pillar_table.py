@@ -400,7 +400,7 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     Raises
     ------
     ParameterError
-        Named ``layout_file``, before anything is written where ``path``
+        Named ``path``, before anything is written where ``path``
         has another suffix, and with nothing left behind where the table
         breaks a rule that `read_pillar_table` reads it by (a radius <= 0,
         a pillar outside the square, two that overlap, ...).
@@ -408,7 +408,8 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     path = Path(path)
     kind = path.suffix.lower()
     if _FILE_KIND.fullmatch(kind) and kind != SUFFIX:  # x.npy: a label map's name
-        raise _refuse(path, f"a {SUFFIX} file (a pillar table)", f"it ends in {path.suffix}")
+        raise ParameterError("path", str(path), f"a {SUFFIX} file (a pillar table)",
+                             f"it ends in {path.suffix}")
     if kind != SUFFIX:  # none, or a number's decimals: brush_phi0.12 -> brush_phi0.12.csv
         path = path.with_name(path.name + SUFFIX)
     shaped = table.aspects is not None
@@ -429,8 +430,8 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
         try:
             _read(tmp)
-        except ParameterError as exc:
-            raise _refuse(path, exc.allowed, exc.reason) from None
+        except ParameterError as exc:  # named as this function's argument
+            raise ParameterError("path", str(path), exc.allowed, exc.reason) from None
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
