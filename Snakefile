@@ -8,6 +8,8 @@ snakemake --cores 2 --configfile config/convergence.yaml   # mesh refinement
 from snakemake.logging import logger
 from snakemake.utils import min_version, validate
 
+from brushcore.model.provenance import other_code
+
 min_version("9.0")
 
 
@@ -38,6 +40,10 @@ check_cluster_threads(
 )
 if clipped := clipped_runtimes(config):  # one walk over the sweep's cases
     logger.warning(clipped)
+if planning and (
+    other := other_code(workflow.basedir)
+):  # the code the curves will name
+    logger.warning(f"brushcore: {other}")
 
 
 report: "workflow/report/workflow.rst"

@@ -846,3 +846,26 @@ def test_the_code_that_ran_is_named_where_git_cannot(tmp_path, monkeypatch) -> N
     sweep = build_sweep([curve, other])
     assert "simulation_code_sha256" in mixed_runs(sweep)
     assert sweep.attrs["simulation_code_sha256"] == ", ".join(sorted([digest, "0" * 64]))
+
+
+def test_a_workflow_running_another_brushcore_is_said_to(tmp_path) -> None:
+    """A clone's workflow ran an older installed wheel through all its jobs
+    without a word (an installation helper's find): planning says so where
+    the brushcore that runs is not the checkout's and its code differs."""
+    import shutil
+
+    import brushcore
+    from brushcore.model import provenance
+
+    package = Path(brushcore.__file__).resolve().parent
+    assert provenance.other_code(package.parent) == ""  # this checkout's own
+    checkout = tmp_path / "clone"
+    shutil.copytree(package, checkout / "brushcore", ignore=shutil.ignore_patterns("__pycache__"))
+    assert provenance.other_code(checkout) == ""  # another copy of the same code
+    with open(checkout / "brushcore/model/curve.py", "a") as fh:
+        fh.write("\n# a later commit\n")
+    said = provenance.other_code(checkout)
+    assert said.startswith(f"the jobs run brushcore from {package} (code sha256 "
+                           f"{provenance.code_digest()[:16]}), whose code differs from this "
+                           f"checkout's {checkout / 'brushcore'}"), said
+    assert provenance.other_code(tmp_path / "no checkout") == ""

@@ -57,11 +57,29 @@ def code_digest() -> str:
     """SHA-256 over the package's Python files (their paths and bytes): the
     code that ran, named where git cannot (an installed wheel reports "git
     unknown" and version 0.1.0 whatever commit it was built from)."""
-    root = Path(__file__).resolve().parents[1]
+    return package_digest(Path(__file__).resolve().parents[1])
+
+
+def package_digest(root: Path) -> str:
+    """`code_digest` of the package folder ``root`` (a checkout's brushcore/)."""
     h = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
+    for path in sorted(Path(root).rglob("*.py")):
         h.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
     return h.hexdigest()
+
+
+def other_code(checkout: Path) -> str:
+    """Where the brushcore that runs is not ``checkout``'s brushcore/ and its
+    code differs, what to say ("" otherwise): a clone's workflow ran an older
+    installed wheel through all its jobs without a word (an installation
+    helper's find)."""
+    mine = Path(checkout) / "brushcore"
+    running = Path(__file__).resolve().parents[1]
+    if not mine.is_dir() or running == mine.resolve() or package_digest(mine) == code_digest():
+        return ""
+    return (f"the jobs run brushcore from {running} (code sha256 {code_digest()[:16]}), whose "
+            f"code differs from this checkout's {mine} ({package_digest(mine)[:16]}): "
+            "install the checkout (pip install -e .) or put it on PYTHONPATH to run its code")
 
 
 def source() -> str:
