@@ -429,7 +429,9 @@ def save_pillar_table(table: PillarTable, path: str | Path) -> Path:
     try:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
         try:
-            _read(tmp)
+            with warnings.catch_warnings():  # said where the table is read, by its name
+                warnings.simplefilter("ignore")
+                _read(tmp)
         except ParameterError as exc:  # named as this function's argument
             raise ParameterError("path", str(path), exc.allowed, exc.reason) from None
         os.replace(tmp, path)
