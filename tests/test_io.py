@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 
 def test_dimensional_values_in_element_units_say_so(tmp_path) -> None:
     """With e_star = dgamma = h = 1 (the workflow's) a variable in N, m or J
@@ -186,8 +188,9 @@ def test_a_curve_however_opened_writes_and_aggregates_as_simulated(tmp_path) -> 
         back = read_curve(tmp_path / f"{name}.nc")
         assert back.contact_snapshot.dtype == np.int8, name
         assert back.attrs["content_sha256"] == digest, name
-    never = simulate(BrushParams("regular", 4, 0.01, 32, roughness=0.2, seed=1),
-                     protocol=[Waypoint("force", -1.0), Waypoint("force", -2.0)])
+    with pytest.warns(UserWarning, match="the protocol never retracts"):
+        never = simulate(BrushParams("regular", 4, 0.01, 32, roughness=0.2, seed=1),
+                         protocol=[Waypoint("force", -1.0), Waypoint("force", -2.0)])
     write_curve(never, tmp_path / "never.nc")
     with xr.open_dataset(tmp_path / "never.nc") as ds:
         never_opened = ds.load()

@@ -189,7 +189,8 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
                       f"labels up to {n_pillars - 1}, but no element has label {shown}"
                       + (f" and {missing.size - 10} more" if missing.size > 10 else ""))
     check_not_touching(labels, _NAME, str(path))
-    split = split_pillars(labels)
+    # an image's pillars are its 8-connected blobs, whose corners `_read_png` says
+    split = split_pillars(labels) if unit == "elements" else np.zeros(0, dtype=np.int64)
     said = (str(path.resolve()), path.stat().st_mtime_ns)
     if split.size and said not in _SAID_SPLIT:  # one spring on two footprints: meant?
         _SAID_SPLIT.add(said)  # once a file: a run reads its map several times
