@@ -65,8 +65,14 @@ def expected_peak_bytes(params: BrushParams, options: SolverOptions,
                         protocol: Sequence[object] | None = None) -> float:
     """The largest peak memory measured for the run's kind, scaled to its
     grid as n^2 [bytes]: an order of magnitude, for `memory_note`."""
+    return _peak(params, options, protocol)[1]
+
+
+def _peak(params: BrushParams, options: SolverOptions,
+          protocol: Sequence[object] | None) -> tuple[int, float]:
+    """The grid the run's kind was measured on, and its peak scaled to the run's grid."""
     grid, peak = LARGEST_PEAK_BYTES[curve_kind(params, options, protocol)]
-    return peak * (params.grid / grid) ** 2
+    return grid, peak * (params.grid / grid) ** 2
 
 
 def available_bytes() -> float:
@@ -88,11 +94,10 @@ def memory_note(params: BrushParams, options: SolverOptions,
     """A warning where the run may need more memory than ``available``
     (default: this machine's, `available_bytes`) [bytes]; "" otherwise and
     on a GPU, whose memory the solver budgets itself."""
-    need = expected_peak_bytes(params, options, protocol)
+    grid, need = _peak(params, options, protocol)
     free = available_bytes() if available is None else available
     if need <= free or params.backend != "cpu":
         return ""
-    grid, _ = LARGEST_PEAK_BYTES[curve_kind(params, options, protocol)]
     return (f"this run may need up to about {need / 1e9:.2g} GB of memory (the largest "
             f"peak of its kind measured at {grid}^2, scaled as grid^2), more than the "
             f"{free / 1e9:.2g} GB available: a smaller grid, or a machine with more memory")

@@ -236,8 +236,8 @@ def shapes_label_map(centres: np.ndarray, shapes: Sequence[PillarShape], areas: 
         shape, area = shapes[p], float(areas[p])
         ey, ex = (e / h for e in shape.half_extents(area))
         if cy - ey < -slack or cx - ex < -slack or cy + ey > n + slack or cx + ex > n + slack:
-            raise LayoutError(f"pillar {p} at (y, x) = ({cy * h:.4g}, {cx * h:.4g}) reaches beyond "
-                              f"the {side:.4g} x {side:.4g} square", grid_helps=False)
+            raise LayoutError(f"pillar {p} at (y, x) = ({cy * h:.4g}, {cx * h:.4g}) reaches "
+                              f"beyond the {side:.4g} x {side:.4g} square", grid_helps=False)
         i0, i1 = max(0, int(math.floor(cy - ey)) - 1), min(n, int(math.ceil(cy + ey)) + 1)
         j0, j1 = max(0, int(math.floor(cx - ex)) - 1), min(n, int(math.ceil(cx + ex)) + 1)
         yy = (np.arange(i0, i1)[:, None] + 0.5 - cy) * h

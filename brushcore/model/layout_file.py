@@ -189,22 +189,30 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
                       f"labels up to {n_pillars - 1}, but no element has label {shown}"
                       + (f" and {missing.size - 10} more" if missing.size > 10 else ""))
     check_not_touching(labels, _NAME, str(path))
+    # once a file version: a run reads its map several times (0.6 s at 2048^2);
     # an image's pillars are its 8-connected blobs, whose corners `_read_png` says
-    split = split_pillars(labels) if unit == "elements" else np.zeros(0, dtype=np.int64)
     said = (str(path.resolve()), path.stat().st_mtime_ns)
-    if split.size and said not in _SAID_SPLIT:  # one spring on two footprints: meant?
-        _SAID_SPLIT.add(said)  # once a file: a run reads its map several times
-        shown = ", ".join(map(str, split[:5])) + " ..." * (split.size > 5)
-        warnings.warn(f"{path}: " + (f"label {shown} covers" if split.size == 1 else
-                                     f"{split.size} labels ({shown}) each cover")
-                      + " pieces that share no element edge; such a label runs as one "
-                      "pillar, one spring on all its pieces: give each piece its own label "
-                      "otherwise", stacklevel=2)
+    if unit == "elements" and said not in _SPLIT_CHECKED:
+        _SPLIT_CHECKED.add(said)
+        _warn_split(path, split_pillars(labels))
     return labels
 
 
-#: Label maps whose split pillars were said, by (path, mtime).
-_SAID_SPLIT: set[tuple[str, int]] = set()
+def _warn_split(path: Path, split: np.ndarray) -> None:
+    """Say which labels of a map cover separate pieces (one spring on two
+    footprints: meant, perhaps, but likely not)."""
+    if not split.size:
+        return
+    shown = ", ".join(map(str, split[:5])) + " ..." * (split.size > 5)
+    warnings.warn(f"{path}: " + (f"label {shown} covers" if split.size == 1 else
+                                 f"{split.size} labels ({shown}) each cover")
+                  + " pieces that share no element edge; such a label runs as one pillar, "
+                  "one spring on all its pieces: give each piece its own label otherwise",
+                  stacklevel=3)
+
+
+#: Label maps checked for split pillars, by (path, mtime).
+_SPLIT_CHECKED: set[tuple[str, int]] = set()
 
 
 def split_pillars(labels: np.ndarray) -> np.ndarray:
