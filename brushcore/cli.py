@@ -1,4 +1,5 @@
-"""Command line: ``brushcore simulate ...`` writes one curve file.
+"""Command line: ``brushcore simulate ...`` writes one curve file,
+``brushcore converge ...`` extrapolates a resolution study's curves.
 
 Conventions: no abbreviated flags, unknown flags named (with the closest
 known one), defaults shown in ``--help``, errors worded with the flags the
@@ -25,9 +26,10 @@ from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTE
                                    on_sigterm, terminate)
 from brushcore.model.inputs import PROTOCOL_SYNTAX
 from brushcore.model.labelmap import count_touching_pairs, touching_note
-from brushcore.model.params import (LAYOUTS, MAX_ASPECT, MAX_GRID, MAX_KBAR_SPREAD, MAX_PHI_ERROR,
-                                    MAX_ROUGH, MAX_SEED, MIN_GRID, MIN_KBAR, RANDOM_GAP_GRID,
-                                    UNIT_RANGE, BrushParams)
+from brushcore.model.params import (LAYOUTS, MAX_ASPECT, MAX_GRID, MAX_KBAR_SPREAD,
+                                    MAX_ORIENTATION, MAX_PHI, MAX_PHI_ERROR, MAX_ROUGH,
+                                    MAX_SEED, MIN_GRID, MIN_KBAR, RANDOM_GAP_GRID, UNIT_RANGE,
+                                    BrushParams)
 from brushcore.numerics.platform.backend import USER_BACKENDS, resolve_backend
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.threads import MAX_THREADS
@@ -50,6 +52,11 @@ FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "-
          "kbar_factors": "--kbar-factors", "kbar_file": "--kbar-file",
          "backend": "--backend", "protocol": "--protocol"}
 _NUMBER = re.compile(r"^-\d|^-\.\d|^-inf$", re.IGNORECASE)
+
+
+def _default(name: str) -> object:
+    """`BrushParams`' default of field ``name``: the flags show the API's."""
+    return BrushParams.__dataclass_fields__[name].default
 
 
 def _path(text: str) -> Path:
@@ -212,30 +219,31 @@ def build_parser() -> argparse.ArgumentParser:
                      action=_Given,
                      help=f"elements per side n, in [{MIN_GRID}, {MAX_GRID}] (required, except "
                           "for a label map or image: the file's; a pillar table needs it)")
-    sim.add_argument("--phi", type=float, default=0.12, action=_Given,
-                     help="filling factor (0, 0.5] (--layout file: the file's)")
+    sim.add_argument("--phi", type=float, default=_default("phi"), action=_Given,
+                     help=f"filling factor (0, {MAX_PHI:g}] (--layout file: the file's)")
     sim.add_argument("--seed", type=_integer(f"an integer in [0, {MAX_SEED}]"), default=0,
                      help=f"seed of the random layout and of drawn heights (--roughness) and "
                           f"stiffnesses (--kbar-spread), in [0, {MAX_SEED}]")
-    sim.add_argument("--min-gap", type=float, default=1.0,
+    sim.add_argument("--min-gap", type=float, default=_default("min_gap"),
                      help=f"minimum gap between random pillars [elements of the "
                           f"{RANDOM_GAP_GRID} x {RANDOM_GAP_GRID} grid, L/{RANDOM_GAP_GRID}, on "
                           f"every grid], in [1, {RANDOM_GAP_GRID})")
     units = f", in [{UNIT_RANGE[0]:g}, {UNIT_RANGE[1]:g}]"
-    sim.add_argument("--e-star", type=float, default=1.0, help="effective modulus E* [Pa]" + units)
-    sim.add_argument("--dgamma", type=float, default=1.0,
+    sim.add_argument("--e-star", type=float, default=_default("e_star"), help="effective modulus E* [Pa]" + units)
+    sim.add_argument("--dgamma", type=float, default=_default("dgamma"),
                      help="work of adhesion [J/m^2]" + units)
-    sim.add_argument("--h", type=float, default=1.0, help="element size [m]" + units)
+    sim.add_argument("--h", type=float, default=_default("h"),
+                     help="element size [m]" + units)
     sim.add_argument("--allow-coarse", action="store_true",
                      help="run even if the pillars are under 2 elements in radius or phi "
                           "is realised more than 5 %% off")
-    sim.add_argument("--shape", choices=SHAPES, default="disc",
+    sim.add_argument("--shape", choices=SHAPES, default=_default("shape"),
                      help="pillar cross-section (area phi L^2 / N for every shape)")
-    sim.add_argument("--aspect", type=float, default=1.0,
+    sim.add_argument("--aspect", type=float, default=_default("aspect"),
                      help=f"major / minor axis of --shape ellipse, [1, {MAX_ASPECT:g}]")
-    sim.add_argument("--orientation", type=float, default=0.0,
+    sim.add_argument("--orientation", type=float, default=_default("orientation"),
                      help="angle of the ellipse's major axis or a square's side from the "
-                          "x axis [degrees], in [-360, 360]")
+                          f"x axis [degrees], in [-{MAX_ORIENTATION:g}, {MAX_ORIENTATION:g}]")
     sim.add_argument("--layout-file", type=_path,
                      help="label map (.npy: -1 no pillar, 0..N-1 pillar) or image (.png: "
                           "dark pillars on white), of the grid's size, or a pillar table "
@@ -250,13 +258,13 @@ def build_parser() -> argparse.ArgumentParser:
         "one value per pillar in label order (regular: row-major, first axis slowest; the "
         "curve file lists every pillar's centre), text ('#' comments; one value a line, or "
         "all on one line) or .npy.")
-    rough.add_argument("--roughness", type=float, default=0.0,
+    rough.add_argument("--roughness", type=float, default=_default("roughness"),
                        help=f"standard deviation of Gaussian pillar heights [d_K], in "
                             f"[0, {MAX_ROUGH:g}], drawn from --seed")
-    rough.add_argument("--preload", type=float, default=0.0,
+    rough.add_argument("--preload", type=float, default=_default("preload"),
                        help=f"compressive force the approach stops at [F_K], in "
                             f"[0, {MAX_ROUGH:g}]")
-    rough.add_argument("--kbar-spread", type=float, default=0.0,
+    rough.add_argument("--kbar-spread", type=float, default=_default("kbar_spread"),
                        help=f"coefficient of variation of a lognormal per-pillar kbar "
                             f"(mean --kbar), in [0, {MAX_KBAR_SPREAD:g}], drawn from --seed")
     rough.add_argument("--heights", type=_path, default=None, metavar="FILE",

@@ -994,7 +994,7 @@ def test_the_config_schema_bounds_are_the_solvers():
     props = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
     grid, props = props["$defs"]["grid"], props["properties"]
     assert (grid["minimum"], grid["maximum"]) == (p.MIN_GRID, p.MAX_GRID)
-    assert (props["phi"]["exclusiveMinimum"], props["phi"]["maximum"]) == (0, 0.5)
+    assert (props["phi"]["exclusiveMinimum"], props["phi"]["maximum"]) == (0, p.MAX_PHI)
     assert props["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert props["fig5"]["properties"]["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert (props["aspect"]["minimum"], props["aspect"]["maximum"]) == (1, p.MAX_ASPECT)

@@ -340,7 +340,8 @@ def extrapolate(
 
     Parameters
     ----------
-    h : element sizes (any length proportional to h; brushcore uses 1/n) [length].
+    h : element sizes, in any unit proportional to h (brushcore uses 1/n,
+        dimensionless).
     f : the result on each grid [any units]; NaN marks a grid not run.
     options : `ConvergenceOptions`; defaults when None.
 

@@ -90,10 +90,15 @@ def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
 SHOWN_SHAPE = "pillar_shape_shown"
 
 
+#: Relative tolerance a case's kbar and rough values are matched to: a
+#: config's values as they survive the curve file names.
+CASE_RTOL = 1e-9
+
+
 def kbar_index(kbars: np.ndarray, kbar: float) -> int | None:
-    """Position of ``kbar`` among ``kbars`` (to 1e-9, as a config's values
-    survive the file names; inf matches inf), None if it was not run."""
-    hit = np.flatnonzero(np.isclose(kbars, kbar, rtol=1e-9, atol=0.0))
+    """Position of ``kbar`` among ``kbars`` (to `CASE_RTOL`; inf matches inf),
+    None if it was not run."""
+    hit = np.flatnonzero(np.isclose(kbars, kbar, rtol=CASE_RTOL, atol=0.0))
     return int(hit[0]) if hit.size else None
 
 
@@ -129,7 +134,7 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
     hit = (
         (sweep["case_layout"] == layout)
         & (sweep["case_n_pillars"] == n_pillars)
-        & np.isclose(sweep["case_kbar"], kbar, rtol=1e-9, atol=0.0)
+        & np.isclose(sweep["case_kbar"], kbar, rtol=CASE_RTOL, atol=0.0)
         & (sweep["case_seed"] == seed)
     )
     # a case key the sweep has no coordinate for holds its one value: disc and flat
@@ -143,7 +148,7 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
     for name in ROUGH_DIMS:
         if f"case_{name}" in sweep.variables:
             hit = hit & np.isclose(sweep[f"case_{name}"], float(rough.get(name, 0.0)),
-                                   rtol=1e-9, atol=0.0)
+                                   rtol=CASE_RTOL, atol=0.0)
         elif float(rough.get(name, 0.0)) != 0.0:
             return None
     idx = np.flatnonzero(hit.values)

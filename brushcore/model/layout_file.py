@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brushcore.model.params import BrushParams
+from brushcore.model.params import MAX_GRID, MAX_PHI, BrushParams
 
 from brushcore.model.labelmap import check_not_touching, pillar_element_counts
 from brushcore.model.inputs import npy_problem
@@ -45,7 +45,7 @@ from brushcore.model.pillar_table import is_table, read_pillar_table
 from brushcore.validation import ParameterError
 
 #: Largest image accepted (the largest grid, 8192^2), checked before decoding.
-MAX_IMAGE_PIXELS = 8192 * 8192
+MAX_IMAGE_PIXELS = MAX_GRID**2
 SUFFIXES = (".npy", ".png")
 #: A phi given with a file must be the file's to this relative tolerance.
 FILE_PHI_RTOL = 1e-9
@@ -171,7 +171,7 @@ def read_label_map(path: str | Path, grid: int | None = None) -> np.ndarray:
         raise _refuse(path, "a map with at least one pillar", "no pillar element",
                       image_rule=True)
     counts = pillar_element_counts(labels)
-    if counts.max() > labels.size / 2:  # no pillar covers half the square (phi <= 0.5)
+    if counts.max() > labels.size * MAX_PHI:  # no pillar covers more than phi may
         big = int(counts.argmax())
         share = f"{counts[big] / labels.size:.3g}"
         if path.suffix.lower() == ".png":
@@ -346,7 +346,8 @@ def file_params(path: str | Path, kbar: float, **kwargs) -> BrushParams:
         # one-pixel pillar padded into a larger map stays one pixel).
         allowed = (exc.allowed.replace("grid >=", "the layout drawn finer, its pillars scaled "
                                        "with it: a map of side >=") if exc.name == "grid"
-                   else "a filling factor in (0, 0.5]" if exc.name == "phi" else exc.allowed)
+                   else f"a filling factor in (0, {MAX_PHI:g}]" if exc.name == "phi"
+                   else exc.allowed)
         raise _refuse(path, allowed, found_as + (f": {exc.reason}" if exc.reason else ""),
                       image_rule=exc.name == "phi") from None
 

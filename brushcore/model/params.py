@@ -68,6 +68,7 @@ MAX_ROUGH = 1e3  # roughness, |heights| and |gap map| [d_K], preload [F_K]
 MAX_KBAR_SPREAD = 100.0  # coefficient of variation
 UNIT_RANGE = (1e-30, 1e30)  # e_star, dgamma, h in the inputs' units
 MAX_SEED = 2**63 - 1  # a file attribute is an int64
+MAX_PHI = 0.5  # filling factor: pillars cover at most half the square
 
 
 def narrowest_radius(radius: float, shape: str, aspect: float) -> float:
@@ -98,7 +99,7 @@ class BrushParams:
         realised phi lie within 5 % of ``phi`` (checked here and, for the
         filling factor, by `simulate`, which names the next grid that
         passes), unless ``allow_coarse``.
-    phi : requested filling factor (total pillar area / L^2) in (0, 0.5].
+    phi : requested filling factor (total pillar area / L^2) in (0, MAX_PHI].
     seed : seed of numpy's Generator for "random", and for the heights and
         stiffnesses of rough or graded lattices (roughness, kbar_spread);
         ignored for flat lattices; in [0, 2**63 - 1].
@@ -119,9 +120,10 @@ class BrushParams:
         (1 for other shapes).
     orientation : angle from the x axis to the major axis of an ellipse or
         a side of a square [degrees] (0 for discs).
-    layout_file : path of the ``.npy`` label map or ``.png`` image of a
-        "file" layout ("" otherwise).  Its n_pillars, grid and phi must be
-        the file's; `brushcore.file_params` fills them in.
+    layout_file : path of the ``.npy`` label map, ``.png`` image or ``.csv``
+        pillar table of a "file" layout ("" otherwise).  Its n_pillars and
+        phi (and a map's or image's grid; a table is drawn on any grid)
+        must be the file's; `brushcore.file_params` fills them in.
     roughness : standard deviation S in [0, 1e3] of Gaussian pillar heights, in
         units of d_K = sqrt(2 pi dgamma a0 / E*) (a0 = sqrt(A / pi), A the
         discretised pillar area), drawn from ``seed`` (also for regular
@@ -207,8 +209,8 @@ class BrushParams:
                  "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars")
         require(is_integer(self.grid) and MIN_GRID <= self.grid <= MAX_GRID, "grid", self.grid,
                  f"an integer in [{MIN_GRID}, {MAX_GRID}]")
-        require(is_real(self.phi) and 0.0 < self.phi <= 0.5, "phi", self.phi,
-                 "a number in (0, 0.5]")
+        require(is_real(self.phi) and 0.0 < self.phi <= MAX_PHI, "phi", self.phi,
+                 f"a number in (0, {MAX_PHI:g}]")
         require(is_integer(self.seed) and 0 <= self.seed <= MAX_SEED, "seed", self.seed,
                  "an integer in [0, 2**63 - 1]")
         require(is_real(self.min_gap) and 1.0 <= self.min_gap < RANDOM_GAP_GRID,
@@ -250,7 +252,8 @@ class BrushParams:
                  "a path (str or os.PathLike)")
         if self.layout == "file":
             require(self.layout_file != "", "layout_file", self.layout_file,
-                     "the path of a .npy label map or .png image for the file layout")
+                     "the path of a .npy label map, .png image or .csv pillar table "
+                     "for the file layout")
         else:
             require(self.layout_file == "", "layout_file", self.layout_file,
                      "no layout file unless layout is 'file'")

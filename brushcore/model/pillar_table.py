@@ -37,7 +37,7 @@ from scipy import optimize
 from scipy.spatial import cKDTree
 
 from brushcore.model.inputs import header_names, table_rows
-from brushcore.model.params import MAX_ORIENTATION
+from brushcore.model.params import MAX_ORIENTATION, MAX_PHI
 from brushcore.model.shapes import PillarShape, along_axes, ellipse_half_extents
 from brushcore.validation import ParameterError
 
@@ -253,8 +253,8 @@ def _read(path: Path) -> PillarTable:
     for array in (table.centres, r, aspects, orientations):  # a cached reading: callers
         if array is not None:  # must not change what the next one gets
             array.setflags(write=False)
-    if table.phi > 0.5 * (1.0 + 1e-12):  # a generated brush at 0.5 sums to 0.5000000000000001
-        raise _refuse(path, "discs covering at most half the square (phi <= 0.5)",
+    if table.phi > MAX_PHI * (1.0 + 1e-12):  # a generated brush at 0.5 sums to 0.5000000000000001
+        raise _refuse(path, f"discs covering at most half the square (phi <= {MAX_PHI:g})",
                       f"pi sum r^2 = {table.phi:.4g}")
     return table
 

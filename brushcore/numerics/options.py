@@ -140,8 +140,10 @@ class SolverOptions:
                                              and self.rtol >= self.MIXED_MIN_RTOL)
 
     def host_fft_library(self) -> str:
-        """The library the host's whole-grid FFTs run on: "mkl" or "fftw"
-        (see ``fft_library``)."""
+        """The library ``fft_library`` names: "mkl" or "fftw", "auto" read as
+        "mkl" where it is installed.  Which one a run's transforms use is
+        `brushcore.model.solve.host_library`'s choice, which times "auto"'s
+        two on the machine and may take FFTW."""
         if self.fft_library == "auto":
             return "mkl" if mkl.available() else "fftw"
         return self.fft_library

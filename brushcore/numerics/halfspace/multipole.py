@@ -28,7 +28,8 @@ def field_terms(moments: np.ndarray, source: np.ndarray, target: np.ndarray,
     Parameters
     ----------
     moments : (3, P) per (source, target) pair: M0, M1_y, M1_x of the source
-        [length^3 / stress x stress, length^4 / ...: C sum dsigma (x - c)]
+        [length^2, length^3, length^3: C sum dsigma and C sum dsigma (x - c),
+        C = h^2 / (pi E*) in length / stress x length]
     source, target : (P,) pillar indices of each pair
     centroids : (cy, cx) of all pillars [length]
     h : element size [length] (the images lie at -h - y)
