@@ -463,7 +463,7 @@ def test_far_response_is_the_first_order_answer_to_second_order_in_size(mirrored
 
 
 def test_settled_needs_every_decision_clear_of_the_error():
-    from brushcore.numerics.events.pulloff import SETTLE_SAFETY, settles
+    from brushcore.numerics.events.decisions import SETTLE_SAFETY, settles
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.9, 0.5])
@@ -495,7 +495,7 @@ def test_settled_needs_every_decision_clear_of_the_error():
 def test_settled_weighs_each_element_by_its_own_error():
     """At the tolerance a large error on an element far from every cut does
     not hold the solve back; the same error on the runner-up does."""
-    from brushcore.numerics.events.pulloff import settles
+    from brushcore.numerics.events.decisions import settles
 
     verdicts: list[bool] = []
     x = np.array([1.0, 0.99, 0.5])  # no element over 1.2: the next event takes 1.0
@@ -512,18 +512,18 @@ def test_decided_weighs_each_element_by_its_own_error():
     by DECISION_SAFETY times its own error estimate plus DECISION_FLOOR
     times the largest: a large error far from the threshold does not hold
     back the round, one near it does."""
-    from brushcore.numerics.events.pulloff import DECISION_FLOOR, DECISION_SAFETY, _decides
+    from brushcore.numerics.events.decisions import DECISION_FLOOR, DECISION_SAFETY, decides
 
     stopped: list[float] = []
     x = np.array([1.2, 0.5, 0.9])  # threshold 1.0: the first element goes
     z = np.array([0.0, 0.04, 0.001])  # the second's error is large, it is far below
     assert 0.1 > DECISION_SAFETY * 0.001 + DECISION_FLOOR * 0.04  # 0.9 clears 1.0
-    assert _decides(1.0, np, stopped)(x, z, 0.04)
+    assert decides(1.0, np, stopped)(x, z, 0.04)
     assert stopped == [0.04]  # the largest estimate, for the next certificate
     # the same errors, but the large one on the element at 0.9: undecided
-    assert not _decides(1.0, np, stopped)(x, z[[0, 2, 1]], 0.04)
+    assert not decides(1.0, np, stopped)(x, z[[0, 2, 1]], 0.04)
     # nothing over the threshold: never decided early
-    assert not _decides(1.0, np, stopped)(np.array([0.5, 0.9]), np.zeros(2), 0.0)
+    assert not decides(1.0, np, stopped)(np.array([0.5, 0.9]), np.zeros(2), 0.0)
 
 
 def test_float32_band_hands_near_ties_to_double():
@@ -532,7 +532,7 @@ def test_float32_band_hands_near_ties_to_double():
     only the band leaves unsettled stops at once (verdict False: refined in
     double), one the estimate itself leaves unsettled iterates on, and the
     early exit of a cascade round waits until the band is clear."""
-    from brushcore.numerics.events.pulloff import _decides, settles
+    from brushcore.numerics.events.decisions import decides, settles
 
     verdicts: list[bool] = []
     z = np.full(3, 1e-6)  # margins 3.3e-6
@@ -550,9 +550,9 @@ def test_float32_band_hands_near_ties_to_double():
     assert verdicts[-2:] == [False, True]
     stopped: list[float] = []
     over = np.array([1.2, 0.5, 0.9])  # threshold 0.9001: the first element goes
-    assert _decides(0.9001, np, stopped)(over, z, 1e-6)
-    assert not _decides(0.9001, np, stopped, band=1e-3)(over, z, 1e-6)  # 0.9 in the band
-    assert _decides(0.95, np, stopped, band=1e-3)(over, z, 1e-6)
+    assert decides(0.9001, np, stopped)(over, z, 1e-6)
+    assert not decides(0.9001, np, stopped, band=1e-3)(over, z, 1e-6)  # 0.9 in the band
+    assert decides(0.95, np, stopped, band=1e-3)(over, z, 1e-6)
 
 
 @pytest.mark.skipif(not HAVE_PYFFTW, reason="single-precision transforms need pyfftw")

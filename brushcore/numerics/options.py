@@ -54,7 +54,7 @@ class SolverOptions:
         host's FFTs in single precision and applies the block inverses from
         a float32 copy; CG's vectors, dot products, springs and downdates
         stay double, every decision keeps
-        `brushcore.numerics.events.pulloff.PRECISION_BAND` more margin, and a solve
+        `brushcore.numerics.events.decisions.PRECISION_BAND` more margin, and a solve
         unsettled only by it goes on in double.  Float32 breaks the ties of
         mirror images, so "auto" is "mixed" only for layouts without exact
         symmetries (random ones) at rtol >= 1e-6 in units that float32
@@ -63,13 +63,13 @@ class SolverOptions:
         are always double.
     early_decisions : let a cascade round's CG stop before the tolerance
         once its iterate decides the round
-        (`brushcore.numerics.events.pulloff.DECISION_SAFETY`); rounds whose
+        (`brushcore.numerics.events.decisions.DECISION_SAFETY`); rounds whose
         stresses enter F_ad or W always run to the tolerance.  True by
         default, off in `exact()`.
     settle_decisions : a solve at the tolerance goes on (to 1e-9 at most)
         while an element lies within its margin of sigma_c or of the next
         event's cut, so that which elements detach follows the model, not
-        CG's rounding (`brushcore.numerics.events.pulloff.settles`; in
+        CG's rounding (`brushcore.numerics.events.decisions.settles`; in
         protocols, the cascades' solves against sigma_c).  True by
         default, off in `exact()`.
     fft_library : "auto" (default), "fftw" or "mkl": whose FFTs the host's

@@ -39,9 +39,9 @@ from brushcore.numerics.platform.backend import namespace
 from brushcore.numerics.linear.cg import ConvergenceError, pcg_image
 from brushcore.numerics.linear.operator import BrushOperator
 from brushcore.numerics.options import SolverOptions
-from brushcore.numerics.events.pulloff import (PRECISION_BAND, SETTLE_FLOOR, SETTLE_SAFETY,
-                                               Progress, SolverError, band_margin, margins,
-                                               settles, pull_off)
+from brushcore.numerics.events.decisions import (PRECISION_BAND, SETTLE_FLOOR, SETTLE_SAFETY,
+                                                 band_margin, margins, settles)
+from brushcore.numerics.events.pulloff import Progress, SolverError, pull_off
 from brushcore.numerics.events.waypoints import (APPROACH, RETRACT, START, ProtocolCurve,
                                                  Waypoint)
 
@@ -226,7 +226,7 @@ class _Engine:
 
         With a ``threshold`` (a cascade's sigma_c) and ``settle_decisions``,
         a solve at the tolerance goes on while an attached element lies
-        within its error margin of the threshold (`pulloff.settles`), so
+        within its error margin of the threshold (`decisions.settles`), so
         that which elements detach follows the model, not CG's rounding: a
         pillar 9.7e-5 under sigma_c during its neighbour's cascade, with CG's
         error at 1e-4 of the largest stress, let go 2 % of d early (W 2.9e-3
@@ -503,7 +503,7 @@ class _Engine:
         at kbar 0.01, 48^2: 138 events against exact mode's and an
         independent dense solver's 137).  With ``settle_decisions`` both are
         solved tighter while an element not tied with the first lies within
-        its error margin of sigma_c there, as `pulloff.settles` settles its
+        its error margin of sigma_c there, as `decisions.settles` settles its
         cut: which elements go together follows the model, not the rounding.
         """
         xp = self.xp
@@ -534,7 +534,7 @@ class _Engine:
             margin = margin + band_margin(band, sig + t * sig1, xp)
             margin = margin + rate * float(margin[first] / rate[first])  # t's own error
             # float32's ties are coincidences: each inside the tie by its margin
-            # (as `pulloff.settles` with sure_ties)
+            # (as `decisions.settles` with sure_ties)
             unsure = self.sure_ties and bool(xp.any(
                 reach & (below > 0) & (below + margin > self.options.tie_rtol * self.sigma_c)))
             if not (bool(xp.any(~reach & (below < margin))) or unsure):
