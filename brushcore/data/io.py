@@ -231,6 +231,17 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
 
     See `write_dataset_atomic`: a killed job leaves either no file or a
     complete one, never half of one.
+
+    Parameters
+    ----------
+    ds : a curve as `brushcore.simulate` returns it (or as read back with
+        xarray: fills and map dtypes are made the simulated ones first).
+    path : the file to write [.nc]; its folder must exist.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
     """
     if not isinstance(ds, xr.Dataset):
         raise ParameterError("ds", type(ds).__name__, "a curve Dataset (brushcore.simulate's)")
@@ -265,6 +276,15 @@ def _mtime(path: Path) -> float:
 
 def read_curve(path: str | os.PathLike) -> xr.Dataset:
     """Load a curve file fully into memory and check that it is a complete curve.
+
+    Parameters
+    ----------
+    path : a curve file written by `write_curve` or the workflow.
+
+    Returns
+    -------
+    xarray.Dataset
+        The curve, detached from the file (which may be moved or rewritten).
 
     Raises
     ------

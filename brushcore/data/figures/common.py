@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 import matplotlib
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
@@ -73,12 +74,15 @@ def layout_styles(layouts: Sequence[str]) -> dict[str, tuple[str, str]]:
 
 
 def new_figure(width: float, height: float) -> Figure:
+    """A constrained-layout figure of ``width`` x ``height`` [inches], drawn
+    off screen (Agg), so that figures need no display."""
     fig = Figure(figsize=(width, height), layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
 
 def sweep_layouts(sweep: xr.Dataset) -> list[str]:
+    """The sweep's layouts, in its order: one panel each."""
     return [str(v) for v in sweep.layout.values]
 
 
@@ -99,7 +103,8 @@ def brush_colors(n_pillars: Sequence[int]) -> dict[int, str]:
     return {int(n): f"C{i}" for i, n in enumerate(sorted(n_pillars))}
 
 
-def no_data(ax, message: str) -> None:
+def no_data(ax: Axes, message: str) -> None:
+    """Write ``message`` in the middle of an empty panel (a case not run)."""
     ax.text(0.5, 0.5, message, ha="center", va="center", transform=ax.transAxes)
 
 
@@ -146,7 +151,7 @@ def kbar_x(kbar, x_inf: float) -> np.ndarray:
     return np.where(np.isinf(k), x_inf, k)
 
 
-def rigid_ticks(ax, kbars: np.ndarray, x_inf: float) -> None:
+def rigid_ticks(ax: Axes, kbars: np.ndarray, x_inf: float) -> None:
     """Decade ticks over the finite kbar, and "rigid" at ``x_inf`` where rigid ran."""
     if not np.isinf(kbars).any():
         return
@@ -158,7 +163,7 @@ def rigid_ticks(ax, kbars: np.ndarray, x_inf: float) -> None:
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
-def kbar_axes(ax, title: str, ylabel: str, kbars: np.ndarray, x_inf: float) -> None:
+def kbar_axes(ax: Axes, title: str, ylabel: str, kbars: np.ndarray, x_inf: float) -> None:
     """Log kbar axis (rigid pillars at ``x_inf``), panel title and labels
     shared by Figs. 6 and 8."""
     ax.set_xscale("log")
@@ -169,6 +174,7 @@ def kbar_axes(ax, title: str, ylabel: str, kbars: np.ndarray, x_inf: float) -> N
 
 
 def kbar_text(kbar: float) -> str:
+    """kbar for a legend: "rigid" for inf, else three significant digits."""
     return "rigid" if math.isinf(kbar) else f"{kbar:.3g}"
 
 

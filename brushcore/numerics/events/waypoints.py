@@ -124,6 +124,17 @@ def positive_work(displacement: np.ndarray, force: np.ndarray) -> float:
 
     Segments that cross zero are split at the crossing; vertical drops (at
     fixed d) contribute nothing.
+
+    Parameters
+    ----------
+    displacement : (S,) the curve's displacements d, in order [length]
+    force : (S,) the force F at each [force]
+
+    Returns
+    -------
+    float
+        The work [force x length]: a curve in F_K and d_K gives it in
+        F_K d_K.
     """
     displacement, force = np.asarray(displacement), np.asarray(force)
     if displacement.ndim != 1 or displacement.shape != force.shape:

@@ -84,7 +84,7 @@ def dense_influence_matrix(n: int, h: float, e_star: float) -> np.ndarray:
 
 
 def self_compliance(*, h: float, e_star: float) -> float:
-    """Centre displacement of an h x h square [length] under unit pressure,
+    """Centre displacement of an h x h square (side h [length]) under unit pressure,
     4 ln(1+sqrt2) h / (pi E*) [length / stress]; keyword-only, since this
     module's other functions take (h, e_star) in that order."""
     return 4.0 * math.log(1.0 + math.sqrt(2.0)) * h / (math.pi * e_star)
