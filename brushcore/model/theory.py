@@ -2,7 +2,12 @@
 
 Every formula the tests and the figures compare against lives here, so the
 solver, the tests and the plots cannot drift apart.  Units are whatever the
-caller uses consistently (the package default is E* = dgamma = h = 1).
+caller uses consistently (the package default is E* = dgamma = h = 1): the
+arguments ``radius``, ``major``, ``minor``, ``side`` and ``h``
+are lengths, ``area`` a length squared, ``e_star`` a stress, ``dgamma`` an
+energy per area, ``stiffness`` or ``spring`` a force per length; ``kbar``,
+``phi`` and ``n_pillars`` are dimensionless.  Each function's docstring
+gives its result's unit.
 
 References
 ----------
