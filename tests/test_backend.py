@@ -24,6 +24,7 @@ from brushcore.cli import main
 from brushcore.data.aggregate import build_sweep
 from brushcore.data.io import read_curve, write_curve
 from brushcore.model import curve as curve_module
+from brushcore.model import curve_format
 from brushcore.model import solve as solve_module
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.halfspace.convolution import Convolver
@@ -337,7 +338,7 @@ def _fake_gpu() -> backend_module.Backend:
 def test_gpu_wiring_with_numpy_standing_in_for_cupy(monkeypatch):
     fake = _fake_gpu()
     real = resolve_backend
-    for module in (curve_module, solve_module):
+    for module in (curve_module, curve_format, solve_module):
         monkeypatch.setattr(module, "resolve_backend",
                             lambda name: fake if name == "gpu" else real(name))
     params = BrushParams("random", 12, 1.0, 64, seed=1)

@@ -12,7 +12,7 @@ def test_dimensional_values_in_element_units_say_so(tmp_path) -> None:
     from brushcore import BrushParams, simulate
     from brushcore.data.aggregate import build_sweep
     from brushcore.data.io import write_curve
-    from brushcore.model.curve import ELEMENT_UNITS_COMMENT
+    from brushcore.model.curve_format import ELEMENT_UNITS_COMMENT
 
     curve = simulate(BrushParams("regular", 4, 0.01, 48))
     marked = {n for n in curve.variables if ELEMENT_UNITS_COMMENT in
@@ -64,7 +64,7 @@ def test_none_is_a_declared_fill_that_xarray_skips(tmp_path) -> None:
 
     from brushcore import BrushParams, Waypoint, simulate
     from brushcore.data.io import read_curve, write_curve
-    from brushcore.model.curve import FILL_VALUES
+    from brushcore.model.curve_format import FILL_VALUES
 
     flat = simulate(BrushParams("regular", 16, 0.455, 64))
     with warnings.catch_warnings():  # it never pulls: said, and wanted here

@@ -1161,7 +1161,7 @@ def test_rough_curve_and_sweep_are_cf_clean(tmp_path):
     assert float(at.displacement_at_adhesive_force_normalized) == pytest.approx(d_ad, rel=1e-12)
     assert float(at.force_unit_F_K) == flat_curve.attrs["force_unit_F_K"]
     # every paper its curves cite, once; the libraries the curves ran on
-    from brushcore.model.curve import REFERENCES, ROUGH_REFERENCE
+    from brushcore.model.curve_format import REFERENCES, ROUGH_REFERENCE
     from brushcore.model.provenance import software_versions
 
     assert sweep.attrs["references"] == f"{REFERENCES}; {ROUGH_REFERENCE}"

@@ -32,7 +32,7 @@ import xarray as xr
 
 from brushcore.model import provenance
 from brushcore.model.params import RANDOM_GAP_GRID, BrushParams, narrowest_radius
-from brushcore.model.curve import FILL_VALUES, fill_value, mark_element_units
+from brushcore.model.curve_format import FILL_VALUES, fill_value, mark_element_units
 from brushcore.model.layout_file import curve_layout
 from brushcore.model.pillar_table import is_table
 from brushcore.model.shapes import parse_shape_label, shape_label
@@ -840,7 +840,7 @@ def mixed_runs(sweep: xr.Dataset) -> str:
 def encoding(sweep: xr.Dataset, complevel: int = 4) -> dict[str, dict[str, object]]:
     """netCDF4 encoding: zlib for the padded curves and the snapshots, counts as int64
     (fill -1, read back as NaN), the curves' "none" of snapshots and step maps
-    as its fill (`brushcore.model.curve.FILL_VALUES`).
+    as its fill (`brushcore.model.curve_format.FILL_VALUES`).
 
     One chunk per curve keeps NaN padding and unrun cases nearly free on disk.
     """

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from brushcore.model.curve import FILL_DTYPES, FILL_VALUES, fill_value
+from brushcore.model.curve_format import FILL_DTYPES, FILL_VALUES, fill_value
 from brushcore.validation import ParameterError
 
 #: Variables and attributes a curve file must have to be aggregated.
@@ -39,7 +39,7 @@ class CurveFileError(ValueError):
 def _encoding(ds: xr.Dataset) -> dict:
     enc: dict[str, dict] = {name: {"_FillValue": None} for name in ds.coords}  # CF: none
     for name, v in ds.data_vars.items():
-        if name in FILL_VALUES:  # "none" as its fill (`brushcore.model.curve.FILL_VALUES`)
+        if name in FILL_VALUES:  # "none" as its fill (`brushcore.model.curve_format.FILL_VALUES`)
             enc[name] = {"_FillValue": fill_value(name, v.dtype)}
         if v.ndim >= 2:  # maps and snapshots compress ~50x
             enc[name] = {**enc.get(name, {}), "zlib": True, "complevel": 4}
