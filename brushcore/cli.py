@@ -1,5 +1,7 @@
-"""Command line: ``brushcore simulate ...`` writes one curve file,
-``brushcore converge ...`` extrapolates a resolution study's curves.
+"""Command line: ``brushcore simulate`` writes a curve, ``converge`` extrapolates.
+
+``brushcore simulate ...`` writes one curve file; ``brushcore converge ...``
+extrapolates the curves of a resolution study.
 
 Conventions: no abbreviated flags, unknown flags named (with the closest
 known one), defaults shown in ``--help``, errors worded with the flags the
@@ -144,6 +146,31 @@ class _Parser(argparse.ArgumentParser):
                 if len(flags) > 1:  # argparse keeps the last: say so, a typo may hide there
                     warnings.warn(f"{flags[0]} is given {len(flags)} times: the last one counts")
         return super().parse_known_args(args, namespace)
+
+    def parse_args(self, args=None, namespace=None):  # noqa: D102 - argparse API
+        args = list(sys.argv[1:] if args is None else args)
+        parsed, extras = self.parse_known_args(args, namespace)
+        if extras:
+            # the sub-command's help, where the stray words followed one
+            command = next((a for a in args if not a.startswith("-")), None)
+            shown = f"{self.prog} {command}" if command in ("simulate", "converge") else self.prog
+            self.exit(2, f"brushcore: error: {_unrecognized(args, extras)} "
+                         f"(see '{shown} --help')\n")
+        return parsed
+
+
+def _unrecognized(args: list[str], extras: list[str]) -> str:
+    """argparse's "unrecognized arguments", with the likeliest cause: a list
+    value with spaces left unquoted (--protocol force:-1, separation), which
+    the shell split after its comma."""
+    message = f"unrecognized arguments: {' '.join(extras)}"
+    at = args.index(extras[0]) if extras[0] in args else -1
+    if at >= 2 and args[at - 1].endswith(",") and args[at - 2].startswith("--"):
+        flag, value = args[at - 2], args[at - 1]
+        rest = args[at:at + len(extras)]
+        message += (f"; after {flag} {value}: quote a value with spaces, "
+                    f"{flag} '{' '.join([value, *rest])}'")
+    return message
 
 
 class _Given(argparse.Action):
@@ -308,7 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="whose FFTs the whole grid runs on: mkl needs "
                           "pip install 'brushcore[mkl]' (faster on Intel CPUs); "
                           "auto = the faster of the two on this machine, timed "
-                          "once per grid, thread count and precision")
+                          "once per grid, thread count and precision; a mirror-symmetric "
+                          "brush's quadrant runs FFTW's DCTs whatever this says (the "
+                          "curve records fft_library_used)")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",

@@ -237,6 +237,25 @@ def test_every_missing_flag_is_named_at_once(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_an_unquoted_protocol_is_told_to_be_quoted(tmp_path, capsys):
+    """The shell splits --protocol force:-1, separation after its comma; the
+    stray word was "unrecognized" with the top-level help, naming neither the
+    flag nor the fix."""
+    out = tmp_path / "never.nc"
+    with pytest.raises(SystemExit, match="2"):
+        main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "1", "--grid",
+              "32", "--protocol", "force:-1,", "separation", "--out", str(out)])
+    assert ("unrecognized arguments: separation; after --protocol force:-1,: quote a value "
+            "with spaces, --protocol 'force:-1, separation' (see 'brushcore simulate --help')"
+            in capsys.readouterr().err)
+    with pytest.raises(SystemExit, match="2"):
+        main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "1", "--grid",
+              "32", "stray", "--out", str(out)])
+    assert ("unrecognized arguments: stray (see 'brushcore simulate --help')"
+            in capsys.readouterr().err)
+    assert not out.exists()
+
+
 def test_lookahead_says_at_run_time_that_it_is_approximate(tmp_path):
     """--lookahead trades accuracy for solves: said when the run starts, not
     only in the help; the exact default says nothing."""

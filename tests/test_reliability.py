@@ -789,6 +789,51 @@ def test_a_curve_with_bad_case_attributes_is_refused_as_the_files_fault(name, va
         build_sweep([curve])
 
 
+def test_files_that_never_were_curves_are_told_apart_from_damaged_ones(tmp_path):
+    """A sweep, a table or another netCDF file given among curves (a glob
+    that took them) is named as not a curve, with the advice to leave it
+    out; "run their simulate again" was said of them, which cannot help.
+    A damaged curve keeps that advice; a missing file or a folder says so."""
+    from brushcore.data.aggregate import AggregationError, build_sweep, write_sweep
+    from brushcore.data.io import CurveFileError, read_curve, write_curve
+
+    curve = simulate(BrushParams("regular", 4, 0.1, 32))
+    good = write_curve(curve, tmp_path / "c.nc")
+    sweep = tmp_path / "sweep.nc"
+    write_sweep(build_sweep([good]), sweep)
+    table = tmp_path / "t.csv"
+    table.write_text("x,y,radius\n0.5,0.5,0.1\n")
+    other = tmp_path / "other.nc"
+    import xarray as xr
+    xr.Dataset({"a": ("x", [1.0])}).to_netcdf(other)
+    cut = tmp_path / "cut.nc"
+    cut.write_bytes(good.read_bytes()[:3000])
+    for path, said in [(sweep, "a brushcore sweep file, not a curve file"),
+                       (table, "cannot be read as a netCDF curve file"),
+                       (other, "not a brushcore curve file")]:
+        with pytest.raises(CurveFileError, match=said) as caught:
+            read_curve(path)
+        assert caught.value.not_a_curve
+    with pytest.raises(CurveFileError, match="no such file") as caught:
+        read_curve(tmp_path / "nope.nc")
+    assert not caught.value.not_a_curve
+    with pytest.raises(CurveFileError, match="a folder, not a curve file"):
+        read_curve(tmp_path)
+    with pytest.raises(CurveFileError) as caught:
+        read_curve(cut)
+    assert not caught.value.not_a_curve  # a .nc cut short may be a curve: run it again
+    with pytest.raises(AggregationError) as caught:
+        build_sweep([good, cut, sweep, table])
+    said = str(caught.value)
+    assert said.startswith("cannot aggregate 1 curve file(s): ")
+    assert "Run their brushcore simulate again" in said
+    assert ("Cannot aggregate 2 file(s) that are not curves: " in said
+            and "Give only curve files" in said and str(table) in said and str(sweep) in said)
+    with pytest.raises(AggregationError, match=r"^cannot aggregate 1 file\(s\) that are not "
+                                               r"curves: .*sweep.nc"):
+        build_sweep([good, sweep])
+
+
 def test_a_job_that_cannot_write_its_curve_says_so_in_one_line(tmp_path, monkeypatch, capfd):
     """A full disk at the curve's writing: the job's log and the terminal get
     one line naming the file and the cause, the job fails (status 1) and

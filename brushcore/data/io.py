@@ -33,7 +33,16 @@ DIGEST_ATTR = "content_sha256"
 
 
 class CurveFileError(ValueError):
-    """A curve file is missing, truncated, corrupt or not a brushcore curve."""
+    """A curve file is missing, truncated, corrupt or not a brushcore curve.
+
+    ``not_a_curve`` is True where the file never was one (a sweep, a table,
+    another netCDF file, a folder): running its simulation again cannot
+    bring it back, so advice differs from a damaged curve's.
+    """
+
+    def __init__(self, message: str, not_a_curve: bool = False) -> None:
+        super().__init__(message)
+        self.not_a_curve = not_a_curve
 
 
 def _encoding(ds: xr.Dataset) -> dict:
@@ -295,6 +304,10 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
         and are accepted unchecked).
     """
     path = Path(path)
+    if not path.exists():
+        raise CurveFileError(f"{path}: no such file")
+    if path.is_dir():
+        raise CurveFileError(f"{path}: a folder, not a curve file", not_a_curve=True)
     try:
         # The "none" of FILL_VALUES stays a number, as in memory (xarray's
         # default reads it as NaN, and the values as floats).
@@ -302,7 +315,10 @@ def read_curve(path: str | os.PathLike) -> xr.Dataset:
                              mask_and_scale={name: False for name in FILL_VALUES}) as ds:
             ds = ds.load()
     except Exception as exc:  # netCDF4 raises OSError, RuntimeError, ValueError...
-        raise CurveFileError(f"{path}: cannot be read as a netCDF curve file ({exc})") from exc
+        # a table or image given by mistake was never a curve; a .nc that does not
+        # open may be one cut short
+        raise CurveFileError(f"{path}: cannot be read as a netCDF curve file ({exc})",
+                             not_a_curve=path.suffix.lower() != ".nc") from exc
     for name in FILL_VALUES:  # as written: the fill an encoding, not an attribute
         if name in ds.variables and "_FillValue" in ds[name].attrs:
             ds[name].encoding["_FillValue"] = ds[name].attrs.pop("_FillValue")
@@ -324,7 +340,13 @@ def check_curve(ds: xr.Dataset, label: str, digest: bool = True) -> None:
     missing = [v for v in REQUIRED_VARS if v not in ds.variables]
     missing += [f"attribute {a}" for a in REQUIRED_ATTRS if a not in ds.attrs]
     if missing:
-        raise CurveFileError(f"{label}: not a brushcore curve file, missing {', '.join(missing)}")
+        title = str(ds.attrs.get("title", ""))
+        if title.startswith("brushcore"):  # a sweep or a study: what it is, and how to read it
+            raise CurveFileError(f"{label}: a {title.split(':')[0]} file, not a curve file (open "
+                                 "it with xarray.open_dataset)", not_a_curve=True)
+        # one with a curve's parameter hash is a curve damaged (an attribute lost)
+        raise CurveFileError(f"{label}: not a brushcore curve file, missing {', '.join(missing)}",
+                             not_a_curve="parameter_hash" not in ds.attrs)
     stored = ds.attrs.get(DIGEST_ATTR) if digest else None
     if stored is not None and str(stored) != content_digest(ds):
         raise CurveFileError(f"{label}: corrupt, its values do not match the {DIGEST_ATTR} "

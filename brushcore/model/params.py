@@ -206,7 +206,9 @@ class BrushParams:
                      f"a factor {HEX_ASPECT_TOLERANCE:g} of 2/sqrt(3)")
         self._check_shape()
         require(is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar >= MIN_KBAR,
-                 "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars")
+                 "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars"
+                 + (f" (a number, not a string: float({self.kbar!r}))"
+                    if isinstance(self.kbar, str) else ""))
         require(is_integer(self.grid) and MIN_GRID <= self.grid <= MAX_GRID, "grid", self.grid,
                  f"an integer in [{MIN_GRID}, {MAX_GRID}]")
         require(is_real(self.phi) and 0.0 < self.phi <= MAX_PHI, "phi", self.phi,
