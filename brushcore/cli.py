@@ -550,7 +550,7 @@ def _simulate(args: argparse.Namespace) -> int:
         cost = cost_note(params, options, protocol)
         if cost:  # a long run said before it starts, not discovered
             print(cost, file=sys.stderr)
-        memory = memory_note(params, options, protocol)
+        memory = memory_note(params, options, protocol, labels=labels)
         if memory:  # a warning, not a refusal: the peak is scaled, not known
             warnings.warn(memory)
         if options.lookahead:  # opt-in and documented, but a number could be quoted unread

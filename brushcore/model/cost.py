@@ -12,8 +12,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
 from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.events.protocol import standard_preload
+from brushcore.numerics.linear.precondition import MEMORY_BUDGET, BlockInverse
 
 #: The slowest curve measured [s, one thread] by kind and grid.  Where only a
 #: two-thread time exists (2048^2) the one-thread bound is twice it.
@@ -51,28 +55,95 @@ EXACT_RTOL = 1e-6
 NOTE_FROM_S = 300.0
 
 
-#: The largest peak memory measured per kind [bytes] on one grid (README,
-#: "Speed and memory"): "mirror" the soft 48 x 48 brush at 2048^2 (0.81
-#: GiB), "whole" random 1620 at k 1e-5 at 2048^2 (2.69 GiB, its per-pillar
-#: blocks), "rough" the rough 8 x 8 brush at 1024^2 (3.4 GB).  Other grids
-#: scale it as n^2 (the transforms' buffers; the blocks grow slower, so
-#: beyond the grid it errs high).
-LARGEST_PEAK_BYTES = {"mirror": (2048, 0.81 * 2**30), "whole": (2048, 2.69 * 2**30),
-                      "rough": (1024, 3.4e9)}
+# --- Memory: a curve's peak from its brush's geometry ---------------------------
+#: Python with NumPy, SciPy, xarray and brushcore imported [MB] (150-180 measured).
+PROCESS_MB = 200.0
+#: A workflow job's own Snakemake, resident beside its curve [MB] (the job
+#: step's: 192 MiB measured, 2026-12-07).
+JOB_STEP_MB = 200.0
+#: Bytes per element of the n x n grid: the padded transforms' buffers and
+#: the per-element arrays, on a mirror quadrant and on the whole grid.
+GRID_BYTES = {"mirror": 125.0, "whole": 250.0}
+#: Per pillar on the whole grid [MB] (random 1620 holds 200-250 MB more than
+#: random 64 at 256^2 and 512^2).
+PILLAR_MB = 0.2
+#: Per pillar on the tile path [MB] (its coarse blocks; 16 at most by design).
+TILE_MB = 8.0
+#: A generated pillar's largest discretisation over its area phi n^2 / N
+#: (3 %: the stack sizes of `BlockInverse.stack_size` within 2 % of it).
+RASTER_EXCESS = 1.03
+#: What a job asks for over its estimate: `peak_mb` lies 1.06-1.32x above
+#: the 18 peak RSS measured (256^2-2048^2, rigid to soft, regular and random,
+#: phi 0.12-0.5, N 22-2304; a helper's runs of 2026-12-07 and docs/SPEED.md;
+#: `tests/test_workflow.py` holds the table), the request 1.38-1.68x above
+#: them with the job step's 192 MiB.
+MEMORY_SAFETY = 1.3
+#: Extra memory a retry asks for, per attempt after the first (Snakemake says
+#: the attempt, not whether a time or a memory limit ended the last one).
+RETRY_MEMORY = 0.5
+
+
+def largest_pillar(n_pillars: int, phi: float, grid: int) -> float:
+    """Elements of a generated brush's largest pillar: its area phi n^2 / N,
+    times `RASTER_EXCESS`."""
+    return RASTER_EXCESS * phi * grid * grid / n_pillars
+
+
+def peak_mb(*, n_pillars: int, grid: int, largest: float, mirrored: bool,
+            protocol_engine: bool) -> float:
+    """A curve's peak memory [MB]: the process, the grid's buffers, and the
+    preconditioner the run takes (`BlockInverse.fits`).
+
+    Parameters
+    ----------
+    n_pillars : N
+    grid : elements per side n
+    largest : elements of the largest pillar (`largest_pillar`, or a label
+        map's counted)
+    mirrored : solved on a mirror quadrant (a quarter of the pillars' blocks)
+    protocol_engine : solved by the protocol engine (rough or given heights,
+        a protocol other than a flat brush's preload): blocks up to
+        `BlockInverse.MAX_BLOCK_PROTOCOL`, bordered (2.5 stacks, not 1.5)
+
+    Returns
+    -------
+    float
+        The estimate [MB = 1e6 bytes].
+    """
+    pillars = math.ceil(math.sqrt(n_pillars) / 2) ** 2 if mirrored else n_pillars
+    stack = 8.0 * pillars * largest * largest  # the dense inverses, float64
+    limit = BlockInverse.MAX_BLOCK_PROTOCOL if protocol_engine else BlockInverse.MAX_BLOCK
+    if largest <= limit and 1.5 * stack <= MEMORY_BUDGET:
+        copies = 2.5 if protocol_engine and 2.5 * stack <= MEMORY_BUDGET else 1.5
+        preconditioner = copies * stack / 1e6
+    else:
+        preconditioner = TILE_MB * pillars
+    kind = "mirror" if mirrored else "whole"
+    return (PROCESS_MB + GRID_BYTES[kind] * grid * grid / 1e6
+            + (0.0 if mirrored else PILLAR_MB * n_pillars) + preconditioner)
+
+
+def job_memory_mb(*, n_pillars: int, grid: int, largest: float, mirrored: bool,
+                  protocol_engine: bool, attempt: int = 1) -> int:
+    """What a workflow job asks for [MB, rounded up to 100]: `peak_mb` and
+    its Snakemake (`JOB_STEP_MB`), times `MEMORY_SAFETY`, and `RETRY_MEMORY`
+    more for each retry."""
+    need = (peak_mb(n_pillars=n_pillars, grid=grid, largest=largest, mirrored=mirrored,
+                    protocol_engine=protocol_engine) + JOB_STEP_MB)
+    need *= MEMORY_SAFETY * (1.0 + RETRY_MEMORY * (attempt - 1))
+    return int(math.ceil(need / 100.0) * 100)
 
 
 def expected_peak_bytes(params: BrushParams, options: SolverOptions,
-                        protocol: Sequence[object] | None = None) -> float:
-    """The largest peak memory measured for the run's kind, scaled to its
-    grid as n^2 [bytes]: an order of magnitude, for `memory_note`."""
-    return _peak(params, options, protocol)[1]
-
-
-def _peak(params: BrushParams, options: SolverOptions,
-          protocol: Sequence[object] | None) -> tuple[int, float]:
-    """The grid the run's kind was measured on, and its peak scaled to the run's grid."""
-    grid, peak = LARGEST_PEAK_BYTES[curve_kind(params, options, protocol)]
-    return grid, peak * (params.grid / grid) ** 2
+                        protocol: Sequence[object] | None = None,
+                        labels: np.ndarray | None = None) -> float:
+    """`peak_mb` of a run [bytes]; its largest pillar counted on ``labels``
+    where given (a label map's or a table's), else `largest_pillar`."""
+    largest = (float(np.bincount(labels[labels >= 0]).max()) if labels is not None
+               else largest_pillar(params.n_pillars, params.phi, params.grid))
+    kind = curve_kind(params, options, protocol)
+    return 1e6 * peak_mb(n_pillars=params.n_pillars, grid=params.grid, largest=largest,
+                         mirrored=kind == "mirror", protocol_engine=kind == "rough")
 
 
 def available_bytes() -> float:
@@ -90,17 +161,17 @@ def available_bytes() -> float:
 
 def memory_note(params: BrushParams, options: SolverOptions,
                 protocol: Sequence[object] | None = None,
-                available: float | None = None) -> str:
+                available: float | None = None, labels: np.ndarray | None = None) -> str:
     """A warning where the run may need more memory than ``available``
     (default: this machine's, `available_bytes`) [bytes]; "" otherwise and
     on a GPU, whose memory the solver budgets itself."""
-    grid, need = _peak(params, options, protocol)
+    need = expected_peak_bytes(params, options, protocol, labels)
     free = available_bytes() if available is None else available
     if need <= free or params.backend != "cpu":
         return ""
-    return (f"this run may need up to about {need / 1e9:.2g} GB of memory (the largest "
-            f"peak of its kind measured at {grid}^2, scaled as grid^2), more than the "
-            f"{free / 1e9:.2g} GB available: a smaller grid, or a machine with more memory")
+    return (f"this run may need about {need / 1e9:.2g} GB of memory (its grid's buffers "
+            f"and preconditioner, estimated), more than the {free / 1e9:.2g} GB "
+            "available: a smaller grid, or a machine with more memory")
 
 
 def slowest_curve_s(kind: str, grid: int) -> float:
@@ -145,9 +216,11 @@ def kind_of(*, uneven: bool, mirrored: bool) -> str:
 def curve_kind(params: BrushParams, options: SolverOptions,
                protocol: Sequence[object] | None = None) -> str:
     """`kind_of` a run: given stiffnesses alone leave a flat brush in full
-    contact at first touch, so they do not make it rough."""
+    contact at first touch, so they do not make it rough, nor does a
+    preload's protocol (the pull-off takes it: `protocol.dispatches`)."""
     uneven = (params.roughness > 0 or params.heights is not None
-              or params.gap_map is not None or protocol is not None)
+              or params.gap_map is not None
+              or protocol is not None and standard_preload(tuple(protocol)) is None)
     regular = params.layout == "regular" and params.shape == "disc" and params.is_flat
     return kind_of(uneven=uneven, mirrored=regular and options.symmetry)
 

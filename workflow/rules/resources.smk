@@ -1,30 +1,98 @@
 """What a simulate job asks for: memory, GPUs and its time limit, from the
 slowest curves measured per kind and grid (`brushcore.model.cost`)."""
 
+import functools
 import math
 
-from brushcore.model.cost import is_exact, kind_of, slowdown, slowest_curve_s
-from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
+import numpy as np
+
+from brushcore.model.cost import (
+    is_exact,
+    job_memory_mb,
+    kind_of,
+    largest_pillar,
+    slowdown,
+    slowest_curve_s,
+)
+from brushcore.numerics.events.protocol import standard_preload
+from brushcore.model.layout import build_labels
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, file_params
+from brushcore.model.pillar_table import is_table
 from brushcore.model.params import ParameterError
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.backend import resolve_backend
 
 
-def simulate_mem_mb(wildcards):
-    """Memory of one simulation [MB], the same on every attempt.
+def rough_mem_mb(grid):
+    """The floor of a rough curve's request [MB]: 1 GB, 150 MB x (n/512)^2
+    and above 512 the 4 GB block budget.  The one rough peak measured at
+    1024 (3.4 GB, 20 min into an estimated 6-h run) is twice what
+    `brushcore.model.cost.peak_mb` says, and its growth to the end is
+    unmeasured, so rough curves keep this request where it is larger."""
+    return int(1000 + 150 * (grid / 512) ** 2 + (4000 if grid > 512 else 0))
 
-    Measured peak RSS (README, "Speed and memory"): at most 0.6 GB at grid
-    512, 1.05 GiB for a flat curve and 3.4 GB for the rough 8 x 8 brush at
-    1024, 2.7 GiB at 2048 (random 1620).  Granted: 1 GB, the FFT buffers at
-    150 MB x (n/512)^2, and above 512 the 4 GB that per-pillar block inverses
-    may take (`BlockInverse.fits`): 1.15 GB at 512, 5.6 GB at 1024, 7.4 GB
-    at 2048.  Snakemake tells a resource function the attempt, not why the
-    last one failed, and a time limit is the likelier cause with these
-    margins: a retry asks for more time (`simulate_runtime`), not memory.
+
+def simulate_mem_mb(config):
+    """The simulate rule's `mem_mb` [MB]: `brushcore.model.cost.job_memory_mb`
+    of the job's brush (N, phi, grid, and whether it runs on a mirror
+    quadrant or through the protocol engine, from its wildcards; a file
+    brush's largest pillar counted on its labels), at least `rough_mem_mb`
+    for rough curves; a retry asks for half as much again (Snakemake says
+    the attempt, not whether time or memory ended the last one).
+
+    The rule before 2026-12-07 (1 GB + 150 MB (n/512)^2, + 4 GB above 512)
+    left out the blocks at 512 and below: a random brush of 60 pillars at
+    phi 0.3 peaked at 1.24 GiB, 100 at phi 0.5 at 2.2 GiB, against 1.15 GB
+    asked; above 512 it asked 4-12x the peaks measured.
     """
-    grid = int(wildcards.grid)
-    blocks = 4000 if grid > 512 else 0
-    return int(1000 + 150 * (grid / 512) ** 2 + blocks)
+
+    def mem_mb(wildcards, attempt):
+        grid = int(wildcards.grid)
+        kind = curve_kind(
+            wildcards.layout,
+            wildcards.shape,
+            wildcards.rough,
+            config.get("solver"),
+            _offsets(config, wildcards.layout),
+            config_protocol(config),
+        )
+        n_pillars = int(wildcards.n_pillars)
+        largest = _file_largest_pillar(config, wildcards.layout, grid)
+        if largest is None:
+            largest = largest_pillar(n_pillars, float(wildcards.phi), grid)
+        need = job_memory_mb(
+            n_pillars=n_pillars,
+            grid=grid,
+            largest=largest,
+            mirrored=kind == "mirror",
+            protocol_engine=kind == "rough",
+            attempt=attempt,
+        )
+        if kind == "rough":
+            need = max(need, rough_mem_mb(grid) * attempt)
+        return need
+
+    return mem_mb
+
+
+@functools.cache
+def _largest_on(layout_file, grid):
+    """Elements of the largest pillar of a file brush drawn on ``grid``."""
+    grid = {} if grid is None else {"grid": grid}  # a table is drawn on the job's grid
+    labels = build_labels(file_params(layout_file, math.inf, **grid))
+    return float(np.bincount(labels[labels >= 0]).max())
+
+
+def _file_largest_pillar(config, layout, grid):
+    """A `layout_files` brush's largest pillar on ``grid`` [elements], None
+    for a generated layout (`largest_pillar` then)."""
+    if not layout.startswith(FILE_LAYOUT_PREFIX):
+        return None
+    brush = file_brushes(config).get(layout)
+    if not brush:
+        return None
+    table = is_table(brush.path)
+    return _largest_on(brush.path, grid if table else None)
 
 
 def check_local_backend(config, local):
@@ -71,15 +139,20 @@ RUNTIME_SAFETY = 3
 RUNTIME_OVERHEAD_MIN = 5
 
 
-def curve_kind(layout, shape, rough, solver=None, offsets=False):
+def curve_kind(layout, shape, rough, solver=None, offsets=False, protocol=None):
     """The `SLOWEST_CURVE_S` kind of a curve (`brushcore.model.cost.kind_of`,
     as the command's note asks it) from its wildcards (shape and rough
     suffixes), whether its brush is given heights or a gap map
-    (``offsets``, `_given_offsets`) and the config's solver settings
-    (``symmetry: false`` solves a regular brush on the whole grid)."""
-    uneven = (
-        parse_rough_tag(rough).get("roughness", 0.0) > 0 or "_Q" in rough or offsets
+    (``offsets``, `_given_offsets`), the config's solver settings
+    (``symmetry: false`` solves a regular brush on the whole grid) and its
+    protocol (`config_protocol`): a flat brush's preload and separation is
+    a pull-off (`protocol.dispatches`), not a rough curve (it asked for 26
+    min at 512^2 and 18 h at 1024^2 where its plain pull-off takes 10 and 39)."""
+    tagged = parse_rough_tag(rough)
+    protocol_run = "_Q" in rough and (
+        protocol is None or standard_preload(protocol) is None
     )
+    uneven = tagged.get("roughness", 0.0) > 0 or protocol_run or offsets
     folded = (solver or {}).get("symmetry", True)
     return kind_of(
         uneven=uneven,
@@ -94,7 +167,9 @@ def solver_slowdown(solver, kind):
     return slowdown(kind, exact=is_exact(options), double=options.precision == "double")
 
 
-def curve_minutes(layout, shape, rough, grid, solver=None, offsets=False):
+def curve_minutes(
+    layout, shape, rough, grid, solver=None, offsets=False, protocol=None
+):
     """Time limit of a curve's first attempt [min]: `RUNTIME_SAFETY` x the
     slowest measured curve of its kind and grid, times `solver_slowdown` of
     the config's ``solver`` settings, plus `RUNTIME_OVERHEAD_MIN`.
@@ -104,7 +179,7 @@ def curve_minutes(layout, shape, rough, grid, solver=None, offsets=False):
     with `threads`: the measurements are on one thread, and a second gains
     at most 2x.
     """
-    kind = curve_kind(layout, shape, rough, solver, offsets)
+    kind = curve_kind(layout, shape, rough, solver, offsets, protocol)
     seconds = (
         RUNTIME_SAFETY * slowest_curve_s(kind, grid) * solver_slowdown(solver, kind)
     )
@@ -133,6 +208,7 @@ def simulate_runtime(config):
             int(wildcards.grid),
             config.get("solver"),
             _offsets(config, wildcards.layout),
+            config_protocol(config),
         )
         return minutes if cap is None else min(minutes, int(cap))
 
@@ -154,6 +230,7 @@ def clipped_runtimes(config):
                 grid,
                 config.get("solver"),
                 _offsets(config, layout),
+                config_protocol(config),
             ),
             curve_file(layout, n, kbar, seed, grid, phi, rough, shape),
         )

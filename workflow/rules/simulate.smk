@@ -19,7 +19,7 @@ rule simulate:
         rough=r"(_S[0-9][0-9.e+-]*_P[0-9][0-9.e+-]*_C[0-9][0-9.e+-]*(_Q[0-9a-f]{8})?)?",
     threads: config["threads"]
     resources:
-        mem_mb=simulate_mem_mb,
+        mem_mb=simulate_mem_mb(config),
         runtime=simulate_runtime(config),
         gpu=simulate_gpus(config),
         gres=simulate_gres(config),

@@ -60,10 +60,10 @@ def dispatches(offsets: np.ndarray, protocol: tuple[Waypoint, ...]) -> bool:
     """Whether `run_protocol` sends this run to `pulloff.pull_off`: a flat
     brush (every offset equal) under the standard protocol (approach to a
     preload, retract to separation)."""
-    return _standard_preload(protocol) is not None and is_flat(offsets)
+    return standard_preload(protocol) is not None and is_flat(offsets)
 
 
-def _standard_preload(protocol: tuple[Waypoint, ...]) -> float | None:
+def standard_preload(protocol: tuple[Waypoint, ...]) -> float | None:
     """The preload of an (approach to force <= 0, separation) protocol, else None."""
     if (len(protocol) == 2 and protocol[0].kind == "force" and protocol[0].value <= 0
             and protocol[1].kind == "separation"):
@@ -107,7 +107,7 @@ def run_protocol(op: BrushOperator, offsets: np.ndarray, sigma_c: float, h: floa
         raise ValueError("offsets must be finite")
     if dispatch and dispatches(offsets, protocol):
         return _flat(op, float(offsets[0]) if offsets.shape[0] else 0.0,
-                     _standard_preload(protocol), sigma_c, h, options, progress)
+                     standard_preload(protocol), sigma_c, h, options, progress)
     return _Engine(op, offsets, sigma_c, h, options, progress).run(protocol)
 
 

@@ -141,8 +141,8 @@ def _stack_times(stack: np.ndarray, packed: bool, w: np.ndarray,
 RUNS_MIN_BLOCK = 64
 #: Bytes a preconditioner's stored blocks may take (the dense per-pillar
 #: inverses, the tiles' coarse blocks, and what `attach` borders them with):
-#: the workflow's memory request above 512^2 grants it (README, "Time and
-#: memory a job asks for").
+#: the workflow's memory request counts what a brush's take
+#: (`brushcore.model.cost.peak_mb`; README, "Time and memory a job asks for").
 MEMORY_BUDGET = 4e9
 
 
