@@ -121,6 +121,9 @@ def test_rigid_hexagonal_brush_is_at_the_phi_limit_of_the_area_it_covers(n_pilla
     local_phi = ds.attrs["phi_actual"] / hexagonal_fill(n_pillars)
     ratio = float(ds.adhesive_force_normalized) / theory.rigid_limit(local_phi)
     assert ratio == pytest.approx(1.0, abs=0.005), f"F_ad / (phi/fill)^-1/4 = {ratio:.4f}"
+    # the level Fig. 6 and the summary draw is this one (phi * fill passed: +14 % at N = 64)
+    assert theory.hexagonal_rigid_limit(ds.attrs["phi_actual"], n_pillars) == pytest.approx(
+        theory.rigid_limit(local_phi), rel=1e-12)
 
 
 def test_hexagonal_count_that_does_not_fit_is_refused_with_alternatives():
