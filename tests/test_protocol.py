@@ -1010,6 +1010,30 @@ def test_the_foundation_stretch_is_a_pillars_kendall_force_over_its_spring():
         assert float(theory.foundation_stretch(n, phi, kbar)) == pytest.approx(want, rel=1e-12)
 
 
+def test_heights_and_gaps_in_metres_are_hinted_at(tmp_path):
+    """Heights of a measured brush written in metres (2e-6) read as 2e-6 d_K
+    ran without a word; every value under 1e-4 d_K is now said, naming the
+    unit, and heights of a real scatter are not."""
+    from brushcore.model.inputs import with_input_files
+
+    base = BrushParams("regular", 4, 0.1, 32)
+    metres = tmp_path / "m.txt"
+    metres.write_text("2e-6\n1e-6\n-1e-6\n0\n")
+    with pytest.warns(UserWarning, match=r"heights .*m.txt: every value is under 0.0001 d_K "
+                                         r"\(the largest 2e-06\); they are read in units "
+                                         r"of d_K"):
+        with_input_files(base, {"heights": metres})
+    gaps = tmp_path / "g.npy"
+    np.save(gaps, np.full((32, 32), 3e-7))
+    with pytest.warns(UserWarning, match=r"gap_map .*g.npy: every value is under"):
+        with_input_files(base, {"gap_map": gaps})
+    real = tmp_path / "r.txt"
+    real.write_text("0.3\n0\n-0.2\n0.1\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with_input_files(base, {"heights": real})
+
+
 @pytest.mark.parametrize("content,flag,message", [
     ("0.1\n" * 15, "--heights", "it holds 15 values"),
     ("0.1\n" * 5 + "nan\n" + "0.1\n" * 10, "--heights", "line 6 holds nan"),

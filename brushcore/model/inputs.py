@@ -275,6 +275,9 @@ def with_input_files(base: BrushParams,
                     f"pillar {i}: factor {factors[i]:g} makes it {arrays['kbar_values'][i]:.3g}")
     if "gap_map" in given:
         arrays["gap_map"] = read_gap_map(given["gap_map"], base.grid)
+    for name in ("heights", "gap_map"):
+        if name in arrays:
+            _unit_hint(name, given[name], arrays[name])
     source = {INPUT_FILES[name]: (name, path) for name, path in given.items()}
     try:
         return dataclasses.replace(base, **arrays) if arrays else base
@@ -287,6 +290,25 @@ def with_input_files(base: BrushParams,
         name, path = source[exc.name]
         raise ParameterError(exc.name if name != "kbar_factors" else name, str(path),
                              exc.allowed, exc.reason) from None
+
+
+#: Heights and gaps all under this [d_K] change nothing a run can resolve:
+#: most likely lengths in metres (a micron is 1e-6) where d_K was meant.
+NEGLIGIBLE_OFFSET = 1e-4
+
+
+def _unit_hint(name: str, path: str | Path, values: np.ndarray) -> None:
+    """Warn where every height or gap in a file is nonzero but under
+    `NEGLIGIBLE_OFFSET` d_K: the file was likely written in metres (a
+    measured brush's 2e-6 m read as 2e-6 d_K: a brush a millionth of its
+    critical displacement from flat, run without a word)."""
+    largest = float(np.max(np.abs(values))) if values.size else 0.0
+    if 0.0 < largest < NEGLIGIBLE_OFFSET:
+        warnings.warn(f"{name} {path}: every value is under {NEGLIGIBLE_OFFSET:g} d_K (the "
+                      f"largest {largest:.3g}); they are read in units of d_K = sqrt(2 pi "
+                      "dgamma a0 / E*), the brush's critical displacement: lengths in metres "
+                      "must be divided by d_K (the curve file's displacement_unit_d_K, in "
+                      "the run's units)", stacklevel=2)
 
 
 def unreadable(exc: Exception) -> str:
