@@ -153,21 +153,33 @@ class _Parser(argparse.ArgumentParser):
         if extras:
             # the sub-command's help, where the stray words followed one
             command = next((a for a in args if not a.startswith("-")), None)
-            shown = f"{self.prog} {command}" if command in ("simulate", "converge") else self.prog
-            self.exit(2, f"brushcore: error: {_unrecognized(args, extras)} "
+            sub = (self._subparsers._group_actions[0].choices.get(command)
+                   if self._subparsers is not None else None)
+            shown = f"{self.prog} {command}" if sub is not None else self.prog
+            takes = sub._option_string_actions if sub is not None else {}
+            self.exit(2, f"brushcore: error: {_unrecognized(args, extras, takes)} "
                          f"(see '{shown} --help')\n")
         return parsed
 
 
-def _unrecognized(args: list[str], extras: list[str]) -> str:
+def _unrecognized(args: list[str], extras: list[str],
+                  actions: dict[str, argparse.Action]) -> str:
     """argparse's "unrecognized arguments", with the likeliest cause: a list
-    value with spaces left unquoted (--protocol force:-1, separation), which
-    the shell split after its comma."""
+    value with spaces left unquoted (--protocol force:-1, separation, or
+    --protocol=force:-1, separation), which the shell split after its comma.
+    ``actions``: the sub-command's flags, to tell a flag that takes a value."""
     message = f"unrecognized arguments: {' '.join(extras)}"
-    at = args.index(extras[0]) if extras[0] in args else -1
-    if at >= 2 and args[at - 1].endswith(",") and args[at - 2].startswith("--"):
-        flag, value = args[at - 2], args[at - 1]
-        rest = args[at:at + len(extras)]
+    # the stray words' place: the last run of them at the end of what was typed
+    at = len(args) - len(extras) if args[len(args) - len(extras):] == extras else -1
+    for i in range(len(args) - 1, -1, -1):  # or where the first stray word stands alone
+        if at < 0 and args[i] == extras[0]:
+            at = i
+    before = args[at - 1] if at >= 1 else ""
+    flag, value = (before.split("=", 1) if before.startswith("--") and "=" in before
+                   else (args[at - 2] if at >= 2 else "", before))
+    action = actions.get(flag)
+    if value.endswith(",") and action is not None and action.nargs != 0:
+        rest = [word for word in args[at:] if word in extras][:len(extras)]
         message += (f"; after {flag} {value}: quote a value with spaces, "
                     f"{flag} '{' '.join([value, *rest])}'")
     return message

@@ -253,6 +253,16 @@ def test_an_unquoted_protocol_is_told_to_be_quoted(tmp_path, capsys):
               "32", "stray", "--out", str(out)])
     assert ("unrecognized arguments: stray (see 'brushcore simulate --help')"
             in capsys.readouterr().err)
+    # the --flag=value form; a switch before it is not the flag (review helper's finds)
+    with pytest.raises(SystemExit, match="2"):
+        main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "1", "--grid",
+              "32", "--quiet", "--protocol=force:-1,", "separation", "--out", str(out)])
+    assert "quote a value with spaces, --protocol 'force:-1, separation'" in \
+        capsys.readouterr().err
+    with pytest.raises(SystemExit, match="2"):
+        main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "1", "--grid",
+              "32", "--quiet", "separation", "--out", str(out)])
+    assert "unrecognized arguments: separation (see" in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -381,12 +381,13 @@ def test_public_calls_refuse_wrong_arguments_by_name(tmp_path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("text", ["inf", "0.455"])
-def test_kbar_as_a_string_is_told_to_be_a_number(text):
+@pytest.mark.parametrize("text,hint", [("inf", ": float('inf')"), ("0.455", ": float('0.455')"),
+                                       ("abc", "")])
+def test_kbar_as_a_string_is_told_to_be_a_number(text, hint):
     """kbar="inf" read "allowed a number in [1e-09, inf]; inf means rigid
     pillars": the user had typed inf.  The message says a string is not a
-    number and how to make one."""
+    number, and how to make one of a string that reads as one."""
     with pytest.raises(ParameterError, match=re.escape(
             f"kbar='{text}' is invalid: allowed a number in [1e-09, inf]; inf means rigid "
-            f"pillars (a number, not a string: float('{text}'))")):
+            f"pillars (a number, not a string{hint})") + "$"):
         BrushParams("regular", 16, text, 64)

@@ -733,12 +733,28 @@ def test_a_retry_asks_for_twice_the_time_and_half_as_much_memory_again() -> None
     runtime = common["simulate_runtime"]({})
     capped = common["simulate_runtime"]({"slurm_max_runtime_min": 60})
     memory = common["simulate_mem_mb"]({})
-    wildcards = type("Wildcards", (), {"layout": "random", "shape": "", "rough": "",
-                                       "grid": "1024", "n_pillars": "16", "phi": "0.12"})()
+    base = {"layout": "random", "shape": "", "rough": "", "grid": "1024", "n_pillars": "16",
+            "phi": "0.12"}
+
+    def jobs(**changed):
+        return type("Wildcards", (), {**base, **changed})()
+
+    wildcards = jobs()
     assert [runtime(wildcards, attempt) for attempt in (1, 2)] == [39, 78]
     assert [capped(wildcards, attempt) for attempt in (1, 2)] == [39, 60]
     # 16 pillars of 8,101 elements on the tiles: 0.79 GB, x 1.3; x 1.5 on the retry
     assert [memory(wildcards, attempt) for attempt in (1, 2)] == [1100, 1600]
+    # a rough curve's floor (the rule before, 5.6 GB at 1024^2) takes 1.5x too, not 2x
+    rough = jobs(rough="_S0.5_P0.0_C0.0")
+    assert [memory(rough, attempt) for attempt in (1, 2)] == [5600, 8400]
+    # a GPU job's host memory is unmeasured: the floor, rounded (not the quadrant's 700)
+    flat = jobs(layout="regular", grid="512")
+    assert memory(flat, 1) == 700
+    assert common["simulate_mem_mb"]({"backend": "gpu"})(flat, 1) == 1200
+    # near MAX_BLOCK a pillar of 1,483 elements (estimated 1,523) takes the blocks: both
+    # paths priced (random 64 at 888^2 reached 1.8 GB in 100 s; 1.5 GB was asked)
+    edge = jobs(grid="888", n_pillars="64")
+    assert memory(edge, 1) == 3200
 
 
 def test_a_file_brushs_memory_counts_its_largest_pillar(tmp_path: Path, monkeypatch) -> None:
@@ -752,6 +768,13 @@ def test_a_file_brushs_memory_counts_its_largest_pillar(tmp_path: Path, monkeypa
     largest = common["_file_largest_pillar"](config, "file_two", 128)
     assert largest == pytest.approx(math.pi * 0.1**2 * 128**2, rel=0.02)
     assert common["_file_largest_pillar"](config, "random", 128) is None
+    # ... and the request prices that pillar, not the mean one (a spy in the rules' scope)
+    job = type("Wildcards", (), {"layout": "file_two", "shape": "", "rough": "", "grid": "128",
+                                 "n_pillars": "2", "phi": "0.0327"})()
+    priced = []
+    common["job_memory_mb"] = lambda **kwargs: priced.append(kwargs) or 0
+    common["simulate_mem_mb"](config)(job, 1)
+    assert (priced[0]["largest"], priced[0]["counted"]) == (largest, True)
 
 
 #: Peak RSS measured [MiB] of single curves, one thread (2048^2: two): (layout, N,
@@ -770,6 +793,9 @@ MEASURED_PEAKS_MIB = [
     ("regular", 2304, 2048, 0.12, True, 829.4), ("regular", 576, 2048, 0.12, True, 1628.2),
     ("regular", 64, 2048, 0.12, True, 737.3), ("random", 64, 2048, 0.12, False, 1331.2),
     ("random", 1620, 2048, 0.12, False, 2754.6),  # >=, 15 min of an estimated 130
+    # pillars a few elements under MAX_BLOCK, estimated over it (a review helper's runs):
+    ("random", 64, 888, 0.12, False, 1815.0),  # >=, 100 s
+    ("random", 16, 444, 0.12, False, 596.0),
 ]
 
 
@@ -1091,7 +1117,14 @@ def test_the_config_schema_bounds_are_the_solvers():
     (dict(layout="regular", n_pillars=16, roughness=0.3), ("regular", "", "_S0.3_P0.0_C0.0")),
     (dict(layout="regular", n_pillars=4, heights=np.array([0.1, 0.0, 0.0, -0.1])),
      ("file_mine", "", "", "offsets")),
-], ids=["regular", "random", "ellipse", "preload", "rough", "given heights"])
+    # a protocol runs on the whole grid; a flat brush's preload protocol is a pull-off
+    # (the command priced it as the mirror quadrant: 20 min against 4.3 h at 2048^2)
+    (dict(layout="regular", n_pillars=16), ("regular", "", "_S0.0_P0.0_C0.0_Q0123abcd",
+                                            "force:-1, separation")),
+    (dict(layout="random", n_pillars=16), ("random", "", "_S0.0_P0.0_C0.0_Q0123abcd",
+                                           "force:-1, displacement:0.5, force:-1, separation")),
+], ids=["regular", "random", "ellipse", "preload", "rough", "given heights",
+        "preload protocol", "cycle protocol"])
 def test_the_command_and_the_workflow_price_a_curve_alike(case, wildcards):
     """One table of measured curves (`brushcore.model.cost`) sets the
     workflow's Slurm time and the command's note before a long run: each
@@ -1099,16 +1132,23 @@ def test_the_command_and_the_workflow_price_a_curve_alike(case, wildcards):
     plus 5 min."""
     from brushcore import BrushParams, SolverOptions
     from brushcore.model import cost
+    from brushcore.model.inputs import parse_protocol
 
     common = _common_rules()
+    offsets = wildcards[3:] == ("offsets",)  # a layout_files brush given heights
+    protocol = (parse_protocol(wildcards[3]) if len(wildcards) > 3 and not offsets
+                else None)
     for grid in (512, 1024):
         params = BrushParams(kbar=0.01, grid=grid, **case)
-        kind = cost.curve_kind(params, SolverOptions())
-        offsets = wildcards[3:] == ("offsets",)  # a layout_files brush given heights
-        assert common["curve_kind"](*wildcards[:3], None, offsets) == kind
-        minutes = common["curve_minutes"](*wildcards[:3], grid, None, offsets)
-        assert minutes == math.ceil(5 + 3 * cost.expected_seconds(params, SolverOptions()) / 60)
-    note = cost.cost_note(BrushParams(kbar=0.01, grid=2048, **case), SolverOptions())
+        kind = cost.curve_kind(params, SolverOptions(), protocol)
+        assert common["curve_kind"](*wildcards[:3], None, offsets, protocol) == kind
+        minutes = common["curve_minutes"](*wildcards[:3], grid, None, offsets, protocol)
+        assert minutes == math.ceil(
+            5 + 3 * cost.expected_seconds(params, SolverOptions(), protocol) / 60)
+    if protocol is not None:
+        assert kind == ("whole" if len(protocol) == 2 else "rough")
+    note = cost.cost_note(BrushParams(kbar=0.01, grid=2048, **case), SolverOptions(),
+                          protocol)
     assert note.startswith("this run may take up to about ") and "measured at" in note
     assert cost.cost_note(BrushParams(kbar=0.01, grid=64, **case), SolverOptions()) == ""
     # a bound of the host's curves: not said of a GPU run

@@ -90,7 +90,7 @@ def largest_pillar(n_pillars: int, phi: float, grid: int) -> float:
 
 
 def peak_mb(*, n_pillars: int, grid: int, largest: float, mirrored: bool,
-            protocol_engine: bool) -> float:
+            protocol_engine: bool, counted: bool = False) -> float:
     """A curve's peak memory [MB]: the process, the grid's buffers, and the
     preconditioner the run takes (`BlockInverse.fits`).
 
@@ -104,6 +104,11 @@ def peak_mb(*, n_pillars: int, grid: int, largest: float, mirrored: bool,
     protocol_engine : solved by the protocol engine (rough or given heights,
         a protocol other than a flat brush's preload): blocks up to
         `BlockInverse.MAX_BLOCK_PROTOCOL`, bordered (2.5 stacks, not 1.5)
+    counted : ``largest`` counted on the labels; else `largest_pillar`'s
+        bound, and the run may take the blocks wherever a pillar
+        `RASTER_EXCESS` under its area fits them (random 64 at 888^2: 1,483
+        elements against 1,523 estimated, past MAX_BLOCK: blocks of 1.8 GB
+        where the tiles' 0.5 were asked for; a review helper's find)
 
     Returns
     -------
@@ -111,26 +116,34 @@ def peak_mb(*, n_pillars: int, grid: int, largest: float, mirrored: bool,
         The estimate [MB = 1e6 bytes].
     """
     pillars = math.ceil(math.sqrt(n_pillars) / 2) ** 2 if mirrored else n_pillars
-    stack = 8.0 * pillars * largest * largest  # the dense inverses, float64
+    smallest = largest if counted else largest / RASTER_EXCESS**2  # what the run may count
     limit = BlockInverse.MAX_BLOCK_PROTOCOL if protocol_engine else BlockInverse.MAX_BLOCK
-    if largest <= limit and 1.5 * stack <= MEMORY_BUDGET:
-        copies = 2.5 if protocol_engine and 2.5 * stack <= MEMORY_BUDGET else 1.5
-        preconditioner = copies * stack / 1e6
-    else:
-        preconditioner = TILE_MB * pillars
+
+    def fits(m: float) -> bool:  # `BlockInverse.fits`
+        return m <= limit and 1.5 * 8.0 * pillars * m * m <= MEMORY_BUDGET
+
+    # the dense inverses (float64) and their packed copy, or bordered in the
+    # protocol engine; `BlockInverse.fits` keeps either within the budget
+    blocks = min((2.5 if protocol_engine else 1.5) * 8.0 * pillars * largest**2,
+                 MEMORY_BUDGET) / 1e6
+    tiles = TILE_MB * pillars
+    preconditioner = (blocks if fits(largest) else tiles if not fits(smallest)
+                      else max(blocks, tiles))  # either, by a few elements
     kind = "mirror" if mirrored else "whole"
     return (PROCESS_MB + GRID_BYTES[kind] * grid * grid / 1e6
             + (0.0 if mirrored else PILLAR_MB * n_pillars) + preconditioner)
 
 
 def job_memory_mb(*, n_pillars: int, grid: int, largest: float, mirrored: bool,
-                  protocol_engine: bool, attempt: int = 1) -> int:
+                  protocol_engine: bool, counted: bool = False, attempt: int = 1,
+                  floor_mb: float = 0.0) -> int:
     """What a workflow job asks for [MB, rounded up to 100]: `peak_mb` and
-    its Snakemake (`JOB_STEP_MB`), times `MEMORY_SAFETY`, and `RETRY_MEMORY`
-    more for each retry."""
-    need = (peak_mb(n_pillars=n_pillars, grid=grid, largest=largest, mirrored=mirrored,
-                    protocol_engine=protocol_engine) + JOB_STEP_MB)
-    need *= MEMORY_SAFETY * (1.0 + RETRY_MEMORY * (attempt - 1))
+    its Snakemake (`JOB_STEP_MB`), times `MEMORY_SAFETY`, at least
+    ``floor_mb``, and `RETRY_MEMORY` more of either for each retry."""
+    need = MEMORY_SAFETY * (peak_mb(n_pillars=n_pillars, grid=grid, largest=largest,
+                                    mirrored=mirrored, protocol_engine=protocol_engine,
+                                    counted=counted) + JOB_STEP_MB)
+    need = max(need, floor_mb) * (1.0 + RETRY_MEMORY * (attempt - 1))
     return int(math.ceil(need / 100.0) * 100)
 
 
@@ -143,7 +156,8 @@ def expected_peak_bytes(params: BrushParams, options: SolverOptions,
                else largest_pillar(params.n_pillars, params.phi, params.grid))
     kind = curve_kind(params, options, protocol)
     return 1e6 * peak_mb(n_pillars=params.n_pillars, grid=params.grid, largest=largest,
-                         mirrored=kind == "mirror", protocol_engine=kind == "rough")
+                         mirrored=kind == "mirror", protocol_engine=kind == "rough",
+                         counted=labels is not None)
 
 
 def available_bytes() -> float:
@@ -222,7 +236,8 @@ def curve_kind(params: BrushParams, options: SolverOptions,
               or params.gap_map is not None
               or protocol is not None and standard_preload(tuple(protocol)) is None)
     regular = params.layout == "regular" and params.shape == "disc" and params.is_flat
-    return kind_of(uneven=uneven, mirrored=regular and options.symmetry)
+    # a protocol, a preload's too, runs on the whole grid (symmetry_fold 1)
+    return kind_of(uneven=uneven, mirrored=regular and options.symmetry and protocol is None)
 
 
 def _priced(params: BrushParams, options: SolverOptions,

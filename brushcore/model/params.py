@@ -207,7 +207,7 @@ class BrushParams:
         self._check_shape()
         require(is_real(self.kbar) and not math.isnan(self.kbar) and self.kbar >= MIN_KBAR,
                  "kbar", self.kbar, f"a number in [{MIN_KBAR:g}, inf]; inf means rigid pillars"
-                 + (f" (a number, not a string: float({self.kbar!r}))"
+                 + (f" (a number, not a string{_as_number(self.kbar)})"
                     if isinstance(self.kbar, str) else ""))
         require(is_integer(self.grid) and MIN_GRID <= self.grid <= MAX_GRID, "grid", self.grid,
                  f"an integer in [{MIN_GRID}, {MAX_GRID}]")
@@ -502,6 +502,15 @@ class BrushParams:
                 continue
             out[k] = int(v) if isinstance(v, bool) else v
         return out
+
+
+def _as_number(text: str) -> str:
+    """": float('...')" where the string reads as a number, else ""."""
+    try:
+        float(text)
+    except ValueError:
+        return ""
+    return f": float({text!r})"
 
 
 #: Per-pillar and per-element inputs (arrays) of `BrushParams`.

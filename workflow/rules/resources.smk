@@ -23,22 +23,25 @@ from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.backend import resolve_backend
 
 
-def rough_mem_mb(grid):
-    """The floor of a rough curve's request [MB]: 1 GB, 150 MB x (n/512)^2
-    and above 512 the 4 GB block budget.  The one rough peak measured at
-    1024 (3.4 GB, 20 min into an estimated 6-h run) is twice what
-    `brushcore.model.cost.peak_mb` says, and its growth to the end is
-    unmeasured, so rough curves keep this request where it is larger."""
-    return int(1000 + 150 * (grid / 512) ** 2 + (4000 if grid > 512 else 0))
+def unmeasured_mem_mb(grid):
+    """The floor of a request where `brushcore.model.cost.peak_mb` has not
+    been measured to the end [MB]: the rule before 2026-12-07, 1 GB, 150 MB
+    x (n/512)^2 and above 512 the 4 GB block budget.  Rough curves: their one
+    peak measured at 1024 (3.4 GB, the estimate 3.6) was 20 minutes into an
+    estimated 6 hours, its growth to the end unknown.  GPU jobs: the host
+    memory of CuPy's and CUDA's libraries beside the curve, never measured
+    (no card was lent to the sessions that wrote this)."""
+    return 1000 + 150 * (grid / 512) ** 2 + (4000 if grid > 512 else 0)
 
 
 def simulate_mem_mb(config):
     """The simulate rule's `mem_mb` [MB]: `brushcore.model.cost.job_memory_mb`
     of the job's brush (N, phi, grid, and whether it runs on a mirror
     quadrant or through the protocol engine, from its wildcards; a file
-    brush's largest pillar counted on its labels), at least `rough_mem_mb`
-    for rough curves; a retry asks for half as much again (Snakemake says
-    the attempt, not whether time or memory ended the last one).
+    brush's largest pillar counted on its labels), at least
+    `unmeasured_mem_mb` for rough curves and GPU jobs (whose device runs
+    solve the whole grid); a retry asks for half as much again (Snakemake
+    says the attempt, not whether time or memory ended the last one).
 
     The rule before 2026-12-07 (1 GB + 150 MB (n/512)^2, + 4 GB above 512)
     left out the blocks at 512 and below: a random brush of 60 pillars at
@@ -57,20 +60,22 @@ def simulate_mem_mb(config):
             config_protocol(config),
         )
         n_pillars = int(wildcards.n_pillars)
-        largest = _file_largest_pillar(config, wildcards.layout, grid)
-        if largest is None:
-            largest = largest_pillar(n_pillars, float(wildcards.phi), grid)
-        need = job_memory_mb(
+        counted = _file_largest_pillar(config, wildcards.layout, grid)
+        gpu = config.get("backend", "cpu") == "gpu"
+        return job_memory_mb(
             n_pillars=n_pillars,
             grid=grid,
-            largest=largest,
-            mirrored=kind == "mirror",
+            largest=(
+                largest_pillar(n_pillars, float(wildcards.phi), grid)
+                if counted is None
+                else counted
+            ),
+            mirrored=kind == "mirror" and not gpu,
             protocol_engine=kind == "rough",
+            counted=counted is not None,
             attempt=attempt,
+            floor_mb=unmeasured_mem_mb(grid) if kind == "rough" or gpu else 0.0,
         )
-        if kind == "rough":
-            need = max(need, rough_mem_mb(grid) * attempt)
-        return need
 
     return mem_mb
 
