@@ -268,7 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
                           f"{RANDOM_GAP_GRID} x {RANDOM_GAP_GRID} grid, L/{RANDOM_GAP_GRID}, on "
                           f"every grid], in [1, {RANDOM_GAP_GRID})")
     units = f", in [{UNIT_RANGE[0]:g}, {UNIT_RANGE[1]:g}]"
-    sim.add_argument("--e-star", type=float, default=_default("e_star"), help="effective modulus E* [Pa]" + units)
+    sim.add_argument("--e-star", type=float, default=_default("e_star"),
+                     help="effective modulus E* [Pa]" + units)
     sim.add_argument("--dgamma", type=float, default=_default("dgamma"),
                      help="work of adhesion [J/m^2]" + units)
     sim.add_argument("--h", type=float, default=_default("h"),

@@ -484,8 +484,8 @@ def _provenance(
     sources = sorted(((str(path), curve) for path, curve in curves.values()),
                      key=lambda source: source[0])
     files = [name for name, _ in sources]
-    hashes = [digest.group(1) if (digest := IN_MEMORY_PATTERN.fullmatch(name)) else file_sha256(name)
-              for name, _ in sources]
+    hashes = [digest.group(1) if (digest := IN_MEMORY_PATTERN.fullmatch(name))
+              else file_sha256(name) for name, _ in sources]
     combined = hashlib.sha256("\n".join(f"{h}  {f}" for f, h in zip(files, hashes)).encode())
     commits = sorted({str(c.attrs.get("git_commit", "unknown")) for _, c in curves.values()})
     # the code itself, which an installed copy's "git unknown" cannot tell apart

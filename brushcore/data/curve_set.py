@@ -215,7 +215,7 @@ def load_curves(paths: Iterable[str | Path | xr.Dataset],
 
 
 def check_named_case(path: Path, key: CaseKey, phi: float, case: CaseKey,
-                      case_phi: float) -> None:
+                     case_phi: float) -> None:
     """Refuse a file that holds another case than the one its name stands for
     (a curve copied or moved by hand would otherwise enter the sweep as its
     own case, and the case asked for would be NaN)."""

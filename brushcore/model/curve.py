@@ -297,32 +297,33 @@ def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
 
     data = {
         **step_variables(curve.displacement, curve.force, area, curve.attached_pillars,
-                          ds_, fs, "pull-off displacement d"),
+                         ds_, fs, "pull-off displacement d"),
         "detachment_step": filled_variable("detachment_step", ("y", "x"), detach,
-                                   "first step at which the element is detached",
-                                   comment="-1 (the fill) outside pillars"),
+                                           "first step at which the element is detached",
+                                           comment="-1 (the fill) outside pillars"),
         "contact_snapshot": filled_variable("contact_snapshot", ("snapshot", "y", "x"), states,
-                                    "contact state",
-                                    flag_values=np.array([-1, 0, 1], dtype=np.int8),
-                                    flag_meanings="no_pillar detached attached"),
-        "snapshot_step": filled_variable("snapshot_step", "snapshot", snaps, "step of the snapshot"),
+                                            "contact state",
+                                            flag_values=np.array([-1, 0, 1], dtype=np.int8),
+                                            flag_meanings="no_pillar detached attached"),
+        "snapshot_step": filled_variable("snapshot_step", "snapshot", snaps,
+                                         "step of the snapshot"),
         "snapshot_label": xr.Variable("snapshot", np.array(SNAPSHOT_LABELS),
                                       {"long_name": "stage of the pull-off"}),
         **pillar_results(labels, h, curve.pillar_force_at_peak, curve.displacement[last]),
         **result_variables(f_ad, float(curve.displacement[i_max]), work, fs, ws,
-                            "adhesive force (maximum tensile force)",
-                            "work of separation, integral of max(F, 0) dd"),
+                           "adhesive force (maximum tensile force)",
+                           "work of separation, integral of max(F, 0) dd"),
     }
     attrs = run_attrs(params, options, labels, scales, events=curve.events,
-                       steps=int(curve.displacement.size), applications=applications,
-                       cg_iterations=curve.cg_iterations, wall=wall,
-                       title="Adhesive pull-off of a spring-mounted pillar brush",
-                       references=REFERENCES, preconditioner=curve.preconditioner,
-                       symmetry_fold=curve.symmetry_fold)
+                      steps=int(curve.displacement.size), applications=applications,
+                      cg_iterations=curve.cg_iterations, wall=wall,
+                      title="Adhesive pull-off of a spring-mounted pillar brush",
+                      references=REFERENCES, preconditioner=curve.preconditioner,
+                      symmetry_fold=curve.symmetry_fold)
     attrs["pillar_order"] = PILLAR_ORDER
     return mark_element_units(xr.Dataset(data, coords={
         **curve_coords(params, curve.displacement.size, snaps.size,
-                  "step of the pull-off (one per solve)"),
+                       "step of the pull-off (one per solve)"),
         "pillar": pillar_coord(params.n_pillars)}, attrs=attrs))
 
 
@@ -455,72 +456,73 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
 
     data = {
         **step_variables(d, f, area, curve.attached_pillars, ds_, fs,
-                          "displacement d of the backing plate"),
+                         "displacement d of the backing plate"),
         "branch": filled_variable("branch", "step", curve.branch.astype(np.int32),
-                          "index of the protocol waypoint being followed",
-                          comment="-1 (the fill) at first touch"),
-        "direction": cf_variable("step", curve.direction.astype(np.int8), "direction of motion",
-                         "1", flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
-                         flag_meanings="approach first_touch retraction"),
+                                  "index of the protocol waypoint being followed",
+                                  comment="-1 (the fill) at first touch"),
+        "direction": cf_variable(
+            "step", curve.direction.astype(np.int8), "direction of motion", "1",
+            flag_values=np.array([APPROACH, START, RETRACT], dtype=np.int8),
+            flag_meanings="approach first_touch retraction"),
         "retraction": cf_variable("step", curve.retraction.astype(np.int8),
-                          "step belongs to the last retraction branch", "1",
-                          flag_values=np.array([0, 1], dtype=np.int8),
-                          flag_meanings="other last_retraction"),
-        "attachment_step": filled_variable("attachment_step", ("y", "x"),
-                                   on_grid(curve.attach_step, -1, np.int32),
-                                   "last step at which the element attached",
-                                   comment="-1 (the fill) outside pillars or never in contact"),
-        "detachment_step": filled_variable("detachment_step", ("y", "x"),
-                                   on_grid(curve.detach_step, -1, np.int32),
-                                   "first step without the element after its last detachment",
-                                   comment="-1 (the fill) outside pillars, never detached"),
-        "contact_snapshot": filled_variable("contact_snapshot", ("snapshot", "y", "x"), states,
-                                    "contact state",
-                                    flag_values=np.array([-1, 0, 1], dtype=np.int8),
-                                    flag_meanings="no_pillar detached attached",
-                                    comment="-2 (the fill): a stage the run never reached"),
-        "snapshot_step": filled_variable("snapshot_step", "snapshot", np.asarray(steps, dtype=np.int32),
-                                 "step of the snapshot",
-                                 comment="-1 (the fill): a stage the run never reached"),
+                                  "step belongs to the last retraction branch", "1",
+                                  flag_values=np.array([0, 1], dtype=np.int8),
+                                  flag_meanings="other last_retraction"),
+        "attachment_step": filled_variable(
+            "attachment_step", ("y", "x"), on_grid(curve.attach_step, -1, np.int32),
+            "last step at which the element attached",
+            comment="-1 (the fill) outside pillars or never in contact"),
+        "detachment_step": filled_variable(
+            "detachment_step", ("y", "x"), on_grid(curve.detach_step, -1, np.int32),
+            "first step without the element after its last detachment",
+            comment="-1 (the fill) outside pillars, never detached"),
+        "contact_snapshot": filled_variable(
+            "contact_snapshot", ("snapshot", "y", "x"), states, "contact state",
+            flag_values=np.array([-1, 0, 1], dtype=np.int8),
+            flag_meanings="no_pillar detached attached",
+            comment="-2 (the fill): a stage the run never reached"),
+        "snapshot_step": filled_variable(
+            "snapshot_step", "snapshot", np.asarray(steps, dtype=np.int32),
+            "step of the snapshot", comment="-1 (the fill): a stage the run never reached"),
         "snapshot_label": xr.Variable("snapshot", np.array(names),
                                       {"long_name": "stage of the protocol"}),
         # Given arrays as given, bit for bit (x * d_K / d_K is not always x):
         # `BrushParams.from_curve` rebuilds them and their inputs_digest.
         **pillar_variables(labels, h, inputs.heights,
-                            (inputs.heights / ds_ if params.heights is None
+                           (inputs.heights / ds_ if params.heights is None
                              else np.array(params.heights)),
-                            inputs.kbar, pillar_force, curve.let_go),
+                           inputs.kbar, pillar_force, curve.let_go),
         **result_variables(f_ad, d_ad, work, fs, ws,
-                            "adhesive force (maximum tensile force of the last retraction)",
-                            "work of separation, integral of max(F, 0) dd over the last "
-                            "retraction"),
+                           "adhesive force (maximum tensile force of the last retraction)",
+                           "work of separation, integral of max(F, 0) dd over the last "
+                           "retraction"),
         **pull_variables(d, f, area, curve.pulls, peaks, fs, ws),
         # the energy lost only from first touch to separation: a protocol that
         # ends pressed holds elastic energy besides (12.1 W_K after a press alone)
         "dissipated_energy": cf_variable((), dissipated, "integral of F dd over the protocol",
-                                  "J", comment=DISSIPATED_COMMENT),
-        "dissipated_energy_normalized": cf_variable((), dissipated / ws,
-                                            "integral of F dd over the protocol / W_K", "1",
-                                            comment=DISSIPATED_COMMENT),
-        "pillars_in_contact_at_preload": cf_variable((), np.int32(in_contact),
-                                             "pillars with attached elements at the end of "
-                                             "the first waypoint", "1"),
-        "contact_area_at_preload": cf_variable((), float(area[preload_step]),
-                                       "real contact area at the end of the first waypoint",
-                                       "m2"),
+                                         "J", comment=DISSIPATED_COMMENT),
+        "dissipated_energy_normalized": cf_variable(
+            (), dissipated / ws, "integral of F dd over the protocol / W_K", "1",
+            comment=DISSIPATED_COMMENT),
+        "pillars_in_contact_at_preload": cf_variable(
+            (), np.int32(in_contact), "pillars with attached elements at the end of the first "
+            "waypoint", "1"),
+        "contact_area_at_preload": cf_variable(
+            (), float(area[preload_step]), "real contact area at the end of the first waypoint",
+            "m2"),
     }
     if inputs.gap_map is not None:
         data["gap_map"] = cf_variable(("y", "x"), inputs.gap_map, "extra gap of each element", "m")
         # In d_K, as BrushParams(gap_map=...) and --gap-map take it back.
         data["gap_map_normalized"] = cf_variable(("y", "x"), np.array(params.gap_map),
-                                          "extra gap of each element / d_K", "1")
+                                                 "extra gap of each element / d_K", "1")
     attrs = run_attrs(params, options, labels, scales, events=curve.events,
-                       steps=int(d.size), applications=applications,
-                       cg_iterations=curve.cg_iterations, wall=wall,
-                       title="Approach, preload and pull-off of a rough, graded pillar brush",
-                       references=f"{REFERENCES}; {ROUGH_REFERENCE}",
-                       preconditioner=op.preconditioner,
-                       hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
+                      steps=int(d.size), applications=applications,
+                      cg_iterations=curve.cg_iterations, wall=wall,
+                      title="Approach, preload and pull-off of a rough, graded pillar brush",
+                      references=f"{REFERENCES}; {ROUGH_REFERENCE}",
+                      preconditioner=op.preconditioner,
+                      hashed=({"protocol": [(w.kind, w.value) for w in waypoints]},))
     attrs.update({
         "preload_force": float(-waypoints[0].value) if waypoints[0].kind == "force" else 0.0,
         "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
@@ -529,10 +531,11 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
     if protocol is not None:  # as given (normalised), the form --protocol and the config take
         attrs["protocol_normalized"] = protocol_text(protocol)
     return mark_element_units(xr.Dataset(data, coords={
-        **curve_coords(params, d.size, len(steps), "step of the protocol (one per event or solve)"),
+        **curve_coords(params, d.size, len(steps),
+                       "step of the protocol (one per event or solve)"),
         "pillar": pillar_coord(n_pillars),
         "pull": cf_variable("pull", np.arange(len(peaks), dtype=np.int32),
-                     "retraction branch index, in order", "1"),
+                            "retraction branch index, in order", "1"),
     }, attrs=attrs))
 
 

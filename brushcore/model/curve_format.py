@@ -156,24 +156,24 @@ def filled_variable(name: str, dims, data: np.ndarray, long_name: str, **extra) 
 
 
 def step_variables(displacement: np.ndarray, force: np.ndarray, area: np.ndarray,
-                    attached_pillars: np.ndarray, d_unit: float, f_unit: float,
-                    displacement_name: str) -> dict[str, xr.Variable]:
+                   attached_pillars: np.ndarray, d_unit: float, f_unit: float,
+                   displacement_name: str) -> dict[str, xr.Variable]:
     """The curve itself, per step, in SI and normalised (every curve file's)."""
     return {
         "displacement": cf_variable("step", displacement, displacement_name, "m"),
         "force": cf_variable("step", force, "tensile normal force F", "N"),
         "contact_area": cf_variable("step", area, "real contact area", "m2"),
         "attached_pillars": cf_variable("step", attached_pillars.astype(np.int32),
-                                "pillars with attached elements", "1"),
+                                        "pillars with attached elements", "1"),
         "displacement_normalized": cf_variable("step", displacement / d_unit,
-                                       "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
+                                               "d / d_K, d_K = sqrt(2 pi dgamma a0 / E*)", "1"),
         "force_normalized": cf_variable("step", force / f_unit,
-                                "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)", "1"),
+                                        "F / F_K, F_K = sqrt(8 pi E* dgamma a0^3)", "1"),
     }
 
 
 def result_variables(f_ad: float, d_ad: float, work: float, f_unit: float, w_unit: float,
-                      force_name: str, work_name: str) -> dict[str, xr.Variable]:
+                     force_name: str, work_name: str) -> dict[str, xr.Variable]:
     """F_ad, the d it is reached at and W, in SI and normalised (every curve file's)."""
     return {
         "adhesive_force": cf_variable((), f_ad, force_name, "N"),
@@ -181,12 +181,12 @@ def result_variables(f_ad: float, d_ad: float, work: float, f_unit: float, w_uni
         "displacement_at_adhesive_force": cf_variable((), d_ad, "d at the adhesive force", "m"),
         "work_of_separation": cf_variable((), work, work_name, "J"),
         "work_of_separation_normalized": cf_variable((), work / w_unit,
-                                             "W / W_K, W_K = 2 pi a0^2 dgamma", "1"),
+                                                     "W / W_K, W_K = 2 pi a0^2 dgamma", "1"),
     }
 
 
 def curve_coords(params: BrushParams, steps: int, snapshots: int,
-            step_name: str) -> dict[str, xr.Variable]:
+                 step_name: str) -> dict[str, xr.Variable]:
     """Coordinates of every curve file: step, element centres, snapshot."""
     coord = (np.arange(params.grid) + 0.5) * params.h
     return {
@@ -194,15 +194,15 @@ def curve_coords(params: BrushParams, steps: int, snapshots: int,
         "y": cf_variable("y", coord, "element centre y", "m"),
         "x": cf_variable("x", coord, "element centre x", "m"),
         "snapshot": cf_variable("snapshot", np.arange(snapshots, dtype=np.int32),
-                        "contact snapshot index", "1"),
+                                "contact snapshot index", "1"),
     }
 
 
 def run_attrs(params: BrushParams, options: SolverOptions, labels: np.ndarray,
-               scales: theory.KendallScales, *, events: int, steps: int, applications: int,
-               cg_iterations: int, wall: float, title: str, references: str,
-               preconditioner: str, hashed: tuple[dict, ...] = (),
-               symmetry_fold: int = 1) -> dict[str, object]:
+              scales: theory.KendallScales, *, events: int, steps: int, applications: int,
+              cg_iterations: int, wall: float, title: str, references: str,
+              preconditioner: str, hashed: tuple[dict, ...] = (),
+              symmetry_fold: int = 1) -> dict[str, object]:
     """Attributes every curve file carries: inputs, discretisation, cost, provenance.
 
     ``backend``, ``device_name`` and ``device_memory_bytes`` say where the
@@ -272,8 +272,8 @@ ROUGH_REFERENCE = "He, Li & Popov, J. Adhesion (2021), doi:10.1080/00218464.2021
 
 
 def pull_variables(d: np.ndarray, f: np.ndarray, area: np.ndarray, pulls: np.ndarray,
-                    peaks: list[tuple[int, float, float, float]], f_unit: float,
-                    w_unit: float) -> dict[str, xr.Variable]:
+                   peaks: list[tuple[int, float, float, float]], f_unit: float,
+                   w_unit: float) -> dict[str, xr.Variable]:
     """Per retraction branch (dimension ``pull``, in order): its steps, F_ad,
     the d of F_ad, W, the contact left at its end and the energy of its cycle.
 
@@ -290,27 +290,28 @@ def pull_variables(d: np.ndarray, f: np.ndarray, area: np.ndarray, pulls: np.nda
         "pull_first_step": cf_variable("pull", first, "first step of the retraction branch", "1"),
         "pull_last_step": cf_variable("pull", last, "last step of the retraction branch", "1"),
         "pull_adhesive_force": cf_variable("pull", f_ad, "maximum tensile force of the retraction "
-                                    "branch", "N"),
+                                           "branch", "N"),
         "pull_adhesive_force_normalized": cf_variable("pull", f_ad / f_unit, "F_ad / F_K of the "
-                                               "retraction branch", "1"),
-        "pull_displacement_at_adhesive_force": cf_variable("pull", d_ad, "d at the branch's maximum "
-                                                    "tensile force", "m"),
+                                                      "retraction branch", "1"),
+        "pull_displacement_at_adhesive_force": cf_variable(
+            "pull", d_ad, "d at the branch's maximum tensile force", "m"),
         "pull_work_of_separation": cf_variable("pull", work, "integral of max(F, 0) dd over the "
-                                        "retraction branch", "J",
-                                        comment="segments split where F crosses 0 "
-                                        "(brushcore.positive_work): clipping F at 0 "
-                                        "before a trapezoid sum over-counts a branch "
-                                        "that starts under load"),
+                                               "retraction branch", "J",
+                                               comment="segments split where F crosses 0 "
+                                               "(brushcore.positive_work): clipping F at 0 "
+                                               "before a trapezoid sum over-counts a branch "
+                                               "that starts under load"),
         "pull_work_of_separation_normalized": cf_variable("pull", work / w_unit, "W / W_K of the "
-                                                   "retraction branch", "1"),
+                                                          "retraction branch", "1"),
         "pull_contact_area_at_end": cf_variable("pull", area[last], "real contact area at the "
-                                         "branch's last step", "m2"),
+                                                "branch's last step", "m2"),
         "pull_cycle_energy": cf_variable("pull", cycle, "integral of F dd from the end of the "
-                                  "previous retraction branch (first touch) to the end of "
-                                  "this one", "J",
-                                  comment="sums to dissipated_energy; a branch that ends "
-                                  "under load also holds the elastic energy stored there"),
-        "pull_cycle_energy_normalized": cf_variable("pull", cycle / w_unit, "cycle energy / W_K", "1"),
+                                         "previous retraction branch (first touch) to the end of "
+                                         "this one", "J",
+                                         comment="sums to dissipated_energy; a branch that ends "
+                                         "under load also holds the elastic energy stored there"),
+        "pull_cycle_energy_normalized": cf_variable("pull", cycle / w_unit,
+                                                    "cycle energy / W_K", "1"),
     }
 
 
@@ -333,12 +334,12 @@ PILLAR_ORDER = ("label order: regular brushes row-major, pillar i*sqrt(N)+j at "
 
 def pillar_coord(n_pillars: int) -> xr.Variable:
     """The coordinate ``pillar``: pillar index in label order."""
-    return cf_variable("pillar", np.arange(n_pillars, dtype=np.int32), "pillar index (label order)",
-                "1")
+    return cf_variable("pillar", np.arange(n_pillars, dtype=np.int32),
+                       "pillar index (label order)", "1")
 
 
 def pillar_results(labels: np.ndarray, h: float, force_at_peak: np.ndarray,
-                    let_go: np.ndarray) -> dict[str, xr.Variable]:
+                   let_go: np.ndarray) -> dict[str, xr.Variable]:
     """Per pillar, in every curve file: centroid [m] and area [m^2] of its
     elements, force at F_ad [N] and the displacement at which it let go [m]."""
     centre = pillar_centroids(labels, h)
@@ -347,18 +348,17 @@ def pillar_results(labels: np.ndarray, h: float, force_at_peak: np.ndarray,
         "pillar_y": cf_variable("pillar", centre[:, 0], "pillar centroid y", "m"),
         "pillar_x": cf_variable("pillar", centre[:, 1], "pillar centroid x", "m"),
         "pillar_area": cf_variable("pillar", area, "pillar contact area (its elements)", "m2"),
-        "pillar_force_at_adhesive_force": cf_variable("pillar", force_at_peak,
-                                              "pillar force at F_ad (tensile positive)", "N"),
-        "pillar_let_go_displacement": cf_variable("pillar", let_go,
-                                          "d at which the pillar's last element detached",
-                                          "m", comment="NaN: never in contact, or still attached at "
-                                          "the end"),
+        "pillar_force_at_adhesive_force": cf_variable(
+            "pillar", force_at_peak, "pillar force at F_ad (tensile positive)", "N"),
+        "pillar_let_go_displacement": cf_variable(
+            "pillar", let_go, "d at which the pillar's last element detached", "m",
+            comment="NaN: never in contact, or still attached at the end"),
     }
 
 
 def pillar_variables(labels: np.ndarray, h: float, heights: np.ndarray,
-                      normalized: np.ndarray, kbar: np.ndarray, force_at_peak: np.ndarray,
-                      let_go: np.ndarray) -> dict[str, xr.Variable]:
+                     normalized: np.ndarray, kbar: np.ndarray, force_at_peak: np.ndarray,
+                     let_go: np.ndarray) -> dict[str, xr.Variable]:
     """Per pillar in a protocol's file: `pillar_results` with the protrusion
     [m] and ``normalized`` [d_K], and k̄, after the centroid and area."""
     results = pillar_results(labels, h, force_at_peak, let_go)
@@ -366,7 +366,7 @@ def pillar_variables(labels: np.ndarray, h: float, heights: np.ndarray,
     return {
         **centroid,
         "pillar_height": cf_variable("pillar", heights, "pillar protrusion z_p "
-                             "(larger reaches the substrate first)", "m"),
+                                     "(larger reaches the substrate first)", "m"),
         "pillar_height_normalized": cf_variable("pillar", normalized, "z_p / d_K", "1"),
         "pillar_kbar": cf_variable("pillar", kbar, "pillar spring stiffness k_p / (E* L)", "1"),
         **results,
