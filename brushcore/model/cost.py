@@ -73,8 +73,8 @@ TILE_MB = 8.0
 #: (3 %: the stack sizes of `BlockInverse.stack_size` within 2 % of it).
 RASTER_EXCESS = 1.03
 #: What a job asks for over its estimate: `peak_mb` lies 1.06-1.32x above
-#: the 18 peak RSS measured (256^2-2048^2, rigid to soft, regular and random,
-#: phi 0.12-0.5, N 22-2304; a helper's runs of 2026-12-07 and docs/SPEED.md;
+#: the 20 peak RSS measured (256^2-2048^2, rigid to soft, regular and random,
+#: phi 0.12-0.5, N 16-2304; helpers' runs of 2026-12-07 and docs/SPEED.md;
 #: `tests/test_workflow.py` holds the table), the request 1.38-1.68x above
 #: them with the job step's 192 MiB.
 MEMORY_SAFETY = 1.3
