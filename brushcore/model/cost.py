@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from brushcore.model.labelmap import pillar_element_counts
 from brushcore.model.params import BrushParams
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.protocol import standard_preload
@@ -152,7 +153,7 @@ def expected_peak_bytes(params: BrushParams, options: SolverOptions,
                         labels: np.ndarray | None = None) -> float:
     """`peak_mb` of a run [bytes]; its largest pillar counted on ``labels``
     where given (a label map's or a table's), else `largest_pillar`."""
-    largest = (float(np.bincount(labels[labels >= 0]).max()) if labels is not None
+    largest = (float(pillar_element_counts(labels).max()) if labels is not None
                else largest_pillar(params.n_pillars, params.phi, params.grid))
     kind = curve_kind(params, options, protocol)
     return 1e6 * peak_mb(n_pillars=params.n_pillars, grid=params.grid, largest=largest,

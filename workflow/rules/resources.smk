@@ -4,7 +4,6 @@ slowest curves measured per kind and grid (`brushcore.model.cost`)."""
 import functools
 import math
 
-import numpy as np
 
 from brushcore.model.cost import (
     is_exact,
@@ -15,6 +14,7 @@ from brushcore.model.cost import (
     slowest_curve_s,
 )
 from brushcore.numerics.events.protocol import standard_preload
+from brushcore.model.labelmap import pillar_element_counts
 from brushcore.model.layout import build_labels
 from brushcore.model.layout_file import FILE_LAYOUT_PREFIX, file_params
 from brushcore.model.pillar_table import is_table
@@ -85,7 +85,7 @@ def _largest_on(layout_file, grid):
     """Elements of the largest pillar of a file brush drawn on ``grid``."""
     grid = {} if grid is None else {"grid": grid}  # a table is drawn on the job's grid
     labels = build_labels(file_params(layout_file, math.inf, **grid))
-    return float(np.bincount(labels[labels >= 0]).max())
+    return float(pillar_element_counts(labels).max())
 
 
 def _file_largest_pillar(config, layout, grid):
