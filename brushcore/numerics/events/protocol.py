@@ -407,7 +407,13 @@ class _Engine:
             if not recorded:  # the first round: the event's own gaps too
                 closed = closed | self._closing
             close = ~att & (closed | (g <= ahead * self.gap_unit))
-            jump = close & ~closed  # attached early: sigma jumps
+            # Attached early (lookahead), sigma jumps.  In a later round every
+            # gap that closed did so under the last re-solve, at fixed d, so it
+            # overlaps: attached with no stress, its contact stays violated
+            # until sigma is re-solved (a rocking soft pillar on retraction,
+            # -5.5e-3 sigma_c K_ii left in exact mode: a protocol energy
+            # auditor's graded brush, test_protocol).
+            jump = close if recorded else close & ~closed
             over = att & (self.sig >= self.sigma_c * (1.0 - tie - ahead))
             if not recorded:  # the first round: the event's own stresses too
                 over = over | self._reaching
