@@ -201,17 +201,20 @@ def _case_flags(conv: xr.Dataset, values: xr.DataArray) -> dict[str, xr.DataArra
 _OUTPUTS = {
     "extrapolated": ("{q} extrapolated to h -> 0", False),
     "error": ("half-width U of the uncertainty band about the extrapolated {q} (Roache's "
-              "GCI or after Eca & Hoekstra); the band also holds the finest {q}", False),
+              "GCI or after Eca & Hoekstra; at least the range of the values where the "
+              "order exceeds 2); the band also holds the finest {q}", False),
     "order": ("observed order p of {q} = f0 + C h^p", False),
     "coefficient": ("coefficient C of {q} = f0 + C h^p, h = 1/n", False),
     "finest": ("{q} on the finest grid run", False),
     "spread": ("half range of {q} over the grids", False),
     "gci": ("grid convergence index of the finest {q}, absolute (Roache; Fs 1.25 at a "
-            "trusted order, else 3 on the larger correction of the observed and the nearest "
-            "trusted order; on three grids it is the error itself)", False),
+            "trusted order on monotone values whose finest three do not diverge, else 3 on "
+            "the larger correction of the observed and the nearest trusted order; on three "
+            "grids the error, but where the order exceeds 2 and the values' range is "
+            "larger)", False),
     "n_grids": ("grids with a value of {q} (not NaN)", False),
-    "safety_factor": ("safety factor Fs of the {q} error (1.25 at a trusted order, else 3)",
-                      False),
+    "safety_factor": ("safety factor Fs of the {q} error (1.25 at a trusted order on "
+                      "monotone values whose finest three do not diverge, else 3)", False),
     "non_monotone": ("{q} oscillates under refinement (1 = yes)", True),
     "poor_fit": ("{q} does not follow f0 + C h^p with a plausible order (1 = yes)", True),
     "too_few_grids": ("fewer than {min_grids} grids with a finite {q} (1 = yes)", True),
