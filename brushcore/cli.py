@@ -662,33 +662,49 @@ def _converge(args: argparse.Namespace) -> int:
     except AggregationError as exc:
         _error(str(exc))
         return 2
+    files = [out / name for name in ("convergence.nc", "convergence.csv", "convergence.md",
+                                     "convergence.png")]
+    # per case, not over the sweep: three cases on three grids make no study
+    runs = sweep["adhesive_force_normalized"].notnull().sum(GRID_DIM)
+    studied = int(runs.max()) >= 3
+    stale = [f for f in files if f.exists()]  # an earlier study: not of the sweep.nc to come
+    # Ctrl-C or SIGTERM from here on says what the folder holds (an interrupted
+    # run left the new sweep.nc beside the earlier curves' study, and said
+    # "nothing written": a crash and resume auditor's find)
+    previous = on_sigterm(terminate)
+    written = False
     try:
+        for f in stale:
+            f.unlink()
         out.mkdir(parents=True, exist_ok=True)
         write_sweep(sweep, out / "sweep.nc")
-    except OSError as exc:
-        _error(f"cannot write {out / 'sweep.nc'}: {exc.strerror or exc}")
-        return 1
+        written = True
+        if studied:
+            write_study(sweep, *files[:3], files[3:])
+    except (OSError, KeyboardInterrupt, Terminated) as exc:
+        done = ([out / "sweep.nc"] if written else []) + [f for f in files if f.exists()]
+        what = ("interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated"
+                if isinstance(exc, Terminated) else f"cannot write in {out}: "
+                f"{exc.strerror or exc}")  # a full disk, a folder gone
+        _error(f"{what}; written: {', '.join(f.name for f in done) or 'nothing'}"
+               + (f" (the earlier {', '.join(f.name for f in stale)} removed)" if stale else "")
+               + ": run brushcore converge again for the whole study")
+        return (EXIT_INTERRUPTED if isinstance(exc, KeyboardInterrupt) else EXIT_TERMINATED
+                if isinstance(exc, Terminated) else 1)
+    finally:
+        on_sigterm(previous)
     mixed = mixed_runs(sweep)
     if mixed:  # a study across code versions or settings: said, not hidden in an attribute
         warnings.warn(f"the curves differ in {mixed}: their differences join the mesh's "
                       "in the study; run them again with one brushcore and settings", stacklevel=1)
     grids = [int(g) for g in sweep[GRID_DIM].values]
-    files = [out / name for name in ("convergence.nc", "convergence.csv", "convergence.md",
-                                     "convergence.png")]
-    study = ", ".join(map(str, files))
-    # per case, not over the sweep: three cases on three grids make no study
-    runs = sweep["adhesive_force_normalized"].notnull().sum(GRID_DIM)
-    if int(runs.max()) < 3:
-        stale = [f for f in files if f.exists()]  # an earlier study: not of this sweep.nc
-        for f in stale:
-            f.unlink()
+    if not studied:
         print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}; no "
               "convergence study: it needs a case run on three or more grids"
               + (f" (removed the earlier curves' {', '.join(f.name for f in stale)})"
                  if stale else ""))
         return 0
-    write_study(sweep, out / "convergence.nc", out / "convergence.csv", out / "convergence.md",
-                (out / "convergence.png",))
+    study = ", ".join(map(str, files))
     # the table; its legend (a paragraph on every column and flag) stays in the file
     print((out / "convergence.md").read_text().split("\n\n", 1)[-1], end="")
     print(f"{len(args.curves)} curves on grids {grids} -> {out / 'sweep.nc'}, {study} "

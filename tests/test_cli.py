@@ -11,6 +11,7 @@ import subprocess
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -524,6 +525,24 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
     assert main(["converge", *paths, str(other), "--out-dir", str(tmp_path / "h")]) == 2
     assert re.search(r"disagree on h: 1\.0 in .*, 0\.5 in .*run every grid with the same "
                      r"--e-star, --dgamma and --h", capsys.readouterr().err)
+    # Ctrl-C while the study is written, over an earlier study: said what the
+    # folder holds (it said "nothing written" beside the earlier curves' study)
+    from brushcore.data import convergence_report
+
+    assert main(["converge", *paths, "--out-dir", str(out)]) == 0
+    capsys.readouterr()
+
+    def cut_short(sweep, nc_path, *rest):
+        Path(nc_path).write_bytes(b"")
+        raise KeyboardInterrupt
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(convergence_report, "write_study", cut_short)
+        assert main(["converge", *paths, "--out-dir", str(out)]) == 130
+    assert ("interrupted; written: sweep.nc, convergence.nc (the earlier convergence.nc, "
+            "convergence.csv, convergence.md, convergence.png removed): run brushcore "
+            "converge again") in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["convergence.nc", "sweep.nc"]
 
 
 def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:

@@ -407,6 +407,34 @@ def test_damaged_fftw_wisdom_is_planned_afresh_not_fatal(tmp_path: Path) -> None
     assert pickle.loads(old.read_bytes()) == mended["wisdom"] and cache.exists()
 
 
+def test_a_wisdom_file_damaged_in_its_pickle_is_planned_afresh(tmp_path: Path, monkeypatch,
+                                                                capsys) -> None:
+    """A crash and resume auditor changed single bytes of the wisdom file's
+    pickle: 38 of 3,600 escaped the checksum and raised MemoryError (a length
+    byte: the command said "out of memory at --grid 64"), OverflowError or
+    ModuleNotFoundError (pickle imports what a file names) on every later run
+    on the machine.  Any such file is now warned of and planned afresh, and
+    a file that names a class is refused without importing it; a cache write
+    that fails leaves no temporary behind."""
+    import pickle
+
+    from brushcore.numerics.halfspace import convolution
+
+    monkeypatch.setenv("BRUSHCORE_WISDOM_DIR", str(tmp_path))
+    good = pickle.dumps({"wisdom": (b"x" * 64,), "sha256": "0"}, protocol=4)
+    at = good.index(b"x" * 64) - 1  # the byte length of SHORT_BINBYTES
+    huge_length = good[:at - 1] + b"B" + (2**31 - 1).to_bytes(4, "little") + good[at + 1:]
+    names_a_module = (b"\x80\x04\x95\x1a\x00\x00\x00\x00\x00\x00\x00\x8c\x0bnot_a_module"
+                      b"\x94\x8c\x01f\x94\x93\x94.")
+    for damaged in (huge_length, names_a_module, b"", b"\x00" * 40):
+        (tmp_path / convolution.WISDOM_FILE).write_bytes(damaged)
+        convolution._load_wisdom()  # no exception
+        assert "is damaged" in capsys.readouterr().err
+    (tmp_path / "blocked.bin").mkdir()  # the target a folder: the rename fails
+    convolution.save_to_cache("blocked.bin", b"data")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocked.bin", convolution.WISDOM_FILE]
+
+
 def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
     params = BrushParams(**SMALL)
     with pytest.raises(ConvergenceError) as info:

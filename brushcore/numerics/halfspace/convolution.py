@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import hashlib
+import io
 import os
 import pickle
 import sys
@@ -113,21 +114,33 @@ def _load_wisdom() -> None:
     if not path.exists():
         path = cache_dir() / OLD_WISDOM_FILE
     try:
-        with open(path, "rb") as fh:
-            stored = pickle.load(fh)
-    except (OSError, ValueError, pickle.UnpicklingError, EOFError, TypeError, AttributeError):
+        data = path.read_bytes()
+    except OSError:
         return  # no or unreadable wisdom: plan afresh
+    try:
+        stored = _PlainUnpickler(io.BytesIO(data)).load()
+    except Exception:  # noqa: BLE001 - any damage (a changed length byte: MemoryError,
+        stored = None  # OverflowError, a module name: ImportError) is planned afresh
     wisdom = stored.get("wisdom") if isinstance(stored, dict) else stored
     intact = (isinstance(wisdom, tuple) and all(isinstance(w, bytes) for w in wisdom)
               and (not isinstance(stored, dict) or stored.get("sha256") == _wisdom_digest(wisdom)))
     if not intact:
-        print(f"brushcore: FFTW wisdom in {path} is damaged (its checksum does not match); "
+        print(f"brushcore: FFTW wisdom in {path} is damaged (unreadable, or its checksum does not match); "
               "planning afresh, and the next save replaces it", file=sys.stderr, flush=True)
         return
     try:
         pyfftw.import_wisdom(wisdom)
     except (ValueError, TypeError):
         pass
+
+
+class _PlainUnpickler(pickle.Unpickler):
+    """Reads dicts, tuples, bytes and str only: the wisdom file names no
+    class, and one that does is damaged (or planted; pickle would import and
+    call what it names)."""
+
+    def find_class(self, module: str, name: str):
+        raise pickle.UnpicklingError(f"the wisdom file names {module}.{name}")
 
 
 def save_to_cache(name: str, data: bytes) -> None:
@@ -143,8 +156,9 @@ def save_to_cache(name: str, data: bytes) -> None:
             fh.flush()
             os.fsync(fh.fileno())  # a crash must not leave a renamed, half-written file
         os.replace(tmp, path)
-    except OSError:
-        pass
+    except OSError:  # a full or read-only cache: leave no temporary behind
+        with contextlib.suppress(OSError, UnboundLocalError):
+            tmp.unlink(missing_ok=True)
 
 
 def _save_wisdom() -> None:
