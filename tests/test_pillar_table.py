@@ -186,6 +186,16 @@ def test_a_table_of_ellipses_is_the_generated_brush(tmp_path: Path, layout: str,
     made, read = simulate(params), simulate(table)
     for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
         assert float(read[name]) == float(made[name]), name
+    # the file brush's shape parameter stays "disc": its curve says what the file holds
+    assert (read.attrs["shape"], read.attrs["pillar_shapes"]) == ("disc", "ellipses")
+    from brushcore.model.layout_file import pillar_shapes
+
+    mixed = _table(tmp_path, "x, y, radius, aspect, orientation\n0.3, 0.3, 0.1, 2, 0\n"
+                             "0.7, 0.7, 0.1, 1, 0\n")
+    assert pillar_shapes(mixed) == "discs and ellipses"
+    discs = save_pillar_table(generated_table(BrushParams(layout, 16, 0.01, grid)),
+                              tmp_path / "discs")
+    assert pillar_shapes(discs) == "discs" and pillar_shapes(tmp_path / "m.npy") == "as drawn"
     # the radius rule reads the semi-minor axis: r / sqrt(2)
     from brushcore.model.layout import smallest_pillar
 

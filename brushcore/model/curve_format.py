@@ -24,6 +24,7 @@ from brushcore.model import theory
 from brushcore.model.labelmap import count_touching_pairs, pillar_element_counts
 from brushcore.model.lattices import hexagonal_fill, hexagonal_lattice
 from brushcore.model.layout import random_gap, smallest_radius_elements
+from brushcore.model.layout_file import pillar_shapes
 from brushcore.model.params import BrushParams
 from brushcore.model.provenance import (code_digest, git_commit, parameter_hash,
                                         software_versions, source, version)
@@ -113,7 +114,8 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
     share an element edge (`labelmap.count_touching_pairs`: 0 but for random
     discs on grids coarser than 512, where the gap is under an element),
     hexagonal rows x columns and fill, a random layout's gap [length]
-    (`layout.random_gap`), file digest.
+    (`layout.random_gap`), a file's digest and its pillars' shapes in words
+    (`layout_file.pillar_shapes`).
 
     ``shape``, ``aspect``, ``orientation`` and ``layout_file`` themselves are
     parameters (see `BrushParams.as_attrs`); ``pillar_radius`` is the
@@ -132,6 +134,7 @@ def geometry_attrs(params: BrushParams, labels: np.ndarray) -> dict[str, float |
     if params.layout == "file":
         attrs["layout_file_sha256"] = hashlib.sha256(
             Path(params.layout_file).read_bytes()).hexdigest()
+        attrs["pillar_shapes"] = pillar_shapes(params.layout_file)  # shape says "disc"
     return attrs
 
 

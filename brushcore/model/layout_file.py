@@ -293,6 +293,19 @@ def file_layout(path: str | Path) -> str:
     return FILE_LAYOUT_PREFIX + Path(path).stem
 
 
+def pillar_shapes(path: str | Path) -> str:
+    """What a file brush's pillars are, in words, for its curve (whose
+    ``shape`` parameter stays "disc", the file's own shapes aside): "discs",
+    "ellipses" or "discs and ellipses" for a table, "as drawn" for a label
+    map or image."""
+    if not is_table(path):
+        return "as drawn"
+    table = read_pillar_table(path)
+    if not table.has_ellipses:
+        return "discs"
+    return "ellipses" if bool(np.all(table.aspects != 1.0)) else "discs and ellipses"
+
+
 def curve_layout(attrs: Mapping[str, object]) -> str:
     """The layout a curve's attributes name, a file's brush by its file
     (`file_layout`), as sweep.nc and the workflow name it."""
