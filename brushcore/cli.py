@@ -672,22 +672,31 @@ def _converge(args: argparse.Namespace) -> int:
     # run left the new sweep.nc beside the earlier curves' study, and said
     # "nothing written": a crash and resume auditor's find)
     previous = on_sigterm(terminate)
+    removed: list[Path] = []
     written = False
     try:
         for f in stale:
             f.unlink()
+            removed.append(f)
         out.mkdir(parents=True, exist_ok=True)
         write_sweep(sweep, out / "sweep.nc")
         written = True
         if studied:
             write_study(sweep, *files[:3], files[3:])
     except (OSError, KeyboardInterrupt, Terminated) as exc:
-        done = ([out / "sweep.nc"] if written else []) + [f for f in files if f.exists()]
+        # what this run wrote: the study files that stand where none stood or
+        # an earlier one was removed
+        done = ([out / "sweep.nc"] if written else []) + [
+            f for f in files if f.exists() and (f not in stale or f in removed)]
         what = ("interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated"
                 if isinstance(exc, Terminated) else f"cannot write in {out}: "
                 f"{exc.strerror or exc}")  # a full disk, a folder gone
+        kept = [f for f in stale if f not in removed]
         _error(f"{what}; written: {', '.join(f.name for f in done) or 'nothing'}"
-               + (f" (the earlier {', '.join(f.name for f in stale)} removed)" if stale else "")
+               + (f" (the earlier {', '.join(f.name for f in removed)} removed)"
+                  if removed else "")
+               + (f" (the earlier {', '.join(f.name for f in kept)} not removed: not of "
+                  "the curves given)" if kept else "")
                + ": run brushcore converge again for the whole study")
         return (EXIT_INTERRUPTED if isinstance(exc, KeyboardInterrupt) else EXIT_TERMINATED
                 if isinstance(exc, Terminated) else 1)

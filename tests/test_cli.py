@@ -543,6 +543,19 @@ def test_converge_extrapolates_curves_run_by_hand_on_three_grids(tmp_path, capsy
             "convergence.csv, convergence.md, convergence.png removed): run brushcore "
             "converge again") in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["convergence.nc", "sweep.nc"]
+    # an earlier study that cannot be removed is not called written nor removed
+    assert main(["converge", *paths, "--out-dir", str(out)]) == 0
+    capsys.readouterr()
+
+    def refused(self, missing_ok=False):
+        raise PermissionError(errno.EACCES, "Permission denied", str(self))
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Path, "unlink", refused)
+        assert main(["converge", *paths, "--out-dir", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "Permission denied; written: nothing (the earlier convergence.nc, convergence.csv, " \
+        "convergence.md, convergence.png not removed" in err, err
 
 
 def test_a_kbar_file_says_that_kbar_is_only_recorded(tmp_path) -> None:

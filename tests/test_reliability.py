@@ -422,11 +422,10 @@ def test_a_wisdom_file_damaged_in_its_pickle_is_planned_afresh(tmp_path: Path, m
 
     monkeypatch.setenv("BRUSHCORE_WISDOM_DIR", str(tmp_path))
     good = pickle.dumps({"wisdom": (b"x" * 64,), "sha256": "0"}, protocol=4)
-    at = good.index(b"x" * 64) - 1  # the byte length of SHORT_BINBYTES
-    huge_length = good[:at - 1] + b"B" + (2**31 - 1).to_bytes(4, "little") + good[at + 1:]
-    names_a_module = (b"\x80\x04\x95\x1a\x00\x00\x00\x00\x00\x00\x00\x8c\x0bnot_a_module"
-                      b"\x94\x8c\x01f\x94\x93\x94.")
-    for damaged in (huge_length, names_a_module, b"", b"\x00" * 40):
+    assert good[2:3] == b"\x95"  # FRAME and its 8-byte length
+    huge_frame = good[:3] + (2**62).to_bytes(8, "little") + good[11:]  # MemoryError before
+    names_a_module = b"cnot_a_module\nf\n."  # GLOBAL: ModuleNotFoundError before
+    for damaged in (huge_frame, names_a_module, b"", b"\x00" * 40):
         (tmp_path / convolution.WISDOM_FILE).write_bytes(damaged)
         convolution._load_wisdom()  # no exception
         assert "is damaged" in capsys.readouterr().err

@@ -384,6 +384,7 @@ def extrapolate_sweep(
         "scattered_safety_factor": opts.scattered_safety_factor,
         "trusted_order": f"[{opts.trusted_order[0]}, {opts.trusted_order[1]}]",
         "max_relative_residual": opts.max_relative_residual,
+        "steep_order": opts.steep_order,
         "min_grids": opts.min_grids,
         "under_resolved_radius_elements": UNDER_RESOLVED_RADIUS,
         **_provenance(sweep),

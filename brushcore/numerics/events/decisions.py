@@ -32,13 +32,11 @@ DECISION_SAFETY = 3.0
 DECISION_FLOOR = 0.3
 
 
-def margins(safety: float, z, zmax: float, xp, scale: float = 1.0):
+def margins(safety: float, z, zmax: float, xp):
     """Each element's margin: ``safety`` times its own error estimate plus
-    DECISION_FLOOR times the largest, times the preconditioner's ``scale``
-    (`BrushOperator.estimate_scale`: how far M^-1 r may fall short of the
-    error) (shared by `decides`, `settles` and the protocol engine's settled
-    events)."""
-    return scale * (safety * xp.abs(z) + DECISION_FLOOR * zmax)
+    DECISION_FLOOR times the largest (shared by `decides`, `settles` and
+    the protocol engine's settled events)."""
+    return safety * xp.abs(z) + DECISION_FLOOR * zmax
 
 
 def band_margin(band: float, x, xp) -> float:
@@ -46,8 +44,7 @@ def band_margin(band: float, x, xp) -> float:
     return band * float(xp.max(xp.abs(x))) if band else 0.0
 
 
-def decides(threshold: float, xp, stopped: list[float], band: float = 0.0,
-            scale: float = 1.0):
+def decides(threshold: float, xp, stopped: list[float], band: float = 0.0):
     """CG early exit for a cascade round: stop once the iterate detaches at
     least one element and every element clears the threshold by its margin
     (DECISION_SAFETY times its own error estimate plus DECISION_FLOOR times
@@ -63,11 +60,10 @@ def decides(threshold: float, xp, stopped: list[float], band: float = 0.0,
     exceeds the threshold, always runs to the tolerance, and forces recorded
     inside a cascade lie on a vertical drop).  The largest error estimate it
     stopped at is appended to ``stopped``.  Every margin also holds ``band``
-    times max|x| (`PRECISION_BAND` while the transforms are float32), and the
-    estimate parts ``scale`` times (`margins`).
+    times max|x| (`PRECISION_BAND` while the transforms are float32).
     """
     def decided(x, z, zmax: float) -> bool:
-        margin = margins(DECISION_SAFETY, z, zmax, xp, scale) + band_margin(band, x, xp)
+        margin = margins(DECISION_SAFETY, z, zmax, xp) + band_margin(band, x, xp)
         done = (bool(xp.any(x >= threshold + margin))
                 and not bool(xp.any(xp.abs(x - threshold) < margin)))
         if done:
@@ -95,8 +91,7 @@ PRECISION_BAND = 3e-5
 
 
 def settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
-             band: float = 0.0, cut: bool = True, sure_ties: bool = False,
-             scale: float = 1.0):
+             band: float = 0.0, cut: bool = True, sure_ties: bool = False):
     """Condition on CG's tolerance: no decision that the error could flip.
 
     At the tolerance CG's error is still ~rtol of the largest stress, and a
@@ -121,8 +116,7 @@ def settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
     float32 and 5.4e-7 in double, within CG's error of each other, put random
     1620 at kbar 1e-5 (512^2) on its other branch on some FFTW plans, W 3.4e-4
     off exact mode); without, a tie stands as solved (the mirror images of a
-    regular brush, run in double, are ties to round-off).  ``scale`` as in
-    `decides`.
+    regular brush, run in double, are ties to round-off).
     """
     def clear(x, margin) -> bool:
         verdict = True
@@ -140,7 +134,7 @@ def settles(threshold: float | None, tie: float, xp, verdicts: list[bool],
         return verdict
 
     def settled(x, z, zmax: float) -> bool:
-        margin = margins(SETTLE_SAFETY, z, zmax, xp, scale)
+        margin = margins(SETTLE_SAFETY, z, zmax, xp)
         verdicts.append(clear(x, margin + band_margin(band, x, xp)))
         return verdicts[-1] or (band > 0.0 and clear(x, margin))
     return settled

@@ -248,8 +248,7 @@ class _Engine:
         def settled(band: float):
             if threshold is None or not self.options.settle_decisions:
                 return None
-            return settles(threshold, 0.0, xp, verdicts, band, cut=False,
-                           scale=op.estimate_scale)
+            return settles(threshold, 0.0, xp, verdicts, band, cut=False)
 
         refine = op.can_refine  # float32 transforms: a band more, then double
         try:
@@ -537,7 +536,7 @@ class _Engine:
             if not self.options.settle_decisions or rtol <= SETTLE_FLOOR:
                 return t, reach, rtol
             e = xp.abs(err) + t * xp.abs(err1)  # of sigma at t
-            margin = margins(SETTLE_SAFETY, e, float(xp.max(e)), xp, self.op.estimate_scale)
+            margin = margins(SETTLE_SAFETY, e, float(xp.max(e)), xp)
             margin = margin + band_margin(band, sig + t * sig1, xp)
             margin = margin + rate * float(margin[first] / rate[first])  # t's own error
             # float32's ties are coincidences: each inside the tie by its margin

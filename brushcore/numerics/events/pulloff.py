@@ -189,10 +189,9 @@ def _solve_stresses(op: BrushOperator, options: SolverOptions, x0: np.ndarray,
     sure = op.can_refine  # float32 transforms: ties are coincidences (`settles`)
 
     def conditions(band: float) -> tuple:
-        return ((decides(threshold, xp, stopped, band, op.estimate_scale)
+        return ((decides(threshold, xp, stopped, band)
                  if threshold is not None and options.early_decisions else None),
-                settles(threshold, tie, xp, verdicts, band, sure_ties=sure,
-                        scale=op.estimate_scale)
+                settles(threshold, tie, xp, verdicts, band, sure_ties=sure)
                 if options.settle_decisions else None)
     band = PRECISION_BAND if op.can_refine else 0.0  # float32 transforms
     floor = SolverOptions.MIXED_MIN_RTOL if op.can_refine else SETTLE_FLOOR

@@ -125,7 +125,8 @@ def _load_wisdom() -> None:
     intact = (isinstance(wisdom, tuple) and all(isinstance(w, bytes) for w in wisdom)
               and (not isinstance(stored, dict) or stored.get("sha256") == _wisdom_digest(wisdom)))
     if not intact:
-        print(f"brushcore: FFTW wisdom in {path} is damaged (unreadable, or its checksum does not match); "
+        print(f"brushcore: FFTW wisdom in {path} is damaged (unreadable, or its checksum "
+              "does not match); "
               "planning afresh, and the next save replaces it", file=sys.stderr, flush=True)
         return
     try:
@@ -148,16 +149,16 @@ def save_to_cache(name: str, data: bytes) -> None:
     concurrent job never reads half a file); a read-only cache is skipped,
     which only costs the work of finding the data again next time."""
     path = cache_dir() / name
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
         with open(tmp, "wb") as fh:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())  # a crash must not leave a renamed, half-written file
         os.replace(tmp, path)
     except OSError:  # a full or read-only cache: leave no temporary behind
-        with contextlib.suppress(OSError, UnboundLocalError):
+        with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
 
 

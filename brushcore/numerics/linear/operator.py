@@ -26,10 +26,6 @@ from brushcore.numerics.linear.pillar_solve import PillarSolver
 from brushcore.numerics.linear.tiles import TileCoarse
 from brushcore.numerics.halfspace.kernel import self_compliance
 
-#: `BrushOperator.estimate_scale` on the Sherman-Morrison diagonal (pillars
-#: too large even for the tiles).
-DIAGONAL_ESTIMATE_SCALE = 1.0
-
 
 class BrushOperator:
     """Matrix-free A = P_C (K + S) P_C over the attached pillar elements.
@@ -146,16 +142,6 @@ class BrushOperator:
         if self.block is not None:
             return "blocks"
         return "tiles" if self.tiles is not None else "diagonal"
-
-    @property
-    def estimate_scale(self) -> float:
-        """How far CG's error estimate M^-1 r may fall short of the error on
-        this preconditioner: the factor on every decision margin's estimate
-        parts (`brushcore.numerics.events.decisions.margins`); 1 on the
-        blocks, whose estimate is the error within ~30 %."""
-        if self.block is not None:
-            return 1.0
-        return TileCoarse.ESTIMATE_SCALE if self.tiles is not None else DIAGONAL_ESTIMATE_SCALE
 
     @property
     def size(self) -> int:

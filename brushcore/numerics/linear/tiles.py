@@ -85,9 +85,6 @@ class TileCoarse:
     STACK_PER_CELL = 5.0
     #: Refresh a pillar's inverse once its attached count moved by this fraction.
     REFRESH = 0.1
-    #: How far CG's error estimate M^-1 r falls short of the error on the
-    #: tiles (`BrushOperator.estimate_scale`).
-    ESTIMATE_SCALE = 1.0
     #: Rows of K gathered at once during assembly (bounds the temporary to ~100 MB).
     CHUNK_ELEMENTS = 12_000_000
 
