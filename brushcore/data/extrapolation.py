@@ -58,8 +58,9 @@ Method
     kept three-grid bands with observed p in (2, 3] held the limit in 59 %,
     in (3, 4] in 20 %, a quarter of the fits kept; with the floor 93 % of
     all kept bands against 82 %, every fit still kept; real curves do it:
-    regular 16 rigid on 256/384/768, p 3.7, 1.5524 +- 0.0121 where 1024^2
-    gives 1.5431; +- 0.0222 with the floor).
+    regular 16 rigid on 256/384/768, p 3.7, 1.5524 +- 0.0121 where fits
+    that include 1024^2 put the limit at 1.49-1.54; +- 0.0222 with the floor).
+    It applies to four or more grids too, where such orders are rarer.
   The GCI is returned for every fit (``gci``), and the half range of the raw
   values, (max f - min f)/2, always (``spread``): the uncertainty Stern et
   al. (2001) use for oscillatory convergence, where no extrapolation exists.
