@@ -327,7 +327,9 @@ def extrapolate_sweep(
         out[f"{q}_{ORDER_FLAG}"] = untrusted.astype(np.int8).assign_attrs(
             long_name=f"observed order of {q} outside the trusted range "
                       f"{list(opts.trusted_order)} and no other flag raised, so its error "
-                      f"carries Fs {opts.scattered_safety_factor:g} (1 = yes)", units="1",
+                      f"carries Fs {opts.scattered_safety_factor:g}, and above order "
+                      f"{opts.steep_order:g} is at least the values' range (1 = yes)",
+            units="1",
             flag_values=np.array([0, 1], dtype=np.int8), flag_meanings="no yes")
         out[q] = raw.copy()
         # {q}_finest comes from here: NaN on a grid where the other quantity
