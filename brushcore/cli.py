@@ -688,9 +688,12 @@ def _converge(args: argparse.Namespace) -> int:
         # an earlier one was removed
         done = ([out / "sweep.nc"] if written else []) + [
             f for f in files if f.exists() and (f not in stale or f in removed)]
-        what = ("interrupted" if isinstance(exc, KeyboardInterrupt) else "terminated"
-                if isinstance(exc, Terminated) else f"cannot write in {out}: "
-                f"{exc.strerror or exc}")  # a full disk, a folder gone
+        if isinstance(exc, KeyboardInterrupt):
+            what, status = "interrupted", EXIT_INTERRUPTED
+        elif isinstance(exc, Terminated):
+            what, status = "terminated", EXIT_TERMINATED
+        else:  # a full disk, a folder gone
+            what, status = f"cannot write in {out}: {exc.strerror or exc}", 1
         kept = [f for f in stale if f not in removed]
         _error(f"{what}; written: {', '.join(f.name for f in done) or 'nothing'}"
                + (f" (the earlier {', '.join(f.name for f in removed)} removed)"
@@ -698,8 +701,7 @@ def _converge(args: argparse.Namespace) -> int:
                + (f" (the earlier {', '.join(f.name for f in kept)} not removed: not of "
                   "the curves given)" if kept else "")
                + ": run brushcore converge again for the whole study")
-        return (EXIT_INTERRUPTED if isinstance(exc, KeyboardInterrupt) else EXIT_TERMINATED
-                if isinstance(exc, Terminated) else 1)
+        return status
     finally:
         on_sigterm(previous)
     mixed = mixed_runs(sweep)

@@ -126,8 +126,8 @@ def _load_wisdom() -> None:
               and (not isinstance(stored, dict) or stored.get("sha256") == _wisdom_digest(wisdom)))
     if not intact:
         print(f"brushcore: FFTW wisdom in {path} is damaged (unreadable, or its checksum "
-              "does not match); "
-              "planning afresh, and the next save replaces it", file=sys.stderr, flush=True)
+              "does not match); planning afresh, and the next save replaces it",
+              file=sys.stderr, flush=True)
         return
     try:
         pyfftw.import_wisdom(wisdom)
