@@ -345,10 +345,10 @@ def test_allow_coarse_runs_what_is_refused_by_default(tmp_path):
 
 def test_progress_in_a_log_has_no_carriage_returns(tmp_path):
     """stderr to a file (a batch log) gets whole lines, never a rewritten one."""
-    from brushcore.cli import _Progress
+    from brushcore.cli.output import Progress
 
     log = open(tmp_path / "log", "w+")
-    progress = _Progress(log)
+    progress = Progress(log)
     progress.last -= 60  # as if the last line was a minute ago
     progress(3, 50, 100)
     progress.end_line()
@@ -689,13 +689,13 @@ def test_converge_refines_a_map_drawn_once_a_grid(tmp_path, capsys) -> None:
 def test_a_warning_that_names_a_parameter_names_its_flag() -> None:
     """The input readers' warnings open with the parameter ("heights FILE:");
     the command prints the flag a user typed, and leaves other text alone."""
-    from brushcore.cli import _cli_warning
+    from brushcore.cli.output import cli_warning
 
-    assert _cli_warning(UserWarning("heights h.txt: line 1 '0,1' is read as values")) == \
+    assert cli_warning(UserWarning("heights h.txt: line 1 '0,1' is read as values")) == \
         "brushcore: warning: --heights h.txt: line 1 '0,1' is read as values\n"
-    assert _cli_warning("the protocol never retracts") == \
+    assert cli_warning("the protocol never retracts") == \
         "brushcore: warning: the protocol never retracts\n"
-    assert _cli_warning("protocol ends early") == "brushcore: warning: protocol ends early\n"
+    assert cli_warning("protocol ends early") == "brushcore: warning: protocol ends early\n"
 
 
 def test_input_files_of_an_unknown_key_are_refused_as_bad_input(tmp_path) -> None:
