@@ -434,6 +434,26 @@ def test_a_wisdom_file_damaged_in_its_pickle_is_planned_afresh(tmp_path: Path, m
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blocked.bin", convolution.WISDOM_FILE]
 
 
+def test_an_unusable_cache_is_said_once(tmp_path: Path, monkeypatch, capsys) -> None:
+    """A cache that cannot be written (here a file where its folder should
+    be) was silent: every run then plans FFTW afresh and jobs plan without
+    the machine's lock.  It is said once per process, naming the folder and
+    the variable that moves it, and the save still fails quietly."""
+    from brushcore.numerics.halfspace import convolution
+
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("")
+    monkeypatch.setenv("BRUSHCORE_WISDOM_DIR", str(blocked))
+    monkeypatch.setattr(convolution, "_UNUSABLE_SAID", set())
+    convolution.save_to_cache("a.bin", b"data")
+    convolution.save_to_cache("b.bin", b"data")
+    err = capsys.readouterr().err
+    assert err.count(f"cannot write the cache {blocked}") == 1, err
+    assert "BRUSHCORE_WISDOM_DIR" in err
+    monkeypatch.setenv("BRUSHCORE_WISDOM_DIR", str(tmp_path))  # a writable one: silent
+    convolution.save_to_cache("c.bin", b"data")
+    assert capsys.readouterr().err == "" and (tmp_path / "c.bin").read_bytes() == b"data"
+
 def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
     params = BrushParams(**SMALL)
     with pytest.raises(ConvergenceError) as info:

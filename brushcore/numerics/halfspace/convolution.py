@@ -157,9 +157,27 @@ def save_to_cache(name: str, data: bytes) -> None:
             fh.flush()
             os.fsync(fh.fileno())  # a crash must not leave a renamed, half-written file
         os.replace(tmp, path)
-    except OSError:  # a full or read-only cache: leave no temporary behind
+    except OSError as exc:  # a full or read-only cache: leave no temporary behind
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
+        _note_unusable_cache(path.parent, exc)
+
+
+#: Cache folders already said to be unusable (once per process, not per save).
+_UNUSABLE_SAID: set[Path] = set()
+
+
+def _note_unusable_cache(folder: Path, exc: OSError) -> None:
+    """Say once that the cache cannot be written: every run then plans its
+    FFTs afresh (seconds at 512^2, minutes at 2048^2) and concurrent jobs
+    plan without the machine's lock, so they may round differently."""
+    if folder in _UNUSABLE_SAID:
+        return
+    _UNUSABLE_SAID.add(folder)
+    # a note, not a warning: warnings as errors must not fail the run
+    print(f"brushcore: cannot write the cache {folder} ({exc.strerror or exc}): FFT plans "
+          "are made afresh in every run and not shared between jobs; set "
+          "BRUSHCORE_WISDOM_DIR to a writable folder", file=sys.stderr, flush=True)
 
 
 def _save_wisdom() -> None:
