@@ -1535,3 +1535,42 @@ def test_a_tensile_target_beyond_the_pull_off_is_said():
     # a leg that starts apart has nothing to let go of: not said (a diff reviewer's find)
     _, said = run(-2.0, (Waypoint("separation"), Waypoint("force", 0.05)))
     assert not any("was not reached" in w for w in said), said
+
+
+def test_the_soft_limit_line_is_drawn_only_where_springs_take_the_stretch():
+    """The rough figure's elastic-foundation line N^(1/4) G(S d_K / lambda)
+    holds where a pillar's let-go stretch lambda dwarfs the half space's own
+    displacement at F_ad (0.72-0.77 d_K): regular 256 at kbar 0.01 (lambda
+    0.61 d_K) lay 1.6x below it at S = 0 and 3.5x above it at S = 1 (a
+    review helper's check of the shipped rough config), and the line was
+    drawn for every kbar <= 0.01 whatever N.  Now at lambda >= 3 d_K only:
+    kbar 1e-3 (lambda 6.1) is drawn, 0.01 and 0.455 are not, for N = 256;
+    for N = 16, kbar 0.01 (lambda 4.9) is drawn."""
+    from brushcore.data import figures
+    from brushcore.data.figures.rough import MIN_FOUNDATION_STRETCH
+
+    def sweep(n_pillars: int) -> xr.Dataset:
+        kbars = [0.001, 0.01, 0.455, math.inf]
+        rough = [0.0, 0.3, 1.0]
+        shape = (1, 1, len(kbars), 1, len(rough), 1, 1)
+        dims = ("layout", "n_pillars", "kbar", "seed", "roughness", "preload", "kbar_spread")
+        values = np.linspace(3.0, 1.0, np.prod(shape)).reshape(shape)
+        return xr.Dataset(
+            {"adhesive_force_normalized": (dims, values),
+             "phi_actual": (dims, np.full(shape, 0.12))},
+            coords={"layout": ["regular"], "n_pillars": [n_pillars], "kbar": kbars,
+                    "seed": [0], "roughness": rough, "preload": [0.5], "kbar_spread": [0.0]},
+            attrs={"phi": 0.12})
+
+    for n_pillars, drawn in ((256, {0.001}), (16, {0.001, 0.01})):
+        fig = figures.rough_roughness(sweep(n_pillars), "regular", n_pillars)
+        ax = fig.axes[0]
+        dashed = {line.get_color() for line in ax.lines  # not the legend's empty key
+                  if line.get_linestyle() == "--" and len(line.get_xdata())}
+        kbar_of = {c.get_label(): c for c in ax.containers}  # errorbars, by their legend
+        colors = {float(label.split("= ")[1].replace("$", "").replace("rigid", "inf")):
+                  container.lines[0].get_color() for label, container in kbar_of.items()}
+        want = {colors[k] for k in drawn}
+        assert dashed == want, (n_pillars, dashed, colors)
+        for k in drawn:
+            assert float(theory.foundation_stretch(n_pillars, 0.12, k)) >= MIN_FOUNDATION_STRETCH
