@@ -135,7 +135,7 @@ STRICT_CASES = {
     "regular rigid": BrushParams("regular", 16, math.inf, 64),
     "regular soft": BrushParams("regular", 16, 0.455, 96),
     "random": BrushParams("random", 12, 1.0, 64, seed=1),
-    # soft enough for the far-field warm start (`BlockInverse._far_response`)
+    # soft enough for the far-field warm start (`WarmStart._far_response`)
     "random soft": BrushParams("random", 12, 1e-4, 64, seed=1),
     "rough preloaded": BrushParams("regular", 16, 0.455, 64, roughness=0.5, preload=1.0,
                                    seed=2),

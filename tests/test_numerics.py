@@ -198,7 +198,7 @@ def test_block_preconditioner_is_exact_block_inverse_after_downdates(packed, see
 @settings(max_examples=10, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
 def test_one_slot_downdates_and_reach_follow_the_exact_inverses(seed):
-    """Elements detached one at a time (`_remove_slots`' in-place one-slot
+    """Elements detached one at a time (`remove_slots`' in-place one-slot
     path, most cascade rounds) leave each pillar's exact block inverse, as
     the many-slot path above does, and `reach()` is sum |G| of the blocks
     as they are now (it is brought up to date lazily)."""
@@ -224,7 +224,8 @@ def test_single_precision_blocks_round_at_float32_with_exact_pillar_totals(packe
     1) and float32 round-off alone gets wrong by a median 20 % (3.3 % at
     the least over 400 seeds); its `refined` solves apply the float64
     blocks."""
-    from brushcore.numerics.linear.precondition import BlockInverse, _stack_times
+    from brushcore.numerics.linear.precondition import BlockInverse
+    from brushcore.numerics.linear.stacks import stack_times
 
     rng, labels, _ = _random_problem(seed, n=12)
     compliance = np.full(3, 1e5)  # h^2 / k: very soft springs
@@ -257,8 +258,8 @@ def test_single_precision_blocks_round_at_float32_with_exact_pillar_totals(packe
     block = op.block
     w = np.zeros((block.inv.shape[0], block.m))
     w.ravel()[op._bpos] = r
-    plain = _stack_times(block.inv.astype(np.float32), False, w.astype(np.float32),
-                         block._remaining).sum(axis=1)
+    plain = stack_times(block.inv.astype(np.float32), False, w.astype(np.float32),
+                        block._remaining).sum(axis=1)
     assert np.abs(plain - totals).max() > 1e-3 * np.abs(totals).max()
 
 
@@ -349,14 +350,14 @@ def test_detach_warm_start_is_the_local_solve_and_its_neighbours_first_order(see
     exactly with the others held (B_p' y_p = (B_p x_p) on its remaining
     elements), and each other pillar's first-order answer to that change,
     y_q = x_q - B_q^-1 K_qp (y_p - x_p)."""
-    from brushcore.numerics.linear.precondition import BlockInverse
+    from brushcore.numerics.linear.warm_start import WarmStart
 
     rng, labels, compliance = _random_problem(seed)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(BlockInverse, "NEIGHBOUR_PAIRS_PER_ELEMENT", 1e9)  # all pillars
-        mp.setattr(BlockInverse, "FAR_RESPONSE_MAX_COUPLING", 0.0)  # its own test below
+        mp.setattr(WarmStart, "NEIGHBOUR_PAIRS_PER_ELEMENT", 1e9)  # all pillars
+        mp.setattr(WarmStart, "FAR_RESPONSE_MAX_COUPLING", 0.0)  # its own test below
         op = BrushOperator(Convolver(10), labels, compliance, 1.0, 1.0, coarse=False)
-    assert all(len(near) == 2 for near in op.block._neighbours)
+    assert all(len(near) == 2 for near in op.block.warm_start.neighbours)
     x = rng.uniform(0.5, 1.5, op.size)
     p = op.pl[0]
     drop = (op.pl == p) & (rng.random(op.size) < 0.5)
@@ -386,15 +387,15 @@ def test_detach_bookkeeping_is_what_a_fresh_count_gives(seed):
     """After detachments the operator's index arrays, cut down by the mask
     (`BrushOperator._update`), equal those recomputed from `attached`, and
     the neighbour coefficients sliced from a pillar's cached block
-    (`BlockInverse._near_block`) equal `_coefficients` bit for bit, with
-    at most NEAR_BLOCKS_KEPT blocks kept."""
-    from brushcore.numerics.linear.precondition import BlockInverse
+    (`WarmStart._near_block`) equal `BlockInverse._coefficients` bit for
+    bit, with at most NEAR_BLOCKS_KEPT blocks kept."""
+    from brushcore.numerics.linear.warm_start import WarmStart
 
     rng, labels, compliance = _random_problem(seed, n=16, n_pillars=8)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(BlockInverse, "NEIGHBOUR_PAIRS_PER_ELEMENT", 1e9)  # all pillars
+        mp.setattr(WarmStart, "NEIGHBOUR_PAIRS_PER_ELEMENT", 1e9)  # all pillars
         op = BrushOperator(Convolver(16), labels, compliance, 1.0, 1.0, coarse=False)
-    block = op.block
+    block, warm = op.block, op.block.warm_start
     for _ in range(3):
         drop = rng.random(op.size) < 0.2
         drop[0] = False
@@ -404,18 +405,18 @@ def test_detach_bookkeeping_is_what_a_fresh_count_gives(seed):
         for got, fresh in zip(cut, (op.idx, op._bpos, op.pl, op.counts)):
             assert np.array_equal(got, fresh)
     for p in range(block.inv.shape[0]):
-        cached, first_row = block._near_block(p)
+        cached, first_row = warm._near_block(p)
         cols = np.flatnonzero(block._live[p])
-        for q in block._neighbours[p]:
+        for q in warm.neighbours[p]:
             rows = np.flatnonzero(block._live[q])
             assert np.array_equal(cached[np.ix_(first_row[q] + rows, cols)],
                                   block._coefficients(q, rows, p, cols))
-        assert len(block._near_blocks) <= BlockInverse.NEAR_BLOCKS_KEPT
-        assert next(reversed(block._near_blocks)) == p  # the latest is kept
+        assert len(warm._near_blocks) <= WarmStart.NEAR_BLOCKS_KEPT
+        assert next(reversed(warm._near_blocks)) == p  # the latest is kept
 
 
 def _far_response_error(mirrored: bool, distance: float, compliance: float) -> np.ndarray:
-    """Largest relative error of `BlockInverse._far_response` against the
+    """Largest relative error of `WarmStart._far_response` against the
     exact first-order answer G_q K_qp dsigma_p, for two pillars at
     ``distance`` (in y and in x) from a changed pillar of radius 4.5 h."""
     from brushcore.numerics.linear.precondition import BlockInverse
@@ -430,12 +431,13 @@ def _far_response_error(mirrored: bool, distance: float, compliance: float) -> n
     elements = np.flatnonzero(flat >= 0)
     block = BlockInverse(elements, flat[elements], n, np.full(3, compliance), 1.0, 1.0,
                          coarse=False, mirrored=mirrored)
-    if not block._far:  # the rigid pillars couple more than the warm start allows
-        block._tilt_basis, block._tilt = block._tilts(np.bincount(flat[elements]))
+    warm = block.warm_start
+    if not warm.far:  # the rigid pillars couple more than the warm start allows
+        warm.tilt_basis, warm.tilt = warm._tilts(np.bincount(flat[elements]))
     cols = np.flatnonzero(block._live[0])
     change = np.random.default_rng(0).uniform(-1.0, 2.0, cols.size)
     block._work[...] = 0.0
-    block._far_response([(0, cols, change, [0], None)])
+    warm._far_response([(0, cols, change, [0], None)])
     errors = []
     for q in (1, 2):
         rows = np.flatnonzero(block._live[q])

@@ -36,7 +36,7 @@ def test_products_over_the_live_pillars_are_the_whole_products(m):
     """Skipping the pillars that have let go (zero blocks) gives the whole
     stack's product bit for bit, on any thread count and however the live
     pillars are split into runs; small blocks take the whole product."""
-    from brushcore.numerics.linear.precondition import RUNS_MIN_BLOCK, _live_runs
+    from brushcore.numerics.linear.stacks import RUNS_MIN_BLOCK, live_runs
 
     rng = np.random.default_rng(m)
     for trial in range(40):
@@ -45,7 +45,7 @@ def test_products_over_the_live_pillars_are_the_whole_products(m):
         remaining = rng.integers(0, 3, size=n) * (rng.random(n) < rng.random())
         a[remaining == 0] = 0.0
         b = rng.normal(size=(n, m, 1)).astype(a.dtype)
-        runs = _live_runs(a, remaining)
+        runs = live_runs(a, remaining)
         if m < RUNS_MIN_BLOCK or remaining.all():
             assert runs is None
         else:
@@ -64,14 +64,14 @@ def test_packed_products_are_scipys_spmv_on_any_thread_count(dtype):
     the dense symmetric product to round-off, and zero off ``which``."""
     from scipy.linalg import blas
 
-    from brushcore.numerics.linear.precondition import _pack_index
+    from brushcore.numerics.linear.stacks import pack_index
     from brushcore.numerics.platform.spmv import packed_products
 
     rng = np.random.default_rng(5)
     m, n_items = 41, 9
     dense = rng.standard_normal((n_items, m, m))
     dense = (dense + dense.transpose(0, 2, 1)).astype(dtype)
-    stack = np.stack([d.ravel()[_pack_index(m)] for d in dense])
+    stack = np.stack([d.ravel()[pack_index(m)] for d in dense])
     w = rng.standard_normal((n_items, m)).astype(dtype)
     which = np.array([0, 2, 3, 7, 8])
     spmv = blas.sspmv if dtype == np.float32 else blas.dspmv

@@ -1,6 +1,6 @@
 """Boussinesq fields of multipole sources at pillar centroids (pure functions).
 
-The far-field warm start (`brushcore.numerics.linear.precondition.BlockInverse`)
+The far-field warm start (`brushcore.numerics.linear.warm_start.WarmStart`)
 needs, at each pillar's centroid, the surface displacement caused by stress
 changes elsewhere, with its gradient and Hessian.  A change of moments M0
 (its total) and M1 (its first moment about the source's centroid), in

@@ -12,7 +12,7 @@ where the work happens:
 - a detachment downdates every touched pillar in one batched Schur
   complement (a regular brush's event touches many pillars at once, and a
   Python loop over them cost more than the downdates on a card), and on a
-  card the neighbours' first-order warm start is left to CG (see
+  card the other pillars' warm start (`WarmStart`) is left to CG (see
   ``respond``);
 - the coarse matrix E is inverted explicitly (the array API has no
   triangular solve) and applied as a matrix-vector product;
@@ -33,6 +33,7 @@ import numpy as np
 from brushcore.numerics.platform.backend import Backend
 from brushcore.numerics.halfspace.kernel import love_coefficient
 from brushcore.numerics.linear.precondition import BlockInverse
+from brushcore.numerics.linear.warm_start import WarmStart
 
 #: Fraction of the device's free memory the stacks may take: the FFT
 #: buffers, cuFFT work areas and CG vectors need the rest.
@@ -81,8 +82,8 @@ class DeviceBlocks(BlockInverse):
         # a smaller card takes smaller batches: their temporaries stay beside the stack
         self._chunk_bytes = min(self.DOWNDATE_CHUNK_BYTES,
                                 DOWNDATE_MEMORY_FRACTION * be.free_memory())
-        # The neighbours' first-order response to a detachment
-        # (`BlockInverse._neighbour_response`, `_far_response`) saves
+        # The other pillars' response to a detachment (`WarmStart`: the
+        # neighbours' first order, the far field's warm start) saves
         # applications where one costs more than its host-side coefficient
         # lookups.  On a card it does not: 32 ms a detachment against 1.2 ms
         # an application, 22 of the 43 s of 16 x 16 at kbar 0.455 on 1024^2
@@ -93,12 +94,12 @@ class DeviceBlocks(BlockInverse):
         self.factorisations = 0
         self.interacting = 1 < n_pillars <= self.MAX_INTERACTION
         self.coarse = coarse and self.interacting and n_pillars <= self.MAX_COARSE
+        self.warm_start = None  # below: `_refresh_rows` has no tilts to update yet
         if self.interacting:
             r, r_near = self._interaction(counts)
             self._r, self._r_near = be.asarray(r), be.asarray(r_near)
             self._z = xp.zeros((n_pillars, self.m), dtype=xp.float64)
             self._reach = xp.zeros((n_pillars, self.m), dtype=xp.float64)
-            self._far = False  # its tilts come with `_setup_far`, below
             # a chunk at a time: abs() of the whole stack would double the peak
             # that `fits_device` budgets for
             for chunk in self._chunks(np.arange(n_pillars)):
@@ -108,12 +109,8 @@ class DeviceBlocks(BlockInverse):
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
         if self.coarse:
             self._factorise()
-        self._neighbours = self._near_pillars(counts, n) if self.interacting else None
-        self._near_blocks = {}
-        if self.respond:
-            self._setup_far(counts)
-        else:  # its tilts serve the warm start alone
-            self._far = False
+        if self.interacting and self.respond:
+            self.warm_start = WarmStart(self, counts, n)
 
     def _coefficient_table(self, off: np.ndarray, h: float, e_star: float) -> np.ndarray:
         """`BlockInverse._coefficient_table` evaluated on the device (n^2
@@ -193,7 +190,7 @@ class DeviceBlocks(BlockInverse):
         touched = np.unique(pil)
         lost = np.bincount(pil, minlength=self._remaining.size)
         self._remaining -= lost
-        respond = stress is not None and self._neighbours is not None and self.respond
+        respond = stress is not None and self.warm_start is not None
         live_before = self._live[touched].copy() if respond else None
         self._live[pil, slot] = False
         before = [xp.asarray(self._row(int(p)), copy=True) for p in touched] if respond else None
@@ -217,7 +214,7 @@ class DeviceBlocks(BlockInverse):
         if stress is None:
             return None
         if respond:
-            self._respond(touched, live_before, before)
+            self.warm_start.respond(touched, live_before, before)
         work = self._work
         out = work[attached_pos]
         work[...] = 0.0
@@ -231,10 +228,10 @@ class DeviceBlocks(BlockInverse):
     def _downdate(self, pillars: np.ndarray, gone: np.ndarray, valid: np.ndarray,
                   with_work: bool) -> None:
         """Remove slots ``gone`` (t, k; where ``valid``) from the touched
-        pillars' inverses in one batched Schur complement, as `_remove_slots`
-        does per pillar; with the stresses in `_work`, their exact local
-        response too.  Padding slots enter as identity rows, so they change
-        nothing."""
+        pillars' inverses in one batched Schur complement, as
+        `brushcore.numerics.linear.stacks.remove_slots` does per pillar;
+        with the stresses in `_work`, their exact local response too.
+        Padding slots enter as identity rows, so they change nothing."""
         xp, be, m = self.backend.xp, self.backend, self.m
         t, k = gone.shape
         p = be.asarray(pillars.astype(np.int64))
@@ -308,8 +305,8 @@ class DeviceBlocks(BlockInverse):
         xp, be = self.backend.xp, self.backend
         be.put(self._z, p, xp.sum(g, axis=2))
         be.put(self._reach, p, xp.sum(xp.abs(g), axis=2))
-        if self._far:
-            be.put(self._tilt, p, g @ xp.take(self._tilt_basis, p, axis=0))
+        if self.warm_start is not None:
+            self.warm_start.refresh(p, g)
 
     def _note_coarse_drift(self, touched: np.ndarray) -> None:
         """The coarse factor's drift check (`BlockInverse._note_drift`) for the touched pillars."""

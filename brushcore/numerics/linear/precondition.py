@@ -26,47 +26,24 @@ by pillar without changing their outcome.
 
 A detachment's warm start uses the same blocks: the pillar that lost
 elements is solved exactly with the others held (the downdate's Schur
-complement), its nearest pillars add their first-order response to
-that change from direct sums (`_neighbour_response`), and, where the
-pillars couple weakly, every other pillar adds its response to the
-multipole expansion of the changes' field (`_far_response`).
+complement, `detach`), and the other pillars' answer to that change is
+estimated by the `WarmStart` the blocks own
+(`brushcore.numerics.linear.warm_start`).  The operations on the stacked
+inverses that know nothing of the geometry (the downdate of one block,
+packed storage, the block-diagonal product) are in
+`brushcore.numerics.linear.stacks`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.linalg import blas
 
 from brushcore.numerics.platform.backend import CPU
 from brushcore.numerics.halfspace.farfield import FarFieldBound, near_influence
 from brushcore.numerics.halfspace.kernel import love_coefficient, pillar_influence
-from brushcore.numerics.halfspace.multipole import field_terms
-from brushcore.numerics.platform.spmv import packed_products
-from brushcore.numerics.platform.threads import stacked_matmul
-
-
-def _remove_slots(g: np.ndarray, gone: np.ndarray, values: np.ndarray | None = None
-                  ) -> np.ndarray | None:
-    """Remove slots ``gone`` from the inverse g of a symmetric block, in place:
-    g - g[:, D] g[D, D]^-1 g[D, :], the inverse of the block without them
-    (zero rows and columns at D).  With ``values`` on D, also return
-    g[:, D] g[D, D]^-1 values (from the same solve), what a vector g b loses
-    with them; else None."""
-    cols = g[:, gone]
-    rhs = cols.T if values is None else np.column_stack([cols.T, values])
-    x = np.linalg.solve(g[np.ix_(gone, gone)], rhs)
-    if gone.size == 1 and g.dtype == np.float64:
-        # One slot (most cascade rounds): an outer product, applied in place
-        # (g^T is Fortran-ordered) without the m x m temporary: ~4x faster at
-        # m = 495.  With no sum to order, gemm gives the same numbers
-        # (blas dger does not: it fuses the product into the update).
-        blas.dgemm(-1.0, x[:, : g.shape[0]].T, cols.T, 1.0, g.T, overwrite_c=True)
-    else:
-        g -= cols @ x[:, : g.shape[0]]
-    g[gone, :] = 0.0  # exact in exact arithmetic; remove round-off
-    g[:, gone] = 0.0
-    return None if values is None else cols @ x[:, g.shape[0]]
+from brushcore.numerics.linear.stacks import pack_index, remove_slots, stack_times
+from brushcore.numerics.linear.warm_start import WarmStart
 
 
 def _spd_inverse(e: np.ndarray) -> np.ndarray:
@@ -113,50 +90,11 @@ def coarse_inverse(c: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return inverse, np.divide(1.0, c, out=np.zeros_like(c), where=~dead)
 
 
-def _pack_index(m: int) -> np.ndarray:
-    """Flat indices into an m x m block of its upper triangle, packed
-    column by column (BLAS spmv's layout)."""
-    rows, cols = np.triu_indices(m)
-    order = np.lexsort((rows, cols))
-    return rows[order] * m + cols[order]
-
-
-def _stack_times(stack: np.ndarray, packed: bool, w: np.ndarray,
-                 remaining: np.ndarray, threads: int = 1) -> np.ndarray:
-    """blockdiag(stack_p) w for stacked (N, m) w: one batched matmul (over
-    the runs of pillars with elements left where blocks are large,
-    `_live_runs`), or one BLAS spmv per pillar with elements left from
-    packed ``stack`` (float32 or float64, as w); either way in slabs of
-    pillars on ``threads`` threads, the same numbers on any thread count."""
-    if not packed:
-        runs = _live_runs(stack, remaining)
-        return stacked_matmul(stack, w[:, :, None], threads, runs)[:, :, 0]
-    # detached pillars have G_p = 0
-    return packed_products(stack, w, np.flatnonzero(remaining), threads)
-
-
-#: Smallest block size whose products skip the pillars that have let go
-#: (`_live_runs`): one call per run of remaining pillars costs ~1.5 us,
-#: a block of 21 ~0.15 us and one of 148 ~6 us in a curve (float32).
-RUNS_MIN_BLOCK = 64
 #: Bytes a preconditioner's stored blocks may take (the dense per-pillar
 #: inverses, the tiles' coarse blocks, and what `attach` borders them with):
 #: the workflow's memory request counts what a brush's take
 #: (`brushcore.model.cost.peak_mb`; README, "Time and memory a job asks for").
 MEMORY_BUDGET = 4e9
-
-
-def _live_runs(stack: np.ndarray, remaining: np.ndarray) -> list[tuple[int, int]] | None:
-    """The runs [start, stop) of pillars with elements left, for
-    `stacked_matmul` to skip the others' zero blocks; None (all of
-    them) for small blocks or when every pillar remains."""
-    if stack.shape[-1] < RUNS_MIN_BLOCK:
-        return None
-    alive = remaining > 0
-    if alive.all():
-        return None
-    edges = np.flatnonzero(np.diff(alive, prepend=False, append=False)).tolist()
-    return list(zip(edges[::2], edges[1::2]))
 
 
 class BlockInverse:
@@ -208,7 +146,7 @@ class BlockInverse:
         # (the float64 stack stays for downdates and `refined` solves).
         self.single = single and self.interacting  # `_blocks_times` needs `_z`
         packed_from = self.SINGLE_PACKED_MIN_BLOCK if self.single else self.PACKED_MIN_BLOCK
-        self._pack_index = _pack_index(self.m) if self.m >= packed_from else None
+        self._pack_index = pack_index(self.m) if self.m >= packed_from else None
         self._copy = None  # what `_blocks_times` applies instead of `inv`
         if self.single:
             shape = (self.m, self.m) if self._pack_index is None else self._pack_index.shape
@@ -238,9 +176,8 @@ class BlockInverse:
             # when all pillars carry their own unit-displacement load.
             self.coupling = float((self._r @ self._z.sum(axis=1)).max())
             self.coarse = self.coarse and self.coupling >= self.COUPLING_PER_PILLAR * n_pillars
-        self._neighbours = self._near_pillars(counts, n) if self.interacting else None
-        self._near_blocks: dict[int, tuple[np.ndarray, dict[int, int]]] = {}
-        self._setup_far(counts)
+        # the other pillars' answer to a detachment (`detach`)
+        self.warm_start = WarmStart(self, counts, n) if self.interacting else None
         if self.coarse:
             self._factorise()
 
@@ -301,7 +238,7 @@ class BlockInverse:
         yy, xx, h, e_star = self._yy, self._xx, self._h, self._e_star
         cy = yy.sum(axis=1) / counts
         cx = xx.sum(axis=1) / counts
-        self._centroids = cy, cx  # also for `_near_pillars`
+        self._centroids = cy, cx  # also for the warm start (`WarmStart`)
         # Diagonals are zero: a pillar's own images are in its block.
         r = pillar_influence(cy, cx, h, e_star, self._mirrored)
         # For the uncertainty bound: the influence at the closest approach
@@ -368,63 +305,6 @@ class BlockInverse:
             block = block + t[sy, dx] + t[dy, sx] + t[sy, sx]
         return block
 
-    #: Largest `coupling` with the far-field warm start (`_far_response`).
-    #: The first-order answer misses the pillars' collective one, by a
-    #: smooth error of one sign that the preconditioned residual underrates,
-    #: so CG may stop with it: measured, F_ad 4e-4 from exact mode for 24 x
-    #: 24 at kbar 1e-2 (coupling 3.6), 4.1e-5 for the rigid 4 x 4 brush on
-    #: 128^2 (0.75), W 2.2e-5 for random 30 at kbar 1e-2 on 96^2 (0.25),
-    #: and more applications, not fewer, for 16 x 16 at kbar 0.455 (5.4).
-    #: At 0.18 (random 1620 at kbar 1e-4, 512^2) F_ad and W stay within
-    #: 2.5e-6 and 3.9e-7 of exact mode, with 23 % fewer applications.
-    FAR_RESPONSE_MAX_COUPLING = 0.2
-
-    #: Pillars that answer the field of a neighbour's first-order response
-    #: (`_far_response`): a second-order change, felt near it only.
-    LOCAL = 32
-
-    #: Most neighbours whose first-order response follows a pillar's change.
-    NEIGHBOURS = 12
-    #: Coefficient pairs per changed pillar for that response, per element of
-    #: the grid: it must cost well under one application (~n^2 log n).
-    NEIGHBOUR_PAIRS_PER_ELEMENT = 0.25
-
-    def _near_pillars(self, counts: np.ndarray, n: int) -> list[np.ndarray]:
-        """Per pillar, the nearest pillars (by centroid, from `_interaction`)
-        whose response to its change `detach` adds, as many as NEIGHBOURS and
-        the pair budget allow."""
-        cy, cx = self._centroids
-        budget = self.NEIGHBOUR_PAIRS_PER_ELEMENT * n * n
-        near = []
-        self._local = []  # for `_far_response`
-        for p in range(counts.size):
-            dist = np.hypot(cy - cy[p], cx - cx[p])
-            dist[p] = np.inf
-            order = np.argsort(dist)[: min(self.LOCAL, counts.size - 1)]
-            self._local.append(order)
-            order = order[: self.NEIGHBOURS]
-            pairs = counts[p] * np.cumsum(counts[order])
-            near.append(order[pairs <= budget])
-        return near
-
-    def _setup_far(self, counts: np.ndarray) -> None:
-        """Whether detachments get the far-field warm start, and its vectors."""
-        self._far = self.interacting and self.coupling < self.FAR_RESPONSE_MAX_COUPLING
-        if self._far:
-            self._tilt_basis, self._tilt = self._tilts(counts)
-
-    def _tilts(self, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Each element's offset (y, x) from its pillar's centroid, and the
-        basis of fields to second order over a pillar, shape (N, m, 5):
-        y, x, y^2, y x, x^2 [length, length^2]; with each pillar's response
-        to them, G_p basis (`_far_response`), in the stacks' namespace."""
-        cy, cx = self._centroids
-        valid = np.arange(self.m)[None, :] < counts[:, None]
-        dy, dx = (self._yy - cy[:, None]) * valid, (self._xx - cx[:, None]) * valid
-        self._offsets_host = np.stack([dy, dx], axis=2)
-        basis = self.backend.asarray(np.stack([dy, dx, dy * dy, dy * dx, dx * dx], axis=2))
-        return basis, self.backend.xp.matmul(self.inv, basis)
-
     def _factorise(self) -> None:
         c = self._z.sum(axis=1)
         try:
@@ -481,7 +361,9 @@ class BlockInverse:
         before detaching, with `attached_pos` their stack positions), also
         return each pillar's exact response to losing those elements with the
         field of the other pillars held fixed: sigma_p - G[:, D] G[D, D]^-1
-        sigma_p[D] (the same Schur complement as the downdate).
+        sigma_p[D] (the same Schur complement as the downdate), to which
+        `warm_start` (where the pillars interact) adds the other pillars'
+        answer to that change.
         """
         pos = self.pos[elements]
         pil, slot = np.divmod(pos, self.m)
@@ -491,7 +373,7 @@ class BlockInverse:
             w.ravel()[attached_pos] = stress
         touched = np.unique(pil)
         self._remaining -= np.bincount(pil, minlength=self._remaining.size)
-        respond = w is not None and self._neighbours is not None
+        respond = w is not None and self.warm_start is not None
         live_before = self._live[touched].copy() if respond else None
         self._live[pil, slot] = False
         before = list(w[touched].copy()) if respond else None
@@ -504,7 +386,7 @@ class BlockInverse:
                 if w is not None:
                     w[p] = 0.0
                 continue
-            response = _remove_slots(g, d, None if w is None else w[p, d])
+            response = remove_slots(g, d, None if w is None else w[p, d])
             if w is not None:
                 w[p] -= response
                 w[p, d] = 0.0
@@ -512,146 +394,13 @@ class BlockInverse:
         if w is None:
             return None
         if respond:
-            self._respond(touched, live_before, before)
+            self.warm_start.respond(touched, live_before, before)
         out = w.take(attached_pos)
         w.fill(0.0)
         return out
 
-    def _respond(self, touched: np.ndarray, live_before: np.ndarray, before: list) -> None:
-        """The answer of the other pillars to a detachment, in the stacked
-        stresses: the near neighbours' first-order responses, then (where on)
-        the far field's warm start of every other pillar."""
-        sources = self._neighbour_response(touched, live_before, before)
-        if self._far:
-            self._far_response(sources)
-
-    def _neighbour_response(self, touched: np.ndarray, live_before: np.ndarray,
-                            before: list) -> list[tuple]:
-        """Add to the stacked stresses (`_row`) the first-order response of
-        each changed pillar's near neighbours: sigma_q -= G_q K_qp d sigma_p.
-
-        ``live_before`` and ``before`` hold the touched pillars' attached
-        slots and stresses before the detachment.  A warm start only: the
-        global solve that follows corrects what it misses.  A soft pillar's
-        cascade shifts load across its face with its total nearly fixed, a
-        field that falls off fast, so the nearest pillars take most of the
-        response, which CG's first iteration would otherwise spend an
-        application finding (random 220 at kbar 1e-4: 24 % fewer).
-        Coefficients come from host geometry; on a device they cross as
-        small blocks, never as fields.
-
-        Returns the changes whose field no pillar has answered yet, for
-        `_far_response`: (pillar, slots, change on them, pillars that
-        already answered, pillars to answer or None for all), each touched
-        pillar's and each neighbour's.
-        """
-        be = self.backend
-        xp = be.xp
-        skip = set(touched.tolist())
-        sources = []
-        for p, live, old in zip(touched, live_before, before):
-            near = [q for q in self._neighbours[p] if q not in skip and self._remaining[q]]
-            cols = np.flatnonzero(live)
-            change = xp.take(self._row(p) - old, be.asarray(cols))
-            sources.append((int(p), cols, change, [int(p)] + near, None))
-            if not near:
-                continue
-            # All neighbours' coefficients in one gather from p's cached
-            # block; each keeps its own product (a row slice: the same
-            # numbers as a block of its own).
-            live_rows = [np.flatnonzero(self._live[q]) for q in near]
-            sizes = [rows.size for rows in live_rows]
-            block, first_row = self._near_block(int(p))
-            coefficients = block[np.ix_(np.concatenate(
-                [first_row[q] + rows for q, rows in zip(near, live_rows)]), cols)]
-            ends = np.cumsum(sizes)
-            for q, rows, end, size in zip(near, live_rows, ends, sizes):
-                u = xp.zeros(self.m, dtype=xp.float64)
-                shift = be.asarray(coefficients[end - size:end]) @ change
-                be.put(u, be.asarray(rows), shift)
-                response = self.inv[q, :, :] @ u  # G_q: 0 off live
-                self._set_row(q, self._row(q) - response)
-                # second order: its field matters near it only
-                sources.append((q, rows, -xp.take(response, be.asarray(rows)), [q],
-                                self._local[q]))
-        return sources
-
-    #: Pillars whose neighbour coefficients `_near_block` keeps: a cascade
-    #: touches the same pillar for several rounds in a row.
-    NEAR_BLOCKS_KEPT = 4
-
-    def _near_block(self, p: int) -> tuple[np.ndarray, dict[int, int]]:
-        """K_qp for all slots of p's neighbours q (rows, stacked in the order
-        of `_neighbours`) and of p (columns) [length / stress], and each q's
-        first row; the last NEAR_BLOCKS_KEPT pillars' blocks are kept.
-        Sliced to the live slots, the same numbers as `_coefficients`
-        (random 425 at kbar 3e-6, 512^2: 0.6 ms a round for the lookups)."""
-        kept = self._near_blocks
-        if p in kept:
-            kept[p] = kept.pop(p)  # most recently used last
-            return kept[p]
-        near = self._neighbours[p]
-        slots = np.arange(self.m)
-        block = self._coefficients(np.repeat(near, self.m), np.tile(slots, near.size), p, slots)
-        kept[p] = block, {int(q): i * self.m for i, q in enumerate(near)}
-        if len(kept) > self.NEAR_BLOCKS_KEPT:
-            kept.pop(next(iter(kept)))
-        return kept[p]
-
-    def _far_response(self, sources: list[tuple]) -> None:
-        """Add every pillar's response to the far field of ``sources`` (see
-        `_neighbour_response`): sigma_f -= G_f phi_f, phi_f expanded about
-        f's centroid to second order,
-
-            G_f phi_f = phi z_f + grad phi . (G_f d_f) + 1/2 H : (G_f d_f d_f),
-
-        from the vectors `_tilts` keeps per pillar (d_f: offsets from c_f).
-        A change dsigma on pillar p of moments M0 = C sum dsigma and M1 = C
-        sum dsigma (x - c_p), C = h^2 / (pi E*) (Boussinesq's point load),
-        displaces the surface at R from c_p by M0 / R + M1 . R / R^3 to
-        dipole order; phi, its gradient and Hessian follow in closed form
-        (images included on a quadrant).  What is left out is of relative
-        order (a / R)^2.  A soft pillar answers a uniform field with its
-        spring alone, so its gradient and Hessian terms carry the answer.
-
-        A warm start, not a bound: the next global solve corrects the rest.
-        Work is O(N) per touched pillar plus `LOCAL` per neighbour, no
-        application.
-        """
-        be = self.backend
-        xp = be.xp
-        if not sources:
-            return
-        cy, cx = self._centroids
-        scale = self._h ** 2 / (np.pi * self._e_star)
-        sizes = np.array([slots.size for _, slots, _, _, _ in sources])
-        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        change = xp.concat([c for _, _, c, _, _ in sources]) if len(sources) > 1 else sources[0][2]
-        offsets = np.concatenate([self._offsets_host[p, slots] for p, slots, _, _, _ in sources])
-        weighted = be.to_host(xp.stack([change, change * be.asarray(offsets[:, 0]),
-                                        change * be.asarray(offsets[:, 1])]))
-        moments = scale * np.add.reduceat(weighted, starts, axis=1)  # (3, sources)
-        # (source, target) pairs: a touched pillar's change reaches every
-        # pillar, a neighbour's (second order) only its `_local` ones.
-        everyone = np.arange(cy.size)
-        targets = [everyone if to is None else to for _, _, _, _, to in sources]
-        which = np.repeat(np.arange(len(sources)), [t.size for t in targets])
-        target = np.concatenate(targets)
-        keep = np.ones(target.size, dtype=bool)
-        first = np.concatenate([[0], np.cumsum([t.size for t in targets])[:-1]])
-        for i, (_, _, _, done, to) in enumerate(sources):
-            if to is None:  # targets are all pillars, in order
-                keep[first[i] + np.asarray(done)] = False
-            # a neighbour answered only itself, which its `_local` list leaves out
-        which, target = which[keep], target[keep]
-        source = np.array([p for p, _, _, _, _ in sources])[which]
-        # What G_f answers with phi z_f + g . (G_f d) + 1/2 H : (G_f d d).
-        terms = field_terms(moments[:, which], source, target, (cy, cx), self._h,
-                            self._mirrored)
-        corr = (be.asarray(terms[0])[:, None] * self._z
-                + xp.matmul(self._tilt, be.asarray(terms[1:].T)[:, :, None])[:, :, 0])
-        self._subtract_all(corr)
-
+    # The work vector, as the warm start (`WarmStart`) reads and writes it
+    # (`DeviceBlocks` keeps it flat).
     def _subtract_all(self, values: np.ndarray) -> None:
         """Subtract an (N, m) stack from the work vector."""
         self._work -= values
@@ -661,6 +410,7 @@ class BlockInverse:
         return self._work[p]
 
     def _set_row(self, p: int, values: np.ndarray) -> None:
+        """Set pillar p's slots of the work vector."""
         self._work[p] = values
 
     def attach(self, elements: np.ndarray) -> None:
@@ -726,7 +476,7 @@ class BlockInverse:
         if self._remaining[p] == 0:
             del self._elastic[p]
             return
-        _remove_slots(h, gone)
+        remove_slots(h, gone)
 
     def _refresh(self, touched: np.ndarray) -> None:
         """The application's copy, coarse vectors and (when drifted) the
@@ -737,8 +487,8 @@ class BlockInverse:
                 g = self.inv[p]
                 self._z[p] = g.sum(axis=1)
                 self._reach_stale.add(int(p))
-                if self._far:
-                    self._tilt[p] = g @ self._tilt_basis[p]
+                if self.warm_start is not None:
+                    self.warm_start.refresh(p, g)
         if self.coarse:
             self._note_drift(touched, self._z[touched].sum(axis=1))
 
@@ -810,9 +560,9 @@ class BlockInverse:
         """
         if not self.single:  # a float64 copy is a packed one
             if self._copy is None or self._copy.dtype != np.float64:
-                return _stack_times(self.inv, False, w, self._remaining, self.threads)
-            return _stack_times(self._copy, True, w, self._remaining, self.threads)
-        z = _stack_times(self._copy, self._pack_index is not None, w.astype(np.float32),
+                return stack_times(self.inv, False, w, self._remaining, self.threads)
+            return stack_times(self._copy, True, w, self._remaining, self.threads)
+        z = stack_times(self._copy, self._pack_index is not None, w.astype(np.float32),
                          self._remaining, self.threads).astype(np.float64)
         gap = (self._z * w).sum(axis=1) - z.sum(axis=1)  # z is 0 off the live slots
         live = np.maximum(self._remaining, 1)
