@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import pickle
 import re
 from collections.abc import Mapping
 
@@ -35,6 +36,18 @@ class ParameterError(ValueError):
     def __init__(self, name: str, value: object, allowed: str, reason: str = "") -> None:
         self.name, self.value, self.allowed, self.reason = name, value, allowed, reason
         super().__init__(self.in_terms_of({}))
+
+    def __reduce__(self) -> tuple:
+        """Pickle by the constructor's arguments (ValueError's pickles the
+        message alone, which ``__init__`` cannot take: a worker's refusal
+        broke a ProcessPoolExecutor and hung multiprocessing.Pool.map); a
+        value that does not pickle travels as its repr."""
+        value = self.value
+        try:
+            pickle.dumps(value)
+        except Exception:  # noqa: BLE001 - whatever pickle refuses (a generator, a lock)
+            value = repr(value)
+        return type(self), (self.name, value, self.allowed, self.reason)
 
     def in_terms_of(self, names: Mapping[str, str], sep: str = "=") -> str:
         """The message with ``name`` replaced by ``names[name]`` (if present)."""
@@ -82,6 +95,12 @@ def is_integer(value: object) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
 
 
+def is_one_of(value: object, choices: tuple[str, ...] | frozenset[str]) -> bool:
+    """Whether ``value`` is one of the text ``choices`` (an array holding one
+    is not: ``np.array(["regular"]) in LAYOUTS`` compares element-wise)."""
+    return isinstance(value, str) and value in choices
+
+
 def overflows(text: str) -> bool:
     """Whether a numeral reads as an infinite float without spelling "inf"
     (1e400, 1.0e+400): a typo that would pass for rigid pillars."""
@@ -101,15 +120,24 @@ def require_switches(obj: object, names: tuple[str, ...], allowed: str) -> None:
         object.__setattr__(obj, name, bool(value))
 
 
-def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...]) -> None:
-    """Turn NumPy scalars of a frozen dataclass into Python int / float in place.
+def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...],
+              texts: tuple[str, ...] = ()) -> None:
+    """Turn NumPy scalars of a frozen dataclass into Python int / float / str in place.
 
     Users loop over ``np.array([64, 128])``, take ``DataArray.values`` (a 0-d
-    array) or ``np.linspace`` grids (64.0, as the workflow's config may
-    write it); the checks and the netCDF attributes want plain Python
-    numbers.  Anything else (64.5, text, arrays) is left for the range
-    checks to refuse.
+    array: ``sweep.layout[0].values`` for a text field) or ``np.linspace``
+    grids (64.0, as the workflow's config may write it); the checks, hashes
+    and the netCDF attributes want plain Python values (a 0-d text array
+    kept made a brush unhashable and gave it another ``parameter_hash``).
+    Anything else (64.5, arrays of several values) is left for the range
+    checks to refuse (`is_one_of` for text).
     """
+    for name in texts:
+        value = getattr(obj, name)
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            value = value[()]
+        if isinstance(value, str):  # np.str_ too
+            object.__setattr__(obj, name, str(value))
     for name in (*integers, *reals):
         value = getattr(obj, name)
         if isinstance(value, np.ndarray) and value.ndim == 0:

@@ -31,6 +31,58 @@ def test_numpy_scalars_are_accepted_and_normalised():
     assert q == BrushParams("regular", 16, 0.1, 64) and type(q.grid) is int
 
 
+
+def test_text_from_numpy_is_stored_as_text():
+    """A text field taken from a sweep (``sweep.layout[0].values``, a 0-d
+    array) was stored as the array: the brush could not be hashed, its
+    curve got another parameter_hash, and a waypoint's kind wrote a
+    protocol no reader parses ("['force']:-1.0, separation"; a review
+    helper's find).  0-d arrays and np.str_ become str; an array of one
+    value is refused, not compared element-wise."""
+    from brushcore import Waypoint
+    from brushcore.model.provenance import parameter_hash
+
+    p = BrushParams(np.array("regular"), 16, 0.1, 64, shape=np.str_("square"))
+    plain = BrushParams("regular", 16, 0.1, 64, shape="square")
+    assert p == plain and hash(p) == hash(plain) and repr(p) == repr(plain)
+    assert type(p.layout) is str and type(p.shape) is str
+    assert parameter_hash(p.as_attrs()) == parameter_hash(plain.as_attrs())
+    options = SolverOptions(cascade=np.array("global"), precision=np.str_("double"),
+                            fft_library=np.array("auto"))
+    assert hash(options) == hash(SolverOptions(cascade="global", precision="double"))
+    kind = Waypoint(np.array("force"), -1.0).kind
+    assert type(kind) is str and kind == "force"
+    for make in (lambda: BrushParams(np.array(["regular"]), 16, 0.1, 64),
+                 lambda: SolverOptions(cascade=np.array(["local"])),
+                 lambda: Waypoint(np.array(["force"]), -1.0)):
+        with pytest.raises(ParameterError, match="is invalid"):
+            make()
+
+
+def _refuse(kbar: float) -> None:
+    BrushParams("regular", 16, kbar, 64)
+
+
+def test_a_refusal_crosses_a_process_pool():
+    """ParameterError pickled its message alone, which its constructor cannot
+    take: a worker's refusal broke a ProcessPoolExecutor (BrokenProcessPool,
+    the message lost) and hung multiprocessing.Pool.map.  It now arrives
+    whole; a value that does not pickle arrives as its repr."""
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+
+    error = pickle.loads(pickle.dumps(ParameterError("kbar", -1.0, "a number", "why")))
+    assert (error.name, error.value, error.allowed, error.reason) == ("kbar", -1.0, "a number",
+                                                                      "why")
+    assert str(error) == "kbar=-1.0 is invalid (why): allowed a number"
+    odd = pickle.loads(pickle.dumps(ParameterError("protocol", (w for w in ()), "a tuple")))
+    assert odd.value.startswith("<generator object")
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        with pytest.raises(ParameterError, match=r"kbar=-1\.0 is invalid") as info:
+            pool.submit(_refuse, -1.0).result(timeout=120)
+        assert info.value.name == "kbar"
+        assert pool.submit(_refuse, 0.1).result(timeout=120) is None  # the pool lives on
+
 @pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.5), ("grid", "64"),
                                          ("kbar", np.bool_(True)), ("grid", np.array([64])),
                                          ("seed", float("inf")), ("seed", 1e20)])

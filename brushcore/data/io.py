@@ -245,7 +245,7 @@ def write_curve(ds: xr.Dataset, path: str | os.PathLike) -> Path:
     ----------
     ds : a curve as `brushcore.simulate` returns it (or as read back with
         xarray: fills and map dtypes are made the simulated ones first).
-    path : the file to write [.nc]; its folder must exist.
+    path : the file to write [.nc]; a missing folder is made.
 
     Returns
     -------
@@ -349,8 +349,9 @@ def check_curve(ds: xr.Dataset, label: str, digest: bool = True) -> None:
                              not_a_curve="parameter_hash" not in ds.attrs)
     stored = ds.attrs.get(DIGEST_ATTR) if digest else None
     if stored is not None and str(stored) != content_digest(ds):
-        raise CurveFileError(f"{label}: corrupt, its values do not match the {DIGEST_ATTR} "
-                             "written with them")
+        raise CurveFileError(f"{label}: changed since brushcore wrote it (edited, or corrupt): "
+                             f"its values and attributes do not match the {DIGEST_ATTR} written "
+                             "with them (xarray.open_dataset still reads it)")
     # A protocol that never retracts, or whose retraction stays compressive,
     # has no adhesive force (NaN) and may carry NaN in the other results.
     never_pulled = "retraction" in ds.variables and not (

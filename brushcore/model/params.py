@@ -15,7 +15,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 
 import numpy as np
 
-from brushcore.validation import (ParameterError, is_integer, is_real, normalise, require,
+from brushcore.validation import (ParameterError, is_integer, is_one_of, is_real, normalise, require,
                                   require_switches)
 from brushcore.model.lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, nearest_hexagonal_counts
 from brushcore.model.shapes import SHAPES
@@ -189,8 +189,9 @@ class BrushParams:
     def __post_init__(self) -> None:
         normalise(self, ("n_pillars", "grid", "seed"),
                    ("kbar", "phi", "min_gap", "e_star", "dgamma", "h", "aspect",
-                    "orientation", "roughness", "preload", "kbar_spread"))
-        require(self.layout in LAYOUTS, "layout", self.layout, f"one of {LAYOUTS}")
+                    "orientation", "roughness", "preload", "kbar_spread"),
+                  ("layout", "shape", "backend"))
+        require(is_one_of(self.layout, LAYOUTS), "layout", self.layout, f"one of {LAYOUTS}")
         require(is_integer(self.n_pillars) and self.n_pillars >= 1,
                  "n_pillars", self.n_pillars, "an integer N >= 1")
         if self.layout == "regular":
@@ -225,7 +226,7 @@ class BrushParams:
                      f"a number in [{low:g}, {high:g}]")
         require_switches(self, ("allow_coarse",), "True or False")
         self._check_rough()
-        require(self.backend in BACKENDS, "backend", self.backend,
+        require(is_one_of(self.backend, BACKENDS), "backend", self.backend,
                  "'cpu' (the default) or 'gpu'")
         r = self.narrowest_radius_elements
         floor = FLOOR_RADIUS_ELEMENTS if self.allow_coarse else MIN_RADIUS_ELEMENTS
@@ -259,7 +260,7 @@ class BrushParams:
         else:
             require(self.layout_file == "", "layout_file", self.layout_file,
                      "no layout file unless layout is 'file'")
-        require(self.shape in SHAPES, "shape", self.shape, f"one of {SHAPES}")
+        require(is_one_of(self.shape, SHAPES), "shape", self.shape, f"one of {SHAPES}")
         require(self.layout != "file" or self.shape == "disc", "shape", self.shape,
                  "the default 'disc' with layout 'file' (its shapes come from the file)")
         require(is_real(self.aspect) and 1.0 <= self.aspect <= MAX_ASPECT, "aspect",

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brushcore.numerics.platform import mkl
-from brushcore.validation import is_integer, is_real, normalise, require, require_switches
+from brushcore.validation import is_integer, is_one_of, is_real, normalise, require, require_switches
 
 
 @dataclass(frozen=True)
@@ -109,7 +109,8 @@ class SolverOptions:
                    settle_decisions=False)
 
     def __post_init__(self) -> None:
-        normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"))
+        normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"),
+                  ("cascade", "precision", "fft_library"))
         require(is_real(self.rtol) and self.MIN_RTOL <= self.rtol <= self.MAX_RTOL, "rtol",
                 self.rtol, f"a number in [{self.MIN_RTOL:g}, "
                 f"{np.format_float_scientific(self.MAX_RTOL, trim='-', exp_digits=1)}]")
@@ -119,13 +120,13 @@ class SolverOptions:
                  self.tie_rtol, "a number in [0, 1e-6]")
         require(is_real(self.lookahead) and 0 <= self.lookahead <= 0.1, "lookahead",
                  self.lookahead, "a number in [0, 0.1]")
-        require(self.cascade in ("local", "global"), "cascade", self.cascade,
+        require(is_one_of(self.cascade, ("local", "global")), "cascade", self.cascade,
                  "'local' or 'global'")
         require_switches(self, ("symmetry", "early_decisions", "settle_decisions"),
                          "true or false")
-        require(self.precision in ("auto", "mixed", "double"), "precision", self.precision,
+        require(is_one_of(self.precision, ("auto", "mixed", "double")), "precision", self.precision,
                 "'auto', 'mixed' or 'double'")
-        require(self.fft_library in ("auto", "fftw", "mkl"), "fft_library", self.fft_library,
+        require(is_one_of(self.fft_library, ("auto", "fftw", "mkl")), "fft_library", self.fft_library,
                 "'auto', 'fftw' or 'mkl'")
         require(self.fft_library != "mkl" or mkl.available(), "fft_library", self.fft_library,
                 "'auto' or 'fftw' here: 'mkl' needs mkl_fft (pip install 'brushcore[mkl]')")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brushcore.validation import is_real, normalise, require
+from brushcore.validation import is_one_of, is_real, normalise, require
 
 APPROACH, START, RETRACT = -1, 0, 1
 KINDS = ("force", "displacement", "separation")
@@ -43,7 +43,8 @@ class Waypoint:
     value: float | None = None  # 0.0 for separation once made
 
     def __post_init__(self) -> None:
-        require(self.kind in KINDS, "waypoint kind", self.kind, f"one of {KINDS}")
+        normalise(self, (), (), ("kind",))  # a 0-d text array, np.str_: str
+        require(is_one_of(self.kind, KINDS), "waypoint kind", self.kind, f"one of {KINDS}")
         if self.value is None:  # a target left out is no target of 0
             require(self.kind == "separation", "waypoint value", None,
                     f"a finite number: a {self.kind} waypoint needs its target")
