@@ -932,3 +932,35 @@ def test_a_study_refuses_curves_of_other_given_arrays():
         build_sweep([curve(48, one), curve(48, other)])
     sweep = build_sweep([curve(32, other), curve(48, other)])
     assert list(sweep.grid.values) == [32, 48]
+
+
+def test_a_mean_of_fewer_seeds_is_drawn_hollow():
+    """Figs. 6 and 8 drew a kbar where one of two seeds was missing as a full
+    point with a zero-width bar, under a legend saying "min-max of 2 seeds"
+    (the figures referee's find).  Such a point is now redrawn hollow, with
+    a legend entry; a sweep with every seed draws none."""
+    from brushcore.data import figures
+    from brushcore.data.figures.paper import FEWER_SEEDS_LABEL
+
+    dims = ("layout", "n_pillars", "kbar", "seed")
+    force = np.array([[[[2.0, 2.1], [1.8, 1.9], [1.7, 1.72]]]])
+    sweep = xr.Dataset({"adhesive_force_normalized": (dims, force),
+                        "work_of_separation_normalized": (dims, 10 * force)},
+                       coords={"layout": ["random"], "n_pillars": [16],
+                               "kbar": [1e-3, 0.1, math.inf], "seed": [0, 1]},
+                       attrs={"phi": 0.12})
+
+    def hollow(fig) -> list:
+        ax = fig.axes[0]
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        points = [(float(x), float(y)) for line in ax.lines if line.get_markerfacecolor() == "white"
+                  for x, y in zip(line.get_xdata(), line.get_ydata())]
+        return [FEWER_SEEDS_LABEL in labels, points]
+
+    for draw in (figures.fig6, figures.fig8):
+        assert hollow(draw(sweep)) == [False, []]
+    missing = sweep.copy(deep=True)
+    for name in ("adhesive_force_normalized", "work_of_separation_normalized"):
+        missing[name][0, 0, 1, 1] = np.nan  # seed 1 at kbar 0.1
+    assert hollow(figures.fig6(missing)) == [True, [(0.1, 1.8)]]
+    assert hollow(figures.fig8(missing)) == [True, [(0.1, 18.0)]]

@@ -191,19 +191,44 @@ def _panels(sweep: xr.Dataset, axes: dict, name: str):
         yield index, layout, ax, sweep_phi(sweep, layout), _brush_series(sweep, name, layout)
 
 
+#: Legend entry of the hollow markers `_fewer_seeds` draws.
+FEWER_SEEDS_LABEL = "hollow: a mean of fewer seeds than the brush ran"
+
+
+def _fewer_seeds(ax, sweep: xr.Dataset, name: str, layout: str, n: int, series: xr.DataArray,
+                 x_inf: float, color: str) -> bool:
+    """Redraw hollow the points of ``series`` (a seed mean against kbar) that
+    rest on fewer seeds than the brush ran at any kbar: a missing seed is
+    said, not drawn as a full mean with a narrow bar.  Whether any was."""
+    runs = sweep[name].sel(layout=layout, n_pillars=n).sel(kbar=series.kbar)
+    counts = runs.notnull().sum("seed").values
+    fewer = counts < int(runs.notnull().any("kbar").sum())
+    if fewer.any():
+        ax.plot(kbar_x(series.kbar, x_inf)[fewer], series.values[fewer], "o", ms=4,
+                mfc="white", mec=color, zorder=3)
+    return bool(fewer.any())
+
+
+def _fewer_seeds_key(ax, shown: bool) -> None:
+    if shown:
+        ax.plot([], [], "o", ms=4, mfc="white", mec="k", label=FEWER_SEEDS_LABEL)
+
+
 def fig6(sweep: xr.Dataset) -> Figure:
     """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
 
     The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
     punch F_ad = 1 is dotted; a hexagonal panel adds each N's lattice at its
     local filling factor (`theory.hexagonal_rigid_limit`, dash-dot).  With
-    several seeds the bars span min to max.
+    several seeds the bars span min to max, and a hollow marker is a mean of
+    fewer seeds than its brush ran (`_fewer_seeds`).
     Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
     to the finite kbar.
     """
     sweep, fig, axes, colors, kbars, x_inf = _kbar_figure(
         sweep, "Adhesive force against pillar stiffness")
     for index, layout, ax, phi, brushes in _panels(sweep, axes, "adhesive_force_normalized"):
+        fewer = False
         for n, series in brushes:
             runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
             runs = runs.sel(kbar=series.kbar)
@@ -214,6 +239,8 @@ def fig6(sweep: xr.Dataset) -> Figure:
             ax.errorbar(x, y, yerr=[y - lo, hi - y], marker="o", ms=4, capsize=2,
                         color=colors[n], label=f"N = {n}" + (
                             f" (mean, min-max of {seeds} seeds)" if seeds > 1 else ""))
+            fewer |= _fewer_seeds(ax, sweep, "adhesive_force_normalized", layout, n, series,
+                                  x_inf, colors[n])
         kbar_axes(ax, panel_title(index, layout), FAD_LABEL, kbars, x_inf)
         if not brushes:
             no_data(ax, f"no flat {layout} runs")
@@ -226,6 +253,7 @@ def fig6(sweep: xr.Dataset) -> Figure:
                     ax.axhline(theory.hexagonal_rigid_limit(phi, n), color=colors[n],
                                ls=HEX_LINE, lw=1.0, label=HEX_LABEL if i == 0 else None)
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
+        _fewer_seeds_key(ax, fewer)
         ax.legend(fontsize=7)
     return fig
 
@@ -309,14 +337,18 @@ def fig8(sweep: xr.Dataset) -> Figure:
 
     Dashed lines of the same colour are W_S = 2 sqrt(phi/pi) / (sqrt(N) kbar)
     (`brushcore.model.theory.soft_work`); W = 1 is the rigid compact punch;
-    rigid pillars stand apart at "rigid", as in `fig6`.
+    rigid pillars stand apart at "rigid", and means of fewer seeds than the
+    brush ran are hollow, as in `fig6`.
     """
     sweep, fig, axes, colors, kbars, x_inf = _kbar_figure(
         sweep, "Work of separation against pillar stiffness")
     for index, layout, ax, phi, brushes in _panels(sweep, axes, "work_of_separation_normalized"):
+        fewer = False
         for n, series in brushes:
             ax.plot(*break_before_rigid(x_inf, kbar_x(series.kbar, x_inf), series), "o-",
                     ms=4, color=colors[n], label=f"N = {n}")
+            fewer |= _fewer_seeds(ax, sweep, "work_of_separation_normalized", layout, n, series,
+                                  x_inf, colors[n])
             if math.isfinite(phi):
                 # Only where the springs' energy matters; it falls as 1/kbar (0 if rigid).
                 kbar = series.kbar.values
@@ -331,6 +363,7 @@ def fig8(sweep: xr.Dataset) -> Figure:
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
         ax.plot([], [], "k--", lw=1,
                 label=r"soft limit $2\sqrt{\varphi/\pi}/(\sqrt{N}\bar k)$ (eqs. 25-26)")
+        _fewer_seeds_key(ax, fewer)
         ax.legend(fontsize=7)
     return fig
 
