@@ -3,6 +3,8 @@ numbers whatever the thread count, and errors that reach the caller."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -141,3 +143,19 @@ def test_a_bad_thread_count_in_the_environment_is_refused(monkeypatch, value):
     assert fft_threads() == 1
     monkeypatch.delenv("BRUSHCORE_THREADS")
     assert fft_threads() == 1
+
+
+@pytest.mark.parametrize("value", [0, -3, 2.5, "x", True, float("nan"), 10**9])
+def test_pin_threads_refuses_what_it_cannot_run(value):
+    """pin_threads, the call INTERFACE.md's first snippet makes, read 0 and -3
+    as 1 and 2.5 as 2, and "x" raised int()'s bare ValueError (the Python
+    API helper's find): now the threads error every other layer gives."""
+    from brushcore import ParameterError
+    from brushcore.numerics.platform.threads import MAX_THREADS, pin_threads
+
+    before = int(os.environ.get("OMP_NUM_THREADS", "1"))
+    with pytest.raises(ParameterError, match=rf"threads=.* is invalid: allowed an integer in "
+                                             rf"\[1, {MAX_THREADS}\]"):
+        pin_threads(value)
+    assert pin_threads(np.int64(1)) == 1 and pin_threads(1.0) == 1
+    pin_threads(before)

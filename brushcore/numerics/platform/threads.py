@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from brushcore.validation import ParameterError
+from brushcore.validation import ParameterError, is_integer, is_real, require
 
 #: Most threads a job may ask for (the workflow's schema says the same): far
 #: beyond any node, and 100,000 crashed FFTW's planner.
@@ -32,12 +32,20 @@ _VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
 def pin_threads(n: int) -> int:
     """Limit BLAS/OpenMP pools of this process and FFTW plans to ``n`` threads.
 
+    Parameters
+    ----------
+    n : threads, an integer in [1, `MAX_THREADS`] (NumPy integers and
+        integral floats such as 2.0 too; 0, 2.5 or "x" are refused, not
+        read as 1, 2 or a bare int() error)
+
     Returns
     -------
     int
-        The thread count now in force (>= 1).
+        The thread count now in force.
     """
-    n = max(1, int(n))
+    ok = is_integer(n) or (is_real(n) and float(n).is_integer())
+    require(ok and 1 <= n <= MAX_THREADS, "threads", n, f"an integer in [1, {MAX_THREADS}]")
+    n = int(n)
     cpus = usable_cpus()
     if n > cpus:  # 256 threads on 2 cores took 9.8 s of overhead to a 0.0 s solve
         warnings.warn(f"{n} threads on {cpus} usable CPU{'s' * (cpus != 1)}: threads beyond "
