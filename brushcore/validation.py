@@ -9,13 +9,20 @@ hold the rules.
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import functools
+import inspect
 import math
 import numbers
 import pickle
 import re
 from collections.abc import Mapping
+from typing import TypeVar
 
 import numpy as np
+
+
+T = TypeVar("T")
 
 
 class ParameterError(ValueError):
@@ -71,6 +78,36 @@ class ParameterError(ValueError):
 #: What follows a plain-word parameter name where the text refers to the
 #: parameter: a comparison, a quoted or numeric value, or "is"/"are"/"must".
 _REFERENCE = r"(?=\s*(?:[=<>'\"]|\d|-\d|\b(?:is|are|must)\b))"
+
+
+#: Keywords users try where they are set another way (`suggest_keywords`).
+ELSEWHERE = {"threads": "threads are set for the process: "
+                        "brushcore.numerics.platform.threads.pin_threads(n), or the "
+                        "BRUSHCORE_THREADS environment variable"}
+
+
+def suggest_keywords(target: T) -> T:
+    """A function or class whose unknown keyword arguments are refused with
+    the closest known one ("did you mean 'kbar'?"), as the command line
+    names the closest flag; Python's own TypeError names none."""
+    call = target.__init__ if isinstance(target, type) else target
+    known = [name for name in inspect.signature(call).parameters if name != "self"]
+
+    @functools.wraps(call)
+    def checked(*args, **kwargs):
+        for name in kwargs:
+            if name not in known:
+                close = difflib.get_close_matches(name, known, n=1)
+                hint = (f"; did you mean {close[0]!r}?" if close else
+                        f"; {ELSEWHERE[name]}" if name in ELSEWHERE else "")
+                raise TypeError(f"{target.__qualname__}() got an unexpected keyword argument "
+                                f"{name!r}{hint}")
+        return call(*args, **kwargs)
+
+    if isinstance(target, type):
+        target.__init__ = checked
+        return target
+    return checked  # type: ignore[return-value]
 
 
 def require(ok: bool, name: str, value: object, allowed: str, reason: str = "") -> None:

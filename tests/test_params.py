@@ -443,3 +443,23 @@ def test_kbar_as_a_string_is_told_to_be_a_number(text, hint):
             f"kbar='{text}' is invalid: allowed a number in [1e-09, inf]; inf means rigid "
             f"pillars (a number, not a string{hint})") + "$"):
         BrushParams("regular", 16, text, 64)
+
+
+def test_a_mistyped_keyword_names_the_closest_one():
+    """Python's TypeError named no alternative where the command line names
+    the closest flag (the Python API helper's find): the parameter classes
+    and simulate now do, and say where threads are set."""
+    from brushcore import Waypoint, simulate
+
+    brush = BrushParams("regular", 4, 1.0, 32)
+    for call, message in (
+            (lambda: BrushParams("regular", 16, 0.1, 64, kbr=0.1), "'kbr'; did you mean 'kbar'?"),
+            (lambda: Waypoint("force", vlaue=1.0), "'vlaue'; did you mean 'value'?"),
+            (lambda: simulate(brush, option=None), "'option'; did you mean 'options'?"),
+            (lambda: SolverOptions(threads=2), "'threads'; threads are set for the process: "
+                                               "brushcore.numerics.platform.threads.pin_threads"),
+            (lambda: BrushParams("regular", 16, 0.1, 64, zzzz=1), "'zzzz'")):
+        with pytest.raises(TypeError) as info:
+            call()
+        assert message in str(info.value), str(info.value)
+    assert BrushParams("regular", 16, 0.1, 64, seed=2).seed == 2  # the known ones pass

@@ -33,7 +33,7 @@ from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.events.waypoints import (APPROACH, RETRACT, START, Waypoint,
                                                  loop_energy, positive_work, preload_protocol)
 from brushcore.numerics.events.pulloff import Progress
-from brushcore.validation import ParameterError
+from brushcore.validation import ParameterError, suggest_keywords
 
 #: How a protocol is written, for the refusals of other containers.
 PROTOCOL_EXAMPLE = "[Waypoint('force', -1.0), Waypoint('separation')]"
@@ -206,6 +206,7 @@ def own_labels(params: BrushParams, labels: object = None) -> np.ndarray:
     return built
 
 
+@suggest_keywords
 def simulate(params: BrushParams, options: SolverOptions = SolverOptions(),
              progress: Progress | None = None, labels: np.ndarray | None = None,
              protocol: Sequence[Waypoint] | None = None,

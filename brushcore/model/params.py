@@ -15,8 +15,8 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 
 import numpy as np
 
-from brushcore.validation import (ParameterError, is_integer, is_one_of, is_real, normalise, require,
-                                  require_switches)
+from brushcore.validation import (ParameterError, is_integer, is_one_of, is_real, normalise,
+                                  require, require_switches, suggest_keywords)
 from brushcore.model.lattices import HEX_ASPECT_TOLERANCE, hexagonal_lattice, nearest_hexagonal_counts
 from brushcore.model.shapes import SHAPES
 from brushcore.model.draws import lognormal_kbar
@@ -78,6 +78,7 @@ def narrowest_radius(radius: float, shape: str, aspect: float) -> float:
     return radius / math.sqrt(aspect) if shape == "ellipse" else radius
 
 
+@suggest_keywords
 @dataclass(frozen=True)
 class BrushParams:
     """One pull-off problem: a brush of pillars on springs, equal by default,

@@ -7,9 +7,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from brushcore.numerics.platform import mkl
-from brushcore.validation import is_integer, is_one_of, is_real, normalise, require, require_switches
+from brushcore.validation import (is_integer, is_one_of, is_real, normalise, require,
+                                  require_switches, suggest_keywords)
 
 
+@suggest_keywords
 @dataclass(frozen=True)
 class SolverOptions:
     """Numerical options of the pull-off solver.

@@ -11,12 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brushcore.validation import is_one_of, is_real, normalise, require
+from brushcore.validation import is_one_of, is_real, normalise, require, suggest_keywords
 
 APPROACH, START, RETRACT = -1, 0, 1
 KINDS = ("force", "displacement", "separation")
 
 
+@suggest_keywords
 @dataclass(frozen=True)
 class Waypoint:
     """One leg of a protocol: move d until the target is reached.
