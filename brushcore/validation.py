@@ -157,6 +157,15 @@ def require_switches(obj: object, names: tuple[str, ...], allowed: str) -> None:
         object.__setattr__(obj, name, bool(value))
 
 
+def _scalar(value: object) -> object:
+    """The element of a 0-d NumPy array or xarray DataArray (duck-typed: its
+    ``values`` a 0-d array), else ``value`` itself."""
+    if not isinstance(value, np.ndarray) and getattr(value, "ndim", None) == 0 and isinstance(
+            getattr(value, "values", None), np.ndarray):
+        value = value.values
+    return value[()] if isinstance(value, np.ndarray) and value.ndim == 0 else value
+
+
 def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...],
               texts: tuple[str, ...] = ()) -> None:
     """Turn NumPy scalars of a frozen dataclass into Python int / float / str in place.
@@ -166,19 +175,19 @@ def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...],
     grids (64.0, as the workflow's config may write it); the checks, hashes
     and the netCDF attributes want plain Python values (a 0-d text array
     kept made a brush unhashable and gave it another ``parameter_hash``).
-    Anything else (64.5, arrays of several values) is left for the range
-    checks to refuse (`is_one_of` for text).
+    A 0-d xarray DataArray (``sweep.kbar[0]``) counts as its value (its
+    repr, coordinates and all, made a refusal's message).  Anything else
+    (64.5, arrays of several values) is left for the range checks to refuse
+    (`is_one_of` for text).
     """
     for name in texts:
-        value = getattr(obj, name)
-        if isinstance(value, np.ndarray) and value.ndim == 0:
-            value = value[()]
+        value = _scalar(getattr(obj, name))
         if isinstance(value, str):  # np.str_ too
             object.__setattr__(obj, name, str(value))
     for name in (*integers, *reals):
         value = getattr(obj, name)
-        if isinstance(value, np.ndarray) and value.ndim == 0:
-            object.__setattr__(obj, name, value[()])
+        if _scalar(value) is not value:
+            object.__setattr__(obj, name, _scalar(value))
     for name in integers:
         value = getattr(obj, name)
         if (is_real(value) and not is_integer(value) and float(value).is_integer()

@@ -52,6 +52,14 @@ def test_text_from_numpy_is_stored_as_text():
     assert hash(options) == hash(SolverOptions(cascade="global", precision="double"))
     kind = Waypoint(np.array("force"), -1.0).kind
     assert type(kind) is str and kind == "force"
+    # a sweep's coordinate elements as they come (0-d DataArrays), numbers too
+    import xarray as xr
+
+    sweep = xr.Dataset(coords={"layout": ["regular"], "kbar": [0.1, math.inf], "grid": [64]})
+    taken = BrushParams(sweep.layout[0], 16, sweep.kbar[0], sweep.grid[0])
+    assert taken == BrushParams("regular", 16, 0.1, 64) and type(taken.kbar) is float
+    assert type(taken.grid) is int and type(taken.layout) is str
+    assert BrushParams("regular", 16, sweep.kbar[1], 64).kbar == math.inf
     for make in (lambda: BrushParams(np.array(["regular"]), 16, 0.1, 64),
                  lambda: SolverOptions(cascade=np.array(["local"])),
                  lambda: Waypoint(np.array(["force"]), -1.0)):
