@@ -373,6 +373,8 @@ def test_from_curve_refuses_arrays_it_cannot_rebuild():
     shifted = ds.assign(pillar_height_normalized=ds.pillar_height_normalized * (1 + 1e-15))
     with pytest.raises(ParameterError, match=r"^inputs_digest=.*do not reproduce it"):
         BrushParams.from_curve(shifted)
+    with pytest.raises(ParameterError, match=r"^ds='dict' is invalid.*from_attrs"):
+        BrushParams.from_curve(dict(ds.attrs))  # was an AttributeError
 
 
 def test_a_parameter_set_reads_as_the_call_that_makes_it():

@@ -382,8 +382,12 @@ class BrushParams:
         ParameterError
             For ``inputs_digest`` when the curve's variables do not reproduce
             it (variables missing, or a file written before they were
-            stored as given, 2026-12-05), and as `from_attrs`.
+            stored as given, 2026-12-05), and as `from_attrs`; for ``ds``
+            when it is not a Dataset (a dict of attributes: `from_attrs`).
         """
+        require(hasattr(ds, "attrs") and hasattr(ds, "data_vars"), "ds", type(ds).__name__,
+                "a curve Dataset (simulate's or read_curve's); for a dict of its attributes, "
+                "BrushParams.from_attrs")
         attrs = dict(ds.attrs)
         digest = attrs.pop("inputs_digest", "")
         fields = _fields_of(attrs)
