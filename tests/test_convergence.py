@@ -725,7 +725,9 @@ def test_soft_plateau_fit_is_per_layout_and_paper_numbers_sit_where_they_apply()
     """Two layouts on their plateaus, F = c N^(1/4) with c 0.9 (regular) and
     0.75 (random): one fit each, 1/c = 1.111 and 1.333, not a pooled
     average; random 64 (a paper brush) off its plateau gets no paper onset
-    beside its n/a."""
+    beside its n/a.  The paper's 1.2-1.3 stands beside a fit of its own
+    brushes only: the random fit rests on random 256 alone, which the paper
+    did not run (it was quoted beside any fit; the figures referee's find)."""
     from brushcore.data.summary import headline_rows
 
     n = np.array([64, 256])
@@ -745,6 +747,7 @@ def test_soft_plateau_fit_is_per_layout_and_paper_numbers_sit_where_they_apply()
     random = rows["N^1/4 / F_ad, fit over N", "random", ""]
     assert regular.value == f"{1 / 0.9:.3g}" and "2 of 2 brushes" in regular.note, regular
     assert random.value == f"{1 / 0.75:.3g}" and "1 of 2 brushes" in random.note, random
+    assert (regular.paper, random.paper) == ("1.2-1.3", ""), (regular, random)
     onset = rows["kbar where the soft plateau is reached", "random", "64"]
     assert (onset.value, onset.paper) == ("n/a", ""), onset
     assert rows["kbar where the soft plateau is reached", "regular", "64"].paper == "~1e-3"

@@ -268,8 +268,10 @@ def headline_rows(
         points = plateau.get(layout, [])
         fit = fit_soft_prefactor([n for n, _ in points], [f for _, f in points])
         of = sum(1 for lay, _ in brushes if lay == layout)
+        # the paper's range is of its brushes: beside a fit resting on them only
+        papers = bool(points) and all(_papers(layout, n) for n, _ in points)
         rows.append(Row("N^1/4 / F_ad, fit over N", layout, "", "", _fmt(fit["ratio"]),
-                        "1.2-1.3" if points else "",
+                        "1.2-1.3" if papers else "",
                         f"free power-law exponent {_fmt(fit['exponent'])} (eq. 6: 0.25); "
                         f"{len(points)} of {of} brushes on the plateau"))
     big = seed_mean(sweep, "adhesive_force_normalized", "regular", 2304)
