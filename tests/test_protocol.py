@@ -1574,3 +1574,7 @@ def test_the_soft_limit_line_is_drawn_only_where_springs_take_the_stretch():
         assert dashed == want, (n_pillars, dashed, colors)
         for k in drawn:
             assert float(theory.foundation_stretch(n_pillars, 0.12, k)) >= MIN_FOUNDATION_STRETCH
+    # rough_preload's panels (one per roughness) share one y range (they did
+    # not: 0.6-1.8 beside 1.6-1.8, the figures referee's find)
+    panels = figures.rough_preload(sweep(256), "regular", 256).axes[:3]
+    assert len({ax.get_ylim() for ax in panels}) == 1, [ax.get_ylim() for ax in panels]

@@ -150,7 +150,8 @@ def _no_false_zoom(ax, span: float = 0.05) -> None:
 
 def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 256
                   ) -> Figure:
-    """Adhesive force against preload per kbar, one panel per roughness."""
+    """Adhesive force against preload per kbar, one panel per roughness, on
+    one y range."""
     sweep = finest_grid(sweep)  # one value per case: the best-resolved one
     fig = new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
     if not _rough_ready(sweep, fig):
@@ -161,7 +162,8 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
                                                  kbar_spread=0.0)
     roughs = [float(r) for r in sweep.roughness.values
               if np.isfinite(ran.sel(roughness=r).values).any()] or [0.0]
-    axes = fig.subplots(1, len(roughs), squeeze=False)[0]
+    # one y range: the roughness panels are read against each other
+    axes = fig.subplots(1, len(roughs), squeeze=False, sharey=True)[0]
     kbars = [float(k) for k in sweep.kbar.values]
     p_axis = np.asarray(sweep.preload.values, dtype=float)
     protocol = sweep.attrs.get("protocol_normalized")  # one protocol: preload 0 alone
