@@ -16,7 +16,8 @@ from matplotlib.lines import Line2D
 from brushcore.data.convergence import (MIXED, PHI_ACTUAL, QUANTITIES, STUDY_FLAGS, TOUCHING,
                                         flag_radii, phi_spread, phi_varies,
                                         resolution_flag, touching_grids)
-from brushcore.data.figures.common import (FAD_LABEL, kbar_text, new_figure, no_data)
+from brushcore.data.figures.common import (FAD_LABEL, W_LABEL, kbar_text, new_figure,
+                                           no_data)
 
 
 #: The convergence figure's words for `resolution_flag`'s flags.
@@ -27,7 +28,7 @@ RESOLUTION_TEXT = {"under_resolved": "under-resolved",
 #: Labels of the quantities the convergence figure draws.
 CONVERGENCE_LABELS = {
     "adhesive_force_normalized": FAD_LABEL,
-    "work_of_separation_normalized": r"$\bar W$",
+    "work_of_separation_normalized": W_LABEL,
 }
 
 
