@@ -271,8 +271,11 @@ def load_sharing(curve: xr.Dataset) -> Figure:
     """Force of every pillar at F_ad against its height.
 
     Forces are in units of the mean pillar force at F_ad (F_ad / N), heights
-    in d_K; colour is the pillar's kbar.  Equal load sharing is the line at 1;
-    a rough stiff brush loads its tallest pillars, a soft one spreads the load.
+    in d_K; colour is the pillar's kbar.  Equal load sharing is the line at 1.
+    In tension at F_ad the shorter of the attached pillars carry more (their
+    springs are stretched further, by d - z), the more so the stiffer they
+    are; a pillar that never touched (at a small preload, a stiff brush's
+    short ones) carries none.
     A flat pull-off's file holds the forces alone: its pillars stand at
     height 0 on the brush's kbar.
     """
