@@ -213,6 +213,26 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+#: The solver's options that choose among words (`build_parser`): flag,
+#: choices and help; the default is `SolverOptions`' field of the flag's name.
+_CHOICE_OPTIONS = (
+    ("--cascade", ("global", "local"),
+     "local: per-pillar cascades where a rigorous bound shows they do not change the result; "
+     "global: re-solve after every round (reference)"),
+    ("--precision", ("auto", "mixed", "double"),
+     "FFT precision on the CPU: mixed = single-precision transforms, the rest double (needs "
+     "--rtol >= 1e-6; it moves a solution by up to ~1.5e-5 of its peak stress, enough to "
+     "reorder soft random pillars); auto = mixed for random layouts at --rtol >= 1e-6, else "
+     "double; both run double in units float32 cannot hold (stress, displacement scale or "
+     "--h beyond 1e+-15)"),
+    ("--fft-library", ("auto", "fftw", "mkl"),
+     "whose FFTs the whole grid runs on: mkl needs pip install 'brushcore[mkl]' (faster on "
+     "Intel CPUs); auto = the faster of the two on this machine, timed once per grid, thread "
+     "count and precision; a mirror-symmetric brush's quadrant runs FFTW's DCTs whatever "
+     "this says (the curve records fft_library_used)"),
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (exposed for documentation and tests)."""
     parser = _Parser(prog="brushcore", description=DESCRIPTION,
@@ -320,28 +340,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
                      help="approximate: detach (rough brushes: also attach) within this relative "
                           "window of the next event, in [0, 0.1] (0 = exact)")
-    sim.add_argument("--cascade", choices=("global", "local"), default=SolverOptions.cascade,
-                     help="local: per-pillar cascades where a rigorous bound shows they "
-                          "do not change the result; global: re-solve after every round "
-                          "(reference)")
+    # the solver's options that choose among words: flag, choices, help
+    for flag, choices, text in _CHOICE_OPTIONS:
+        sim.add_argument(flag, choices=choices,
+                         default=getattr(SolverOptions, flag[2:].replace("-", "_")), help=text)
     sim.add_argument("--no-symmetry", dest="symmetry", action="store_false",
                      help="solve mirror-symmetric brushes on the whole grid, not one quadrant")
-    sim.add_argument("--precision", choices=("auto", "mixed", "double"),
-                     default=SolverOptions.precision,
-                     help="FFT precision on the CPU: mixed = single-precision transforms, "
-                          "the rest double (needs --rtol >= 1e-6; it moves a solution by up "
-                          "to ~1.5e-5 of its peak stress, enough to reorder soft random "
-                          "pillars); auto = mixed for random layouts at --rtol >= 1e-6, "
-                          "else double; both run double in units float32 cannot hold "
-                          "(stress, displacement scale or --h beyond 1e+-15)")
-    sim.add_argument("--fft-library", choices=("auto", "fftw", "mkl"),
-                     default=SolverOptions.fft_library,
-                     help="whose FFTs the whole grid runs on: mkl needs "
-                          "pip install 'brushcore[mkl]' (faster on Intel CPUs); "
-                          "auto = the faster of the two on this machine, timed "
-                          "once per grid, thread count and precision; a mirror-symmetric "
-                          "brush's quadrant runs FFTW's DCTs whatever this says (the "
-                          "curve records fft_library_used)")
     sim.add_argument("--no-early-decisions", dest="early_decisions", action="store_false",
                      help="run every cascade round's CG to the tolerance")
     sim.add_argument("--no-settle-decisions", dest="settle_decisions", action="store_false",
