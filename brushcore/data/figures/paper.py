@@ -426,13 +426,14 @@ def lattices(sweep: xr.Dataset) -> Figure:
                         mfc="none" if shape != "disc" else None,
                         label=f"{layout}, {shape_text(shape)}")
         if math.isfinite(phi):
-            ax.axhline(theory.rigid_limit(phi), color="k", ls="--", lw=0.8,
+            # solid as in Fig. 6, the soft limit dashed as in Fig. 8: one key for all
+            ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
                        label=r"rigid limit $\varphi^{-1/4}$")
             if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
                 ax.axhline(theory.hexagonal_rigid_limit(phi, n), color="0.45",
                            ls=HEX_LINE, lw=1.0, label=HEX_LABEL)
         # Kendall's force per pillar: squares and ellipses let go below it
-        ax.axhline(theory.soft_limit(n), color="k", ls=":", lw=0.8,
+        ax.axhline(theory.soft_limit(n), color="k", ls="--", lw=1.0,
                    label=r"soft limit $N^{1/4}$ (discs)")
         ax.set_xscale("log")
         rigid_ticks(ax, kbars, x_inf)
