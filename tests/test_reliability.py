@@ -454,6 +454,34 @@ def test_an_unusable_cache_is_said_once(tmp_path: Path, monkeypatch, capsys) -> 
     convolution.save_to_cache("c.bin", b"data")
     assert capsys.readouterr().err == "" and (tmp_path / "c.bin").read_bytes() == b"data"
 
+
+@pytest.mark.skipif(not __import__("brushcore.numerics.halfspace.convolution",
+                                   fromlist=["HAVE_PYFFTW"]).HAVE_PYFFTW, reason="no pyfftw")
+def test_a_read_only_cache_that_holds_the_plans_is_not_written_to(tmp_path: Path, monkeypatch,
+                                                                  capsys) -> None:
+    """Wisdom was saved after every planning, new plans or not, so a cache
+    that holds every plan but cannot be written (a site-wide wisdom folder)
+    printed the unusable-cache note, falsely saying plans were made afresh
+    (a diff reviewer's find).  Wisdom is saved only when it changed (FFTW
+    exports imported entries in another order: compared as sorted lines)."""
+    from brushcore.numerics.halfspace import convolution
+
+    monkeypatch.setenv("BRUSHCORE_WISDOM_DIR", str(tmp_path))
+    monkeypatch.setattr(convolution, "_UNUSABLE_SAID", set())
+    convolution.Convolver(24)  # plans and saves: the cache now holds them
+    saved = (tmp_path / convolution.WISDOM_FILE).stat().st_mtime_ns
+
+    def refused(src, dst):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(convolution.os, "replace", refused)  # root ignores chmod
+    convolution.Convolver(24)  # nothing new to plan: no write, no note
+    assert capsys.readouterr().err == ""
+    assert (tmp_path / convolution.WISDOM_FILE).stat().st_mtime_ns == saved
+    convolution.Convolver(40)  # new plans that cannot be kept: said
+    assert "cannot write the cache" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.tmp"))
+
 def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
     params = BrushParams(**SMALL)
     with pytest.raises(ConvergenceError) as info:

@@ -102,13 +102,19 @@ def _wisdom_digest(wisdom: tuple) -> str:
     return hashlib.sha256(b"\0".join(wisdom)).hexdigest()
 
 
-def _load_wisdom() -> None:
+def _load_wisdom() -> tuple | None:
     """Import this machine's wisdom, if any and intact.
 
     Stored with its digest (files from before 2026-12-07 without): FFTW's
     importer does not refuse damaged wisdom but aborts the process in an
     assertion (3 bytes changed in the text: ``planner.c: assertion failed``,
     exit 134 and no message), and every later run on the machine with it.
+
+    Returns
+    -------
+    tuple or None
+        The wisdom imported (one bytes per precision), None where none was
+        or where it came from `OLD_WISDOM_FILE`.
     """
     path = _wisdom_path()
     if not path.exists():
@@ -116,7 +122,7 @@ def _load_wisdom() -> None:
     try:
         data = path.read_bytes()
     except OSError:
-        return  # no or unreadable wisdom: plan afresh
+        return None  # no or unreadable wisdom: plan afresh
     try:
         stored = _PlainUnpickler(io.BytesIO(data)).load()
     except Exception:  # noqa: BLE001 - any damage (a changed length byte: MemoryError,
@@ -128,11 +134,13 @@ def _load_wisdom() -> None:
         print(f"brushcore: FFTW wisdom in {path} is damaged (unreadable, or its checksum "
               "does not match); planning afresh, and the next save replaces it",
               file=sys.stderr, flush=True)
-        return
+        return None
     try:
         pyfftw.import_wisdom(wisdom)
     except (ValueError, TypeError):
-        pass
+        return None
+    # the old file's wisdom counts as none loaded: the save writes it in the new one
+    return wisdom if path.name == WISDOM_FILE else None
 
 
 class _PlainUnpickler(pickle.Unpickler):
@@ -168,20 +176,32 @@ _UNUSABLE_SAID: set[Path] = set()
 
 
 def _note_unusable_cache(folder: Path, exc: OSError) -> None:
-    """Say once that the cache cannot be written: every run then plans its
-    FFTs afresh (seconds at 512^2, minutes at 2048^2) and concurrent jobs
-    plan without the machine's lock, so they may round differently."""
+    """Say once that the cache cannot be written: plans it lacks are made
+    afresh in every run (seconds at 512^2, minutes at 2048^2), and
+    concurrent jobs plan without the machine's lock, so they may round
+    differently.  (A cache that holds every plan a run needs is not written
+    to, so a read-only one that does is never said.)"""
     if folder in _UNUSABLE_SAID:
         return
     _UNUSABLE_SAID.add(folder)
     # a note, not a warning: warnings as errors must not fail the run
     print(f"brushcore: cannot write the cache {folder} ({exc.strerror or exc}): FFT plans "
-          "are made afresh in every run and not shared between jobs; set "
+          "it lacks are made afresh in every run and not shared between jobs; set "
           "BRUSHCORE_WISDOM_DIR to a writable folder", file=sys.stderr, flush=True)
 
 
-def _save_wisdom() -> None:
+def _entries(wisdom: tuple) -> list[list[bytes]]:
+    """Wisdom as its sorted lines per precision: FFTW exports the entries it
+    imported in another order (same length, other bytes)."""
+    return [sorted(w.splitlines()) for w in wisdom]
+
+
+def _save_wisdom(loaded: tuple | None = None) -> None:
+    """Save this process's wisdom, unless it is the wisdom ``loaded`` (no new
+    plans: no write, and a read-only cache that holds the plans is no error)."""
     wisdom = pyfftw.export_wisdom()
+    if loaded is not None and _entries(wisdom) == _entries(loaded):
+        return
     save_to_cache(_wisdom_path().name,
                   pickle.dumps({"wisdom": wisdom, "sha256": _wisdom_digest(wisdom)}))
 
@@ -211,9 +231,9 @@ def planning() -> Iterator[None]:
     """Make FFTW plans inside this block: wisdom loaded first and saved after,
     one planner at a time on this machine (see `_wisdom_lock`)."""
     with _WISDOM_LOCK, _wisdom_lock():
-        _load_wisdom()
+        loaded = _load_wisdom()
         yield
-        _save_wisdom()
+        _save_wisdom(loaded)
 
 
 class HostBuffers:
