@@ -182,8 +182,8 @@ def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...],
     """
     for name in texts:
         value = _scalar(getattr(obj, name))
-        if isinstance(value, str):  # np.str_ too
-            object.__setattr__(obj, name, str(value))
+        if isinstance(value, str):  # np.str_ and str-mixin Enums too: their text,
+            object.__setattr__(obj, name, str.__str__(value))  # not "Enum.member"
     for name in (*integers, *reals):
         value = getattr(obj, name)
         if _scalar(value) is not value:

@@ -60,6 +60,14 @@ def test_text_from_numpy_is_stored_as_text():
     assert taken == BrushParams("regular", 16, 0.1, 64) and type(taken.kbar) is float
     assert type(taken.grid) is int and type(taken.layout) is str
     assert BrushParams("regular", 16, sweep.kbar[1], 64).kbar == math.inf
+    # a str-mixin Enum's member is its text, not "Layout.regular" (str() of it)
+    import enum
+
+    class Layout(str, enum.Enum):
+        regular = "regular"
+
+    assert BrushParams(Layout.regular, 16, 0.1, 64).layout.__class__ is str
+    assert BrushParams(Layout.regular, 16, 0.1, 64) == BrushParams("regular", 16, 0.1, 64)
     for make in (lambda: BrushParams(np.array(["regular"]), 16, 0.1, 64),
                  lambda: SolverOptions(cascade=np.array(["local"])),
                  lambda: Waypoint(np.array(["force"]), -1.0)):

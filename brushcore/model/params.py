@@ -191,7 +191,7 @@ class BrushParams:
         normalise(self, ("n_pillars", "grid", "seed"),
                    ("kbar", "phi", "min_gap", "e_star", "dgamma", "h", "aspect",
                     "orientation", "roughness", "preload", "kbar_spread"),
-                  ("layout", "shape", "backend"))
+                  ("layout", "shape", "backend", "layout_file"))
         require(is_one_of(self.layout, LAYOUTS), "layout", self.layout, f"one of {LAYOUTS}")
         require(is_integer(self.n_pillars) and self.n_pillars >= 1,
                  "n_pillars", self.n_pillars, "an integer N >= 1")
