@@ -82,8 +82,8 @@ _REFERENCE = r"(?=\s*(?:[=<>'\"]|\d|-\d|\b(?:is|are|must)\b))"
 
 #: Keywords users try where they are set another way (`suggest_keywords`).
 ELSEWHERE = {"threads": "threads are set for the process: "
-                        "brushcore.numerics.platform.threads.pin_threads(n), or the "
-                        "BRUSHCORE_THREADS environment variable"}
+                        "brushcore.numerics.platform.threads.pin_threads(n) (FFTW and BLAS), "
+                        "or the BRUSHCORE_THREADS environment variable (FFTW's)"}
 
 
 def suggest_keywords(target: T) -> T:
@@ -91,7 +91,11 @@ def suggest_keywords(target: T) -> T:
     the closest known one ("did you mean 'kbar'?"), as the command line
     names the closest flag; Python's own TypeError names none."""
     call = target.__init__ if isinstance(target, type) else target
-    known = [name for name in inspect.signature(call).parameters if name != "self"]
+    parameters = inspect.signature(call).parameters
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return target  # takes any keyword: nothing to refuse
+    known = [name for name, p in parameters.items()
+             if name != "self" and p.kind is not inspect.Parameter.POSITIONAL_ONLY]
 
     @functools.wraps(call)
     def checked(*args, **kwargs):

@@ -31,7 +31,6 @@ def test_numpy_scalars_are_accepted_and_normalised():
     assert q == BrushParams("regular", 16, 0.1, 64) and type(q.grid) is int
 
 
-
 def test_text_from_numpy_is_stored_as_text():
     """A text field taken from a sweep (``sweep.layout[0].values``, a 0-d
     array) was stored as the array: the brush could not be hashed, its
@@ -98,6 +97,7 @@ def test_a_refusal_crosses_a_process_pool():
             pool.submit(_refuse, -1.0).result(timeout=120)
         assert info.value.name == "kbar"
         assert pool.submit(_refuse, 0.1).result(timeout=120) is None  # the pool lives on
+
 
 @pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.5), ("grid", "64"),
                                          ("kbar", np.bool_(True)), ("grid", np.array([64])),

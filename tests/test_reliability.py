@@ -482,6 +482,7 @@ def test_a_read_only_cache_that_holds_the_plans_is_not_written_to(tmp_path: Path
     assert "cannot write the cache" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.tmp"))
 
+
 def test_cg_non_convergence_raises_with_the_problem_in_the_message() -> None:
     params = BrushParams(**SMALL)
     with pytest.raises(ConvergenceError) as info:
