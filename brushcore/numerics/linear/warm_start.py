@@ -18,14 +18,11 @@ A warm start, not a bound: the global solve corrects what it misses.
 from __future__ import annotations
 
 import weakref
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from brushcore.numerics.halfspace.multipole import field_terms
-
-if TYPE_CHECKING:
-    from brushcore.numerics.linear.precondition import BlockInverse
 
 
 class WarmStart:
@@ -78,7 +75,9 @@ class WarmStart:
     #: touches the same pillar for several rounds in a row.
     NEAR_BLOCKS_KEPT = 4
 
-    def __init__(self, blocks: BlockInverse, counts: np.ndarray, n: int) -> None:
+    # blocks: Any, not BlockInverse: the blocks import this module, and
+    # DeviceBlocks serves as well
+    def __init__(self, blocks: Any, counts: np.ndarray, n: int) -> None:
         # a weak reference: the blocks own this object, and a cycle kept their
         # stacks (up to MEMORY_BUDGET) alive after a run until the garbage
         # collector ran (a notebook's sixth run at 256^2: 207 MB against 138)
