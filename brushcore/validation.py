@@ -190,8 +190,9 @@ def normalise(obj: object, integers: tuple[str, ...], reals: tuple[str, ...],
             object.__setattr__(obj, name, str.__str__(value))  # not "Enum.member"
     for name in (*integers, *reals):
         value = getattr(obj, name)
-        if _scalar(value) is not value:
-            object.__setattr__(obj, name, _scalar(value))
+        scalar = _scalar(value)
+        if scalar is not value:
+            object.__setattr__(obj, name, scalar)
     for name in integers:
         value = getattr(obj, name)
         if (is_real(value) and not is_integer(value) and float(value).is_integer()

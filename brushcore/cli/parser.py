@@ -23,7 +23,7 @@ from brushcore.model.params import (LAYOUTS, MAX_ASPECT, MAX_GRID, MAX_KBAR_SPRE
                                     MIN_KBAR, RANDOM_GAP_GRID, UNIT_RANGE, BrushParams)
 from brushcore.model.provenance import version
 from brushcore.model.shapes import SHAPES
-from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.options import CASCADES, FFT_LIBRARIES, PRECISIONS, SolverOptions
 from brushcore.numerics.platform.backend import USER_BACKENDS
 from brushcore.numerics.platform.threads import MAX_THREADS
 from brushcore.validation import overflows
@@ -216,16 +216,16 @@ class _Version(argparse.Action):
 #: The solver's options that choose among words (`build_parser`): flag,
 #: choices and help; the default is `SolverOptions`' field of the flag's name.
 _CHOICE_OPTIONS = (
-    ("--cascade", ("global", "local"),
+    ("--cascade", CASCADES,
      "local: per-pillar cascades where a rigorous bound shows they do not change the result; "
      "global: re-solve after every round (reference)"),
-    ("--precision", ("auto", "mixed", "double"),
+    ("--precision", PRECISIONS,
      "FFT precision on the CPU: mixed = single-precision transforms, the rest double (needs "
      "--rtol >= 1e-6; it moves a solution by up to ~1.5e-5 of its peak stress, enough to "
      "reorder soft random pillars); auto = mixed for random layouts at --rtol >= 1e-6, else "
      "double; both run double in units float32 cannot hold (stress, displacement scale or "
      "--h beyond 1e+-15)"),
-    ("--fft-library", ("auto", "fftw", "mkl"),
+    ("--fft-library", FFT_LIBRARIES,
      "whose FFTs the whole grid runs on: mkl needs pip install 'brushcore[mkl]' (faster on "
      "Intel CPUs); auto = the faster of the two on this machine, timed once per grid, thread "
      "count and precision; a mirror-symmetric brush's quadrant runs FFTW's DCTs whatever "

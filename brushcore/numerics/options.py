@@ -10,6 +10,12 @@ from brushcore.numerics.platform import mkl
 from brushcore.validation import (is_integer, is_one_of, is_real, normalise, require,
                                   require_switches, suggest_keywords)
 
+#: The words `SolverOptions.cascade`, ``precision`` and ``fft_library`` take
+#: (the command line offers the same, in this order).
+CASCADES = ("global", "local")
+PRECISIONS = ("auto", "mixed", "double")
+FFT_LIBRARIES = ("auto", "fftw", "mkl")
+
 
 @suggest_keywords
 @dataclass(frozen=True)
@@ -122,13 +128,13 @@ class SolverOptions:
                  self.tie_rtol, "a number in [0, 1e-6]")
         require(is_real(self.lookahead) and 0 <= self.lookahead <= 0.1, "lookahead",
                  self.lookahead, "a number in [0, 0.1]")
-        require(is_one_of(self.cascade, ("local", "global")), "cascade", self.cascade,
+        require(is_one_of(self.cascade, CASCADES), "cascade", self.cascade,
                  "'local' or 'global'")
         require_switches(self, ("symmetry", "early_decisions", "settle_decisions"),
                          "true or false")
-        require(is_one_of(self.precision, ("auto", "mixed", "double")), "precision", self.precision,
+        require(is_one_of(self.precision, PRECISIONS), "precision", self.precision,
                 "'auto', 'mixed' or 'double'")
-        require(is_one_of(self.fft_library, ("auto", "fftw", "mkl")), "fft_library", self.fft_library,
+        require(is_one_of(self.fft_library, FFT_LIBRARIES), "fft_library", self.fft_library,
                 "'auto', 'fftw' or 'mkl'")
         require(self.fft_library != "mkl" or mkl.available(), "fft_library", self.fft_library,
                 "'auto' or 'fftw' here: 'mkl' needs mkl_fft (pip install 'brushcore[mkl]')")

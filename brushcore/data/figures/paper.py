@@ -195,14 +195,24 @@ def _panels(sweep: xr.Dataset, axes: dict, name: str):
 FEWER_SEEDS_LABEL = "hollow: a mean of fewer seeds than the brush ran"
 
 
-def _fewer_seeds(ax, sweep: xr.Dataset, name: str, layout: str, n: int, series: xr.DataArray,
-                 x_inf: float, color: str) -> bool:
+def _seed_runs(sweep: xr.Dataset, name: str, layout: str, n: int,
+               series: xr.DataArray) -> xr.DataArray:
+    """Every seed's ``name`` of one brush at the kbar of its seed mean ``series``."""
+    return sweep[name].sel(layout=layout, n_pillars=n).sel(kbar=series.kbar)
+
+
+def _seeds_ran(runs: xr.DataArray) -> int:
+    """Seeds that ran the brush at any kbar (``runs``: `_seed_runs`)."""
+    return int(runs.notnull().any("kbar").sum())
+
+
+def _fewer_seeds(ax, runs: xr.DataArray, series: xr.DataArray, x_inf: float,
+                 color: str) -> bool:
     """Redraw hollow the points of ``series`` (a seed mean against kbar) that
-    rest on fewer seeds than the brush ran at any kbar: a missing seed is
-    said, not drawn as a full mean with a narrow bar.  Whether any was."""
-    runs = sweep[name].sel(layout=layout, n_pillars=n).sel(kbar=series.kbar)
-    counts = runs.notnull().sum("seed").values
-    fewer = counts < int(runs.notnull().any("kbar").sum())
+    rest on fewer seeds than the brush ran at any kbar (``runs``:
+    `_seed_runs`): a missing seed is said, not drawn as a full mean with a
+    narrow bar.  Whether any was."""
+    fewer = runs.notnull().sum("seed").values < _seeds_ran(runs)
     if fewer.any():
         ax.plot(kbar_x(series.kbar, x_inf)[fewer], series.values[fewer], "o", ms=4,
                 mfc="white", mec=color, zorder=3)
@@ -230,17 +240,15 @@ def fig6(sweep: xr.Dataset) -> Figure:
     for index, layout, ax, phi, brushes in _panels(sweep, axes, "adhesive_force_normalized"):
         fewer = False
         for n, series in brushes:
-            runs = sweep["adhesive_force_normalized"].sel(layout=layout, n_pillars=n)
-            runs = runs.sel(kbar=series.kbar)
+            runs = _seed_runs(sweep, "adhesive_force_normalized", layout, n, series)
             low, high = runs.min("seed", skipna=True), runs.max("seed", skipna=True)
             x, y, lo, hi = break_before_rigid(x_inf, kbar_x(series.kbar, x_inf), series,
                                                low, high)
-            seeds = int(runs.notnull().any("kbar").sum())  # seeds this brush ran
+            seeds = _seeds_ran(runs)
             ax.errorbar(x, y, yerr=[y - lo, hi - y], marker="o", ms=4, capsize=2,
                         color=colors[n], label=f"N = {n}" + (
                             f" (mean, min-max of {seeds} seeds)" if seeds > 1 else ""))
-            fewer |= _fewer_seeds(ax, sweep, "adhesive_force_normalized", layout, n, series,
-                                  x_inf, colors[n])
+            fewer |= _fewer_seeds(ax, runs, series, x_inf, colors[n])
         kbar_axes(ax, panel_title(index, layout), FAD_LABEL, kbars, x_inf)
         if not brushes:
             no_data(ax, f"no flat {layout} runs")
@@ -347,8 +355,8 @@ def fig8(sweep: xr.Dataset) -> Figure:
         for n, series in brushes:
             ax.plot(*break_before_rigid(x_inf, kbar_x(series.kbar, x_inf), series), "o-",
                     ms=4, color=colors[n], label=f"N = {n}")
-            fewer |= _fewer_seeds(ax, sweep, "work_of_separation_normalized", layout, n, series,
-                                  x_inf, colors[n])
+            runs = _seed_runs(sweep, "work_of_separation_normalized", layout, n, series)
+            fewer |= _fewer_seeds(ax, runs, series, x_inf, colors[n])
             if math.isfinite(phi):
                 # Only where the springs' energy matters; it falls as 1/kbar (0 if rigid).
                 kbar = series.kbar.values
