@@ -47,14 +47,18 @@ class ParameterError(ValueError):
     def __reduce__(self) -> tuple:
         """Pickle by the constructor's arguments (ValueError's pickles the
         message alone, which ``__init__`` cannot take: a worker's refusal
-        broke a ProcessPoolExecutor and hung multiprocessing.Pool.map); a
-        value that does not pickle travels as its repr."""
+        broke a ProcessPoolExecutor and hung multiprocessing.Pool.map), and
+        the instance's other attributes as its state, as BaseException's
+        own pickling does: ``add_note``'s ``__notes__`` (dropped before
+        2026-12-07) and any set after construction.  A value that does not
+        pickle travels as its repr."""
         value = self.value
         try:
             pickle.dumps(value)
         except Exception:  # noqa: BLE001 - whatever pickle refuses (a generator, a lock)
             value = repr(value)
-        return type(self), (self.name, value, self.allowed, self.reason)
+        state = {**vars(self), "value": value}
+        return type(self), (self.name, value, self.allowed, self.reason), state
 
     def in_terms_of(self, names: Mapping[str, str], sep: str = "=") -> str:
         """The message with ``name`` replaced by ``names[name]`` (if present)."""

@@ -99,6 +99,73 @@ def test_a_refusal_crosses_a_process_pool():
         assert pool.submit(_refuse, 0.1).result(timeout=120) is None  # the pool lives on
 
 
+#: Every exception class brushcore defines, with constructor arguments that
+#: set its extra fields and flags off their defaults.
+_EXCEPTIONS = {
+    ("brushcore.validation", "ParameterError"): (("kbar", -1.0, "a number", "why"), {}),
+    ("brushcore.model.layout", "LayoutError"): (("pillars leave the square",),
+                                                {"grid_helps": False}),
+    ("brushcore.data.io", "CurveFileError"): (("c.nc: not a curve",), {"not_a_curve": True}),
+    ("brushcore.data.curve_set", "AggregationError"): (("a.nc, b.nc: same case",), {}),
+    ("brushcore.numerics.events.pulloff", "SolverError"): (("inconsistent",), {}),
+    ("brushcore.numerics.linear.cg", "ConvergenceError"): (("CG stalled",), {}),
+    ("brushcore.model.curve", "FirstTouchWarning"): (("3 of 16 pillars",), {}),
+    ("brushcore.data.joblog", "Terminated"): ((), {}),
+    ("brushcore.cli.simulate", "_Missing"): (("--kbar is required",), {}),
+}
+
+
+def _exception(module: str, name: str) -> BaseException:
+    """One of `_EXCEPTIONS`, with a note (``add_note``) and an attribute set after it was made."""
+    import importlib
+
+    args, kwargs = _EXCEPTIONS[module, name]
+    error = getattr(importlib.import_module(module), name)(*args, **kwargs)
+    error.add_note(f"while running case 7 ({name})")
+    error.case = 7  # what a caller attaches on the way up
+    return error
+
+
+def _raise(module: str, name: str) -> None:
+    raise _exception(module, name)
+
+
+def test_every_error_crosses_a_process_pool_whole():
+    """Message, fields, flags and notes of each brushcore exception arrive as
+    raised from a ProcessPoolExecutor's worker: ParameterError pickled by its
+    fields alone dropped ``add_note``'s notes.  The table must name every
+    exception class the package defines (found in its source)."""
+    import ast
+    import pathlib
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+
+    import brushcore
+
+    root = pathlib.Path(brushcore.__file__).parent
+    defined = set()
+    for path in root.rglob("*.py"):
+        module = ".".join(path.relative_to(root.parent).with_suffix("").parts)
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef) and any(
+                    ast.unparse(base).endswith(("Error", "Exception", "Warning", "Exit",
+                                                "Interrupt")) for base in node.bases):
+                defined.add((module, node.name))
+    assert defined == set(_EXCEPTIONS)
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        for module, name in _EXCEPTIONS:
+            expected = _exception(module, name)
+            for got in (pickle.loads(pickle.dumps(expected)), None):
+                if got is None:
+                    with pytest.raises(type(expected)) as info:
+                        pool.submit(_raise, module, name).result(timeout=120)
+                    got = info.value
+                assert type(got) is type(expected) and str(got) == str(expected), name
+                assert got.args == expected.args, name
+                assert got.__notes__ == [f"while running case 7 ({name})"], name
+                assert vars(got) == vars(expected), name  # fields, flags, the attribute
+
+
 @pytest.mark.parametrize("field,value", [("grid", True), ("n_pillars", 16.5), ("grid", "64"),
                                          ("kbar", np.bool_(True)), ("grid", np.array([64])),
                                          ("seed", float("inf")), ("seed", 1e20)])
@@ -383,6 +450,70 @@ def test_from_curve_refuses_arrays_it_cannot_rebuild():
         BrushParams.from_curve(shifted)
     with pytest.raises(ParameterError, match=r"^ds='dict' is invalid.*from_attrs"):
         BrushParams.from_curve(dict(ds.attrs))  # was an AttributeError
+
+
+_RERUN_VARIABLES = ("displacement", "force", "contact_area", "attached_pillars",
+                    "adhesive_force", "work_of_separation")
+
+
+@pytest.mark.parametrize("params,options,protocol", [
+    (BrushParams("random", 9, 0.455, 48, seed=3),
+     SolverOptions(rtol=1e-6, cascade="global", precision="double", tie_rtol=1e-8,
+                   early_decisions=False, symmetry=False), None),
+    (BrushParams("regular", 9, 0.05, 48), SolverOptions(precision="mixed", lookahead=0.01,
+                                                        settle_decisions=False), None),
+    # force 30 F_K: run at rtol 1e-7 x (10 / 30)^2, recorded so; a rerun given
+    # that would tighten it to 1.2e-9 (another parameter_hash, other numbers)
+    (BrushParams("regular", 9, 0.05, 48, heights=np.linspace(-0.3, 0.3, 9)),
+     replace(SolverOptions.exact(), rtol=1e-7), "force:-30, separation"),
+], ids=["random_global_double", "mixed_lookahead", "protocol_tightened"])
+def test_a_curve_file_reruns_from_its_parameters_and_options(params, options, protocol,
+                                                             tmp_path):
+    """SolverOptions.from_curve gives the options as given (a protocol's rtol
+    as asked, ``rtol_requested``, not the tightened one that ran), so that a
+    rerun from the file repeats the curve bit for bit, parameter_hash too."""
+    from brushcore import read_curve, simulate, write_curve
+    from brushcore.model.inputs import parse_protocol
+
+    waypoints = None if protocol is None else parse_protocol(protocol)
+    ds = simulate(params, options, protocol=waypoints)
+    write_curve(ds, tmp_path / "c.nc")
+    back = read_curve(tmp_path / "c.nc")
+    rebuilt = SolverOptions.from_curve(back)
+    assert rebuilt == options and type(rebuilt.rtol) is float and type(rebuilt.symmetry) is bool
+    if protocol is not None:
+        assert back.attrs["rtol"] < options.rtol == back.attrs["rtol_requested"]
+        waypoints = parse_protocol(back.attrs["protocol_normalized"])
+    again = simulate(BrushParams.from_curve(back), rebuilt, protocol=waypoints)
+    assert again.attrs["parameter_hash"] == ds.attrs["parameter_hash"]
+    assert again.attrs["rtol"] == ds.attrs["rtol"]
+    for name in _RERUN_VARIABLES:
+        np.testing.assert_array_equal(again[name].values, ds[name].values, err_msg=name)
+    assert SolverOptions.from_attrs(back.attrs) == options
+
+
+def test_solver_options_from_a_curve_refuse_what_is_none_and_warn_for_old_protocols():
+    from brushcore.numerics.options import REQUESTED_RTOL
+
+    attrs = {"rtol": np.float64(1e-6), "max_iter": np.int64(5000), "tie_rtol": 1e-7,
+             "lookahead": 0.0, "cascade": "global", "symmetry": np.int64(0),
+             "precision": "double", "early_decisions": 1, "settle_decisions": 0,
+             "fft_library": "auto", "layout": "regular"}  # a run's other attributes ignored
+    assert SolverOptions.from_attrs(attrs) == SolverOptions(
+        rtol=1e-6, cascade="global", symmetry=False, precision="double",
+        settle_decisions=False)
+    with pytest.raises(ParameterError, match=r"^symmetry=np.int64\(2\) is invalid"):
+        SolverOptions.from_attrs({**attrs, "symmetry": np.int64(2)})
+    with pytest.raises(ParameterError, match=r"^attrs=.*fft_library missing"):
+        SolverOptions.from_attrs({k: v for k, v in attrs.items() if k != "fft_library"})
+    with pytest.raises(ParameterError, match=r"^ds='dict' is invalid.*SolverOptions\.from_attrs"):
+        SolverOptions.from_curve(attrs)
+    with pytest.raises(ParameterError, match=r"^attrs='list' is invalid"):
+        SolverOptions.from_attrs([("rtol", 1e-4)])
+    protocol = {**attrs, "protocol": "force -1; separation"}
+    assert SolverOptions.from_attrs({**protocol, REQUESTED_RTOL: 1e-4}).rtol == 1e-4
+    with pytest.warns(UserWarning, match="rtol its protocol ran at .* tightens it again"):
+        assert SolverOptions.from_attrs(protocol).rtol == 1e-6
 
 
 def test_a_parameter_set_reads_as_the_call_that_makes_it():

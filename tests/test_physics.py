@@ -309,3 +309,89 @@ def test_a_near_tie_follows_the_event_displacement_not_cg_rounding(tmp_path):
     np.testing.assert_allclose(let_go, want.pillar_let_go_displacement.values, rtol=1e-6)
     w = float(want.work_of_separation_normalized)
     assert abs(float(got.work_of_separation_normalized) / w - 1.0) < 1e-6
+
+
+#: Closed forms over arrays: each with arguments that broadcast, (3, 1)
+#: against (4,) where it takes two or more.
+_KBAR = np.array([[1e-6], [1e-3], [math.inf]])
+_N = np.array([1, 16, 64, 256])
+_BROADCAST = {
+    "critical_stress": (np.array([[1.0], [2e9]]), 0.05, np.array([1e-6, 1.0])),
+    "flat_punch_stiffness": (np.array([[0.5], [2.0]]), np.array([1.0, 3.0])),
+    "elliptic_punch_stiffness": (np.array([[1.0], [3.0]]), np.array([0.5, 1.0, 2.0]), 1.0),
+    "square_punch_stiffness": (np.array([1.0, 2.0]), 3.0),
+    "elliptic_punch_initiation_force": (np.array([[1.0], [3.0]]), np.array([0.5, 1.0, 2.0]),
+                                        1.0, 2.0),
+    "kendall_force": (np.array([[0.5], [4.0]]), 2.0, np.array([0.1, 1.0, 3.0])),
+    "equivalent_radius": (np.array([1.0, 50.0, 1e4]),),
+    "force_scale": (np.array([[1.0], [1e4]]), 1.0, np.array([0.5, 2.0])),
+    "displacement_scale": (np.array([[1.0], [1e4]]), np.array([0.5, 2.0]), 1.0),
+    "work_scale": (np.array([[1.0], [1e4]]), np.array([0.5, 2.0])),
+    "stiffness_from_kbar": (_KBAR, 1.0, _N.astype(float)),
+    "rigid_limit": (np.array([0.01, 0.12, 0.5]),),
+    "hexagonal_rigid_limit": (np.array([[0.05], [0.12]]), np.array([16, 56, 64])),
+    "soft_limit": (_N,),
+    "soft_work": (_N, 0.12, _KBAR),
+    "spring_punch_work": (np.array([[1.0], [2.0]]), _KBAR[:, 0], 3.0),
+    "uniform_spread_pull_off": (np.array([0.0, 0.5, 1.0, 3.0]),),
+    "gaussian_spread_pull_off": (np.array([0.0, 0.1, 1.0]),),
+    "bimodal_stiffness_pull_off": (np.array([[1.0], [2.0], [10.0]]), np.array([0.1, 0.5, 0.9])),
+    "jkr_pull_off": (np.array([[1.0], [2.0]]), np.array([0.5, 1.0])),
+    "jkr_fixed_grips_pull_off": (np.array([[1.0], [2.0]]), np.array([0.5, 1.0])),
+    "foundation_stretch": (_N, np.array([[0.05], [0.12]]), np.array([[1e-4], [1e-2]])),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_BROADCAST))
+def test_closed_forms_take_arrays_and_give_floats_for_numbers(name):
+    """Each closed form over broadcast arrays (a curve over kbar or N for a
+    plot) is its value at each point; numbers give a Python float as before
+    (soft_limit, soft_work and foundation_stretch gave np.float64,
+    uniform_spread_pull_off a 0-d array); lists are taken as arrays."""
+    f = getattr(theory, name)
+    args = _BROADCAST[name]
+    got = f(*args)
+    shape = np.broadcast_shapes(*(np.shape(a) for a in args))
+    assert isinstance(got, np.ndarray) and got.shape == shape and got.dtype == float
+    points = np.broadcast_arrays(*(np.asarray(a) for a in args))
+    for index in np.ndindex(shape):
+        scalar = f(*(p[index].item() for p in points))
+        assert type(scalar) is float, index
+        # NumPy squares by multiplying, Python's ** calls pow: work_scale's last bits
+        assert got[index] == pytest.approx(scalar, rel=1e-15, abs=0), index
+    listed = f(*(a.tolist() if isinstance(a, np.ndarray) else a for a in args))
+    np.testing.assert_array_equal(listed, got)
+
+
+def test_closed_forms_over_arrays_are_the_formulas():
+    """Against the formulas written out, over kbar and N as a plot takes them."""
+    kbar = np.geomspace(1e-6, 1.0, 7)
+    n = np.array([4, 16, 64, 256, 1024])
+    phi = 0.12
+    np.testing.assert_allclose(theory.soft_work(n[:, None], phi, kbar),
+                               2 * np.sqrt(phi / np.pi) / (np.sqrt(n[:, None]) * kbar),
+                               rtol=1e-15)
+    np.testing.assert_allclose(theory.foundation_stretch(n[:, None], phi, kbar),
+                               2 * n[:, None]**-0.75 * np.sqrt(phi / np.pi) / kbar, rtol=1e-15)
+    np.testing.assert_allclose(theory.soft_limit(n), n**0.25, rtol=1e-15)
+    a = np.linspace(0.5, 20.0, 9)
+    np.testing.assert_allclose(theory.kendall_force(a, 2.0, 0.3),
+                               np.sqrt(8 * np.pi * 2.0 * 0.3 * a**3), rtol=1e-15)
+    area = np.pi * a**2  # a disc: its equivalent radius is a, its scales Kendall's
+    np.testing.assert_allclose(theory.equivalent_radius(area), a, rtol=1e-15)
+    np.testing.assert_allclose(theory.force_scale(area, 2.0, 0.3),
+                               theory.kendall_force(a, 2.0, 0.3), rtol=1e-15)
+    np.testing.assert_allclose(theory.displacement_scale(area, 2.0, 0.3),
+                               np.sqrt(2 * np.pi * 0.3 * a / 2.0), rtol=1e-15)
+    np.testing.assert_allclose(theory.work_scale(area, 0.3), 2 * np.pi * a**2 * 0.3,
+                               rtol=1e-15)
+    h = np.array([0.25, 1.0, 4.0])
+    np.testing.assert_allclose(theory.critical_stress(2.0, 0.3, h),
+                               np.sqrt(2.0 * 0.3 / (theory.BETA * h)), rtol=1e-15)
+    assert theory.rigid_limit([0.0625, 1.0]).tolist() == [2.0, 1.0]
+    # a number outside a formula's domain is refused as before; an array holds NaN there
+    with pytest.raises(ValueError, match="math domain"):
+        theory.kendall_force(-1.0, 1.0, 1.0)
+    with pytest.warns(RuntimeWarning, match="invalid value"):
+        assert np.isnan(theory.kendall_force(np.array([-1.0, 1.0]), 1.0, 1.0)).tolist() == [
+            True, False]

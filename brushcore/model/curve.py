@@ -29,7 +29,7 @@ from brushcore.model.solve import (LOAD_SPAN, element_offsets, load_options,
                                    run, run_protocol_curve, spring_options,
                                    stiffness_span)
 from brushcore.numerics.platform.backend import resolve_backend
-from brushcore.numerics.options import SolverOptions
+from brushcore.numerics.options import REQUESTED_RTOL, SolverOptions
 from brushcore.numerics.events.waypoints import (APPROACH, RETRACT, START, Waypoint,
                                                  loop_energy, positive_work, preload_protocol)
 from brushcore.numerics.events.pulloff import Progress
@@ -528,6 +528,9 @@ def _simulate_protocol(params: BrushParams, options: SolverOptions, progress: Pr
         "preload_force": float(-waypoints[0].value) if waypoints[0].kind == "force" else 0.0,
         "protocol": "; ".join(f"{w.kind} {w.value:.9g}" for w in waypoints),
         "pillar_order": PILLAR_ORDER,
+        # ``rtol`` is what ran, tightened above; a rerun must be given this
+        # (`SolverOptions.from_curve`), or it would tighten again
+        REQUESTED_RTOL: asked.rtol,
     })
     if protocol is not None:  # as given (normalised), the form --protocol and the config take
         attrs["protocol_normalized"] = protocol_text(protocol)

@@ -9,6 +9,15 @@ energy per area, ``stiffness`` or ``spring`` a force per length; ``kbar``,
 ``phi`` and ``n_pillars`` are dimensionless.  Each function's docstring
 gives its result's unit.
 
+The closed forms take NumPy arrays (or lists) as well as numbers, broadcast
+together, for a curve over kbar or N (a plot): numbers in give a Python
+float, computed as before they took arrays (bit for bit), arrays in an
+array, equal to the numbers' results to round-off (`work_scale` within 3
+ulp, measured; NumPy squares by multiplying, Python's ``**`` calls
+``pow``).  Array-likes are taken as arrays (an xarray DataArray's labels
+are dropped).  `kendall_scales` (one run's units) and `foundation_pull_off`
+(one brush's pillars) stay scalar.
+
 References
 ----------
 He, Li & Popov, Lubricants 8 (2020) 94 ("the paper"), eqs. 5, 6, 20-27.
@@ -20,11 +29,36 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 
 from brushcore.model.lattices import hexagonal_fill
 from brushcore.numerics.halfspace.kernel import self_compliance  # noqa: F401 - a limit like the rest
+
+#: A closed form's argument or result: a number, or an array of them.
+Values: TypeAlias = float | np.ndarray
+
+
+def _value(x: object) -> float | np.ndarray:
+    """``x`` as a Python float where it is one number (so that the formulas'
+    scalar arithmetic stays Python's, as before they took arrays), else as
+    an array of floats."""
+    values = np.asarray(x, dtype=float)
+    return float(values) if values.ndim == 0 else values
+
+
+def _out(result: object) -> float | np.ndarray:
+    """A result as a Python float where the arguments were numbers (NumPy
+    gives a 0-d float64 there), else the array."""
+    return float(result) if np.ndim(result) == 0 else result
+
+
+def _sqrt(x: float | np.ndarray) -> float | np.ndarray:
+    """math.sqrt of a number (a ValueError below 0, as before arrays were
+    taken), np.sqrt of an array (NaN there); both correctly rounded."""
+    return math.sqrt(x) if isinstance(x, float) else np.sqrt(x)
+
 
 #: Griffith energy balance over one square element of side h under a flat
 #: punch's edge singularity (Pohrt & Popov 2015, eq. 14):
@@ -34,7 +68,7 @@ BETA = (4.0 * math.log(1.0 + math.sqrt(2.0)) - 4.0 / 3.0 * (math.sqrt(2.0) - 1.0
 )
 
 
-def critical_stress(e_star: float, dgamma: float, h: float) -> float:
+def critical_stress(e_star: Values, dgamma: Values, h: Values) -> Values:
     """Mesh-dependent detachment stress sigma_c = sqrt(E* dgamma / (beta h)).
 
     Parameters
@@ -45,18 +79,18 @@ def critical_stress(e_star: float, dgamma: float, h: float) -> float:
 
     Returns
     -------
-    float
+    float or ndarray
         Critical tensile stress [stress] (Pohrt & Popov 2015).
     """
-    return math.sqrt(e_star * dgamma / (BETA * h))
+    return _out(_sqrt(_value(e_star) * _value(dgamma) / (BETA * _value(h))))
 
 
-def flat_punch_stiffness(radius: float | np.ndarray, e_star: float) -> float | np.ndarray:
+def flat_punch_stiffness(radius: Values, e_star: Values) -> Values:
     """Normal stiffness 2 a E* of a rigid circular flat punch [force / length]."""
-    return 2.0 * radius * e_star
+    return _out(2.0 * _value(radius) * _value(e_star))
 
 
-def elliptic_punch_stiffness(major: float, minor: float, e_star: float) -> float:
+def elliptic_punch_stiffness(major: Values, minor: Values, e_star: Values) -> Values:
     """Normal stiffness pi a E* / K(e) of a rigid elliptic flat punch [force / length].
 
     Galin's solution (Contact Problems in the Theory of Elasticity, 1961;
@@ -69,8 +103,14 @@ def elliptic_punch_stiffness(major: float, minor: float, e_star: float) -> float
     """
     from scipy.special import ellipk  # argument m = e^2
 
-    a, b = max(major, minor), min(major, minor)
-    return math.pi * a * e_star / float(ellipk(1.0 - (b / a) ** 2))
+    a, b = _semi_axes(major, minor)
+    return _out(math.pi * a * _value(e_star) / _value(ellipk(1.0 - (b / a) ** 2)))
+
+
+def _semi_axes(major: Values, minor: Values) -> tuple[Values, Values]:
+    """The larger and the smaller of two semi-axes, element-wise [length]."""
+    major, minor = _value(major), _value(minor)
+    return _value(np.maximum(major, minor)), _value(np.minimum(major, minor))
 
 
 #: Electrostatic capacitance of a thin square plate of unit side, in
@@ -79,7 +119,7 @@ def elliptic_punch_stiffness(major: float, minor: float, e_star: float) -> float
 SQUARE_PLATE_CAPACITANCE = 0.3667874
 
 
-def square_punch_stiffness(side: float, e_star: float) -> float:
+def square_punch_stiffness(side: Values, e_star: Values) -> Values:
     """Normal stiffness pi E* C s of a rigid square flat punch of side s
     [force / length].
 
@@ -91,11 +131,11 @@ def square_punch_stiffness(side: float, e_star: float) -> float:
     square, C = `SQUARE_PLATE_CAPACITANCE` s: 1.0212 times the disc of
     equal area.
     """
-    return math.pi * e_star * SQUARE_PLATE_CAPACITANCE * side
+    return _out(math.pi * _value(e_star) * SQUARE_PLATE_CAPACITANCE * _value(side))
 
 
-def elliptic_punch_initiation_force(major: float, minor: float, e_star: float,
-                                    dgamma: float) -> float:
+def elliptic_punch_initiation_force(major: Values, minor: Values, e_star: Values,
+                                    dgamma: Values) -> Values:
     """Force sqrt(8 pi E* dgamma a b^2) at which a rigid elliptic flat punch
     starts to let go, at the ends of its major axis [force].
 
@@ -110,34 +150,35 @@ def elliptic_punch_initiation_force(major: float, minor: float, e_star: float,
     above this.  ``major`` and ``minor`` are the semi-axes [length], in
     either order.
     """
-    a, b = max(major, minor), min(major, minor)
-    return math.sqrt(8.0 * math.pi * e_star * dgamma * a * b * b)
+    a, b = _semi_axes(major, minor)
+    return _out(_sqrt(8.0 * math.pi * _value(e_star) * _value(dgamma) * a * b * b))
 
 
-def kendall_force(radius: float, e_star: float, dgamma: float) -> float:
+def kendall_force(radius: Values, e_star: Values, dgamma: Values) -> Values:
     """Kendall's pull-off force sqrt(8 pi E* dgamma a^3) of a flat punch [force]."""
-    return math.sqrt(8.0 * math.pi * e_star * dgamma * radius**3)
+    return _out(_sqrt(8.0 * math.pi * _value(e_star) * _value(dgamma) * _value(radius)**3))
 
 
-def equivalent_radius(area: float) -> float:
+def equivalent_radius(area: Values) -> Values:
     """Radius a0 = sqrt(A / pi) of the compact punch with the same area [length]."""
-    return math.sqrt(area / math.pi)
+    return _out(_sqrt(_value(area) / math.pi))
 
 
-def force_scale(area: float, e_star: float, dgamma: float) -> float:
+def force_scale(area: Values, e_star: Values, dgamma: Values) -> Values:
     """Kendall force sqrt(8 pi E* dgamma a0^3) of the compact punch of area A
     (a0 = sqrt(A / pi)), the paper's eq. 20 scale F_K [force]."""
     return kendall_force(equivalent_radius(area), e_star, dgamma)
 
 
-def displacement_scale(area: float, e_star: float, dgamma: float) -> float:
+def displacement_scale(area: Values, e_star: Values, dgamma: Values) -> Values:
     """Kendall's critical displacement sqrt(2 pi dgamma a0 / E*), eq. 21 [length]."""
-    return math.sqrt(2.0 * math.pi * dgamma * equivalent_radius(area) / e_star)
+    return _out(_sqrt(2.0 * math.pi * _value(dgamma) * equivalent_radius(area)
+                      / _value(e_star)))
 
 
-def work_scale(area: float, dgamma: float) -> float:
+def work_scale(area: Values, dgamma: Values) -> Values:
     """Work of separation 2 pi a0^2 dgamma of the compact punch, eq. 23 [energy]."""
-    return 2.0 * math.pi * equivalent_radius(area) ** 2 * dgamma
+    return _out(2.0 * math.pi * equivalent_radius(area) ** 2 * _value(dgamma))
 
 
 @dataclass(frozen=True)
@@ -160,23 +201,23 @@ class KendallScales:
 
 
 def kendall_scales(area: float, e_star: float, dgamma: float) -> KendallScales:
-    """`KendallScales` of the real contact area ``area`` [length^2]."""
+    """`KendallScales` of the real contact area ``area`` [length^2] (numbers:
+    one run's units; the scale functions take arrays)."""
     return KendallScales(area, force_scale(area, e_star, dgamma),
                          displacement_scale(area, e_star, dgamma), work_scale(area, dgamma))
 
 
-def stiffness_from_kbar(kbar: float | np.ndarray, e_star: float,
-                        side: float) -> float | np.ndarray:
-    """Pillar spring stiffness k = kbar E* L (eq. 22) [force / length]."""
-    return kbar * e_star * side
+def stiffness_from_kbar(kbar: Values, e_star: Values, side: Values) -> Values:
+    """Pillar spring stiffness k = kbar E* L (eq. 22) [force / length] (inf for rigid)."""
+    return _out(_value(kbar) * _value(e_star) * _value(side))
 
 
-def rigid_limit(phi: float) -> float:
+def rigid_limit(phi: Values) -> Values:
     """Normalised adhesive force of a rigid flat brush, phi^(-1/4) (eq. 5)."""
-    return phi**-0.25
+    return _out(_value(phi)**-0.25)
 
 
-def hexagonal_rigid_limit(phi: float, n_pillars: int) -> float:
+def hexagonal_rigid_limit(phi: Values, n_pillars: int | np.ndarray) -> Values:
     """Eq. 5 at a hexagonal lattice's local filling factor, (phi / fill)^(-1/4).
 
     An N that no lattice fills covers ``fill`` (`lattices.hexagonal_fill`)
@@ -184,17 +225,24 @@ def hexagonal_rigid_limit(phi: float, n_pillars: int) -> float:
     approximation, not a limit: against the same grid's regular lattice,
     measured within 0.2-1.5 % at phi = 0.12 (N = 16, 64; 128^2-512^2) and
     2-3 % above the hexagonal brush at phi = 0.05.
+
+    Raises
+    ------
+    ValueError
+        For an N that fills no hexagonal lattice.
     """
-    return rigid_limit(phi / hexagonal_fill(n_pillars))
+    counts = np.asarray(n_pillars)
+    fill = (hexagonal_fill(int(counts)) if counts.ndim == 0 else  # the lattice is counted
+            np.reshape([hexagonal_fill(int(n)) for n in counts.ravel()], counts.shape))
+    return rigid_limit(_value(phi) / fill)
 
 
-def soft_limit(n_pillars: int | np.ndarray) -> float | np.ndarray:
+def soft_limit(n_pillars: int | np.ndarray) -> Values:
     """Normalised adhesive force of independent soft pillars, N^(1/4) (eq. 6)."""
-    return np.asarray(n_pillars, dtype=float) ** 0.25
+    return _out(_value(n_pillars) ** 0.25)
 
 
-def soft_work(n_pillars: int | np.ndarray, phi: float,
-              kbar: float | np.ndarray) -> float | np.ndarray:
+def soft_work(n_pillars: int | np.ndarray, phi: Values, kbar: Values) -> Values:
     """Normalised work of separation stored in soft springs, eqs. 25-27.
 
     Each of the N springs carries f = N^(-3/4) F_K at pull-off and stores
@@ -213,11 +261,11 @@ def soft_work(n_pillars: int | np.ndarray, phi: float,
     -------
     W_S / (2 pi a0^2 dgamma) [-]
     """
-    n = np.asarray(n_pillars, dtype=float)
-    return 2.0 * math.sqrt(phi / math.pi) / (np.sqrt(n) * np.asarray(kbar, dtype=float))
+    n = np.asarray(n_pillars, dtype=float)  # np.sqrt whatever n is: as before
+    return _out(2.0 * _sqrt(_value(phi) / math.pi) / (np.sqrt(n) * _value(kbar)))
 
 
-def spring_punch_work(pull_off: float, spring: float, contact: float) -> float:
+def spring_punch_work(pull_off: Values, spring: Values, contact: Values) -> Values:
     """Work to separate one punch on a spring that detaches at once [energy].
 
     Under displacement control the punch and its spring are in series, so
@@ -231,7 +279,7 @@ def spring_punch_work(pull_off: float, spring: float, contact: float) -> float:
     contact : the contact's own stiffness k_c, 2 a E* for a flat punch
         [force / length]
     """
-    return 0.5 * pull_off**2 * (1.0 / spring + 1.0 / contact)
+    return _out(0.5 * _value(pull_off)**2 * (1.0 / _value(spring) + 1.0 / _value(contact)))
 
 
 # --- Rough, graded and preloaded brushes: the elastic-foundation limit --------
@@ -277,22 +325,31 @@ def foundation_pull_off(d0: np.ndarray, k_eff: np.ndarray, f_c: float | np.ndarr
     return float(force.max())
 
 
-def uniform_spread_pull_off(width: float | np.ndarray) -> float | np.ndarray:
+def uniform_spread_pull_off(width: Values) -> Values:
     """F_ad / (N f_c) of many equal pillars with heights uniform over a band
     of width w, in units of the stretch lambda = f_c / k_eff:
     1 - w / 2 for w <= 1, 1 / (2 w) beyond."""
     w = np.asarray(width, dtype=float)
-    return np.where(w <= 1.0, 1.0 - 0.5 * w, 0.5 / np.maximum(w, 1.0))
+    return _out(np.where(w <= 1.0, 1.0 - 0.5 * w, 0.5 / np.maximum(w, 1.0)))
 
 
-def gaussian_spread_pull_off(s: float) -> float:
+def gaussian_spread_pull_off(s: Values) -> Values:
     """F_ad / (N f_c) of many equal pillars with Gaussian heights of standard
     deviation s (units of lambda = f_c / k_eff), large N.
 
     With x = (d - z) / lambda ~ Normal(mu, s), F / (N f_c) = E[x; x < 1] =
     mu Phi(a) - s phi(a), a = (1 - mu) / s, maximised over mu numerically.
-    Values 0.784, 0.634, 0.343, 0.115 at s = 0.1, 0.2, 0.5, 1.
+    Values 0.784, 0.634, 0.343, 0.115 at s = 0.1, 0.2, 0.5, 1.  An array of
+    s is maximised element by element (~1 ms each).
     """
+    spreads = np.asarray(s, dtype=float)
+    if spreads.ndim:
+        return np.reshape([_gaussian_spread(float(x)) for x in spreads.ravel()], spreads.shape)
+    return _gaussian_spread(float(spreads))
+
+
+def _gaussian_spread(s: float) -> float:
+    """`gaussian_spread_pull_off` of one spread s."""
     from scipy.optimize import minimize_scalar
     from scipy.stats import norm
 
@@ -308,7 +365,7 @@ def gaussian_spread_pull_off(s: float) -> float:
     return float(-res.fun)
 
 
-def bimodal_stiffness_pull_off(ratio: float = 2.0, fraction: float = 0.5) -> float:
+def bimodal_stiffness_pull_off(ratio: Values = 2.0, fraction: Values = 0.5) -> Values:
     """F_ad / (N f_c) of equal-height pillars, a fraction q with stiffness k
     and the rest with ratio * k (ratio >= 1): the stiff ones let go at
     lambda / ratio, the soft ones at lambda; 0.75 for half k, half 2k.
@@ -318,25 +375,25 @@ def bimodal_stiffness_pull_off(ratio: float = 2.0, fraction: float = 0.5) -> flo
     ratio : stiffness of the stiff pillars over the soft ones' (>= 1) [-]
     fraction : share q of the soft pillars [-]
     """
+    ratio, fraction = _value(ratio), _value(fraction)
     at_stiff = fraction / ratio + (1.0 - fraction)
     at_soft = fraction
-    return max(at_stiff, at_soft)
+    return _out(np.maximum(at_stiff, at_soft))
 
 
-def jkr_pull_off(radius: float, dgamma: float) -> float:
+def jkr_pull_off(radius: Values, dgamma: Values) -> Values:
     """JKR pull-off force 1.5 pi R dgamma of a sphere under load control, or of
     a sphere on any spring once the contact is unstable [force]."""
-    return 1.5 * math.pi * radius * dgamma
+    return _out(1.5 * math.pi * _value(radius) * _value(dgamma))
 
 
-def jkr_fixed_grips_pull_off(radius: float, dgamma: float) -> float:
+def jkr_fixed_grips_pull_off(radius: Values, dgamma: Values) -> Values:
     """Force (5/6) pi R dgamma at which a JKR sphere on a rigid mount
     (displacement control) jumps out of contact [force]."""
-    return 5.0 / 6.0 * math.pi * radius * dgamma
+    return _out(5.0 / 6.0 * math.pi * _value(radius) * _value(dgamma))
 
 
-def foundation_stretch(n_pillars: int, phi: float, kbar: float | np.ndarray
-                       ) -> float | np.ndarray:
+def foundation_stretch(n_pillars: int | np.ndarray, phi: Values, kbar: Values) -> Values:
     """Let-go stretch lambda = f_c / k of one soft pillar in units of d_K.
 
     In the soft limit each of the N pillars holds Kendall's force of its own
@@ -350,4 +407,5 @@ def foundation_stretch(n_pillars: int, phi: float, kbar: float | np.ndarray
     phi : filling factor A / L^2 [-]
     kbar : normalised spring stiffness k / (E* L) [-]
     """
-    return 2.0 * n_pillars**-0.75 * math.sqrt(phi / math.pi) / np.asarray(kbar, dtype=float)
+    return _out(2.0 * _value(n_pillars)**-0.75 * _sqrt(_value(phi) / math.pi)
+                / np.asarray(kbar, dtype=float))

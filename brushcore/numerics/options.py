@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -15,6 +17,11 @@ from brushcore.validation import (is_integer, is_one_of, is_real, normalise, req
 CASCADES = ("global", "local")
 PRECISIONS = ("auto", "mixed", "double")
 FFT_LIBRARIES = ("auto", "fftw", "mkl")
+#: The curve attribute holding the rtol a protocol run was asked for: its
+#: ``rtol`` attribute is the one it ran at, tightened for its loads and
+#: stiffness span (`brushcore.model.solve.load_options`), which a rerun
+#: given it would tighten again.  Written on protocol curves since 2026-12-07.
+REQUESTED_RTOL = "rtol_requested"
 
 
 @suggest_keywords
@@ -115,6 +122,91 @@ class SolverOptions:
         """Reference settings: global cascades, CG to 1e-8, double precision."""
         return cls(rtol=1e-8, cascade="global", precision="double", early_decisions=False,
                    settle_decisions=False)
+
+    @classmethod
+    def from_attrs(cls, attrs: Mapping[str, object]) -> SolverOptions:
+        """The options a curve file's attributes record, as the run was given them.
+
+        Every field is an attribute of the same name (switches stored as
+        0/1, netCDF having no booleans), but for a protocol run's ``rtol``:
+        the attribute ``rtol`` is the tolerance it ran at, tightened for its
+        loads and stiffness span (`brushcore.model.solve.load_options`,
+        ``spring_options``), and ``simulate`` would tighten it again; the
+        one asked for is `REQUESTED_RTOL` (``rtol_requested``), taken where
+        present.  So ``simulate(BrushParams.from_curve(ds),
+        SolverOptions.from_curve(ds), protocol=...)`` repeats the run: the
+        same tightening, the same ``parameter_hash``, and the same numbers
+        where the FFT library and thread count are the curve's
+        (``fft_library_used``, ``threads``: "auto" may time the libraries
+        otherwise on another machine, and threaded FFTW plans round otherwise).
+
+        Warns
+        -----
+        UserWarning
+            For a protocol curve written before ``rtol_requested`` was
+            (2026-12-07): its ``rtol`` is taken, which a rerun tightens again
+            where the first run was tightened (a more accurate rerun, not the
+            same numbers).
+
+        Raises
+        ------
+        ParameterError
+            For ``attrs`` when it is not a mapping or lacks an option (files
+            written before 2026-12-03 lack ``fft_library``), and as the
+            constructor for values out of range.
+        """
+        return cls._from_recorded(attrs)
+
+    @classmethod
+    def from_curve(cls, ds: object) -> SolverOptions:
+        """The options of a curve (a Dataset from `simulate` or `read_curve`),
+        as the run was given them: `from_attrs` of its attributes.
+
+        Raises
+        ------
+        ParameterError
+            For ``ds`` when it is not a Dataset (a dict of attributes:
+            `from_attrs`), and as `from_attrs`.
+        """
+        require(hasattr(ds, "attrs") and hasattr(ds, "data_vars"), "ds", type(ds).__name__,
+                "a curve Dataset (simulate's or read_curve's); for a dict of its attributes, "
+                "SolverOptions.from_attrs")
+        return cls._from_recorded(ds.attrs)
+
+    @classmethod
+    def _from_recorded(cls, attrs: Mapping[str, object]) -> SolverOptions:
+        """`from_attrs`' work, warning at its caller's caller (the user's line)."""
+        values, note = cls._recorded(attrs)
+        if note:
+            warnings.warn(note, stacklevel=3)
+        return cls(**values)
+
+    @classmethod
+    def _recorded(cls, attrs: Mapping[str, object]) -> tuple[dict[str, object], str]:
+        """The fields `from_attrs` takes from ``attrs``, and why its rtol may not
+        be the one asked for ("" where it is)."""
+        require(isinstance(attrs, Mapping), "attrs", type(attrs).__name__,
+                "a mapping of a curve file's attributes (ds.attrs)")
+        names = [f.name for f in fields(cls)]
+        missing = [name for name in names if name not in attrs]
+        require(not missing, "attrs", f"<{len(attrs)} attributes>",
+                f"a curve file's attributes, the solver options {', '.join(names)} among them",
+                f"{', '.join(missing)} missing")
+        values = {}
+        for f in fields(cls):
+            value = attrs[f.name]
+            if isinstance(f.default, bool) and is_integer(value) and value in (0, 1):
+                value = bool(value)  # netCDF's 0/1; other values left for the check
+            values[f.name] = value
+        note = ""
+        if REQUESTED_RTOL in attrs:
+            values["rtol"] = attrs[REQUESTED_RTOL]
+        elif "protocol" in attrs:  # every protocol curve's; a flat run never tightens
+            note = (f"the curve records the rtol its protocol ran at ({values['rtol']!r}), "
+                    f"not the one asked for ({REQUESTED_RTOL}, written since 2026-12-07): a "
+                    "rerun tightens it again where the run was tightened for its loads or "
+                    "stiffness span, more accurate than the curve, not the same numbers")
+        return values, note
 
     def __post_init__(self) -> None:
         normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"),
