@@ -967,3 +967,68 @@ def test_a_mean_of_fewer_seeds_is_drawn_hollow():
         missing[name][0, 0, 1, 1] = np.nan  # seed 1 at kbar 0.1
     assert hollow(figures.fig6(missing)) == [True, [(0.1, 1.8)]]
     assert hollow(figures.fig8(missing)) == [True, [(0.1, 18.0)]]
+
+
+def test_fig6_rigid_limit_takes_each_brush_realised_phi():
+    """Fig. 6 drew phi^(-1/4) at the phi asked for, where Fig. 8's soft
+    limit takes each brush's phi as realised (`sweep_phi`; regular 256 and
+    2304 realise 0.1172 of 0.12 at 512^2: 1.709 against 1.699, the figures
+    referee's find).  Now each N's line is at its own realised phi: black
+    where they lie within a line's width, else in the N's colour."""
+    from brushcore.data import figures
+    from brushcore.model import theory
+
+    def sweep(phis: list[float]) -> xr.Dataset:
+        dims = ("layout", "n_pillars", "kbar", "seed")
+        force = np.full((1, len(phis), 2, 1), 1.5)
+        realised = np.broadcast_to(np.asarray(phis)[None, :, None, None], force.shape)
+        return xr.Dataset({"adhesive_force_normalized": (dims, force),
+                           "phi_actual": (dims, realised.copy())},
+                          coords={"layout": ["regular"], "n_pillars": [16, 256][:len(phis)],
+                                  "kbar": [1e-3, math.inf], "seed": [0]},
+                          attrs={"phi": 0.12})
+
+    def rigid_lines(fig) -> dict[float, str]:
+        ax = fig.axes[0]
+        key = [t.get_text() for t in ax.get_legend().get_texts() if "rigid limit" in t.get_text()]
+        lines = {round(float(line.get_ydata()[0]), 12): line.get_color() for line in ax.lines
+                 if line.get_linestyle() == "-" and len(line.get_xdata()) == 2
+                 and line.get_xdata()[0] == 0 and line.get_xdata()[1] == 1}  # axhline
+        return key, lines
+
+    key, lines = rigid_lines(figures.fig6(sweep([0.1171875])))
+    assert lines == {round(theory.rigid_limit(0.1171875), 12): "k"}, lines  # not 0.12's 1.699
+    assert key == [r"rigid limit $\varphi^{-1/4}$ = 1.71"]
+    key, lines = rigid_lines(figures.fig6(sweep([0.12, 0.1171875])))  # 512^2: 0.6 % apart
+    assert lines == {round(theory.rigid_limit(phi), 12): "k" for phi in (0.12, 0.1171875)}
+    assert key == ["rigid limit $\\varphi^{-1/4}$ = 1.699-1.709\n(each N's realised $\\varphi$)"]
+    key, lines = rigid_lines(figures.fig6(sweep([0.125, 0.1171875])))  # 64^2 realises these
+    assert lines == {round(theory.rigid_limit(0.125), 12): "C0",
+                     round(theory.rigid_limit(0.1171875), 12): "C1"}, lines
+    assert key[0].startswith(r"rigid limit $\varphi^{-1/4}$ = 1.682-1.709"), key
+    assert key[0].endswith(", in its colour)"), key
+
+
+def test_fig5_draws_a_map_shared_by_two_stages_once(tmp_path):
+    """Where nothing detaches before the maximum, "start" and "before
+    maximum" are one step and one map, which Fig. 5 drew in two identical
+    panels (the figures referee's find).  Stages of one step now share one
+    panel, titled with both, as their dot on the curve shares "1,2"."""
+    from brushcore import BrushParams, simulate
+    from brushcore.data import figures
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.io import write_curve
+
+    ds = simulate(BrushParams("regular", 4, 0.455, 32))  # the four let go at once
+    steps = ds.snapshot_step.values.tolist()
+    assert steps == [0, 0, 1, 1, 1], steps
+    maps = ds.contact_snapshot.values
+    assert all(np.array_equal(maps[i], maps[j]) for i, j in ((0, 1), (2, 3), (2, 4)))
+    write_curve(ds, tmp_path / "c.nc")
+    fig = figures.fig5(build_sweep([tmp_path / "c.nc"], keep_snapshots=[("regular", 4)]),
+                       n_pillars=4, kbar=(0.455,))
+    drawn = [ax for ax in fig.axes[1:] if ax.get_images()]
+    assert [ax.get_title() for ax in drawn] == [
+        "1,2: start\n= before maximum", "3,4,5: maximum force\n= after maximum\n= last contact"]
+    dots = sorted(t.get_text() for t in fig.axes[0].texts)
+    assert dots == ["1,2", "3,4,5"], dots

@@ -581,25 +581,29 @@ def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
     from brushcore.data import figures
     from brushcore.data.views import flat_slice
 
-    fig6 = figures.fig6(flat_slice(shape_sweep))
+    discs = flat_slice(shape_sweep)
+    fig6 = figures.fig6(discs)
     # one shape of several: the title says which (a disc-only sweep's does not)
     assert fig6._suptitle.get_text().endswith("(disc pillars)")
     titles = [ax.get_title(loc="left") for ax in fig6.axes]
     assert titles == ["(a) regular", "(b) hexagonal", "(c) random"], titles
-    # the hexagonal panel adds its lattice's rigid limit at phi / fill, per N
+    # the hexagonal panel adds its lattice's rigid limit at phi / fill, per N,
+    # both lines at the phi each brush realised
     from brushcore import theory
 
-    phi = float(shape_sweep.attrs["phi"])
+    all_n = [int(n) for n in shape_sweep.n_pillars.values]
 
-    def levels(ax) -> set[float]:  # horizontal lines but eq. 5's and the compact punch's
-        flat = {round(float(line.get_ydata()[0]), 12) for line in ax.get_lines()
+    def realised(layout: str, n: int) -> float:
+        return float(discs["phi_actual"].sel(layout=layout, n_pillars=n).mean(skipna=True))
+
+    def levels(ax, layout: str) -> set[float]:  # horizontal lines but eq. 5's and the punch's
+        flat = {round(float(line.get_ydata()[0]), 9) for line in ax.get_lines()
                 if len(set(np.ravel(line.get_ydata()))) == 1}
-        return flat - {round(theory.rigid_limit(phi), 12), 1.0}
+        return flat - {round(theory.rigid_limit(realised(layout, n)), 9) for n in all_n} - {1.0}
 
-    hexagonal_n = [int(n) for n in shape_sweep.n_pillars.values]
-    assert levels(fig6.axes[1]) == {round(theory.hexagonal_rigid_limit(phi, n), 12)
-                                    for n in hexagonal_n}
-    assert not levels(fig6.axes[0])
+    assert levels(fig6.axes[1], "hexagonal") == {
+        round(theory.hexagonal_rigid_limit(realised("hexagonal", n), n), 9) for n in all_n}
+    assert not levels(fig6.axes[0], "regular")
     fig = figures.lattices(flat_slice(shape_sweep, None))
     labels = fig.axes[0].get_legend_handles_labels()[1]
     for label in ("regular, disc", "regular, square", "hexagonal, square", "random, square"):

@@ -1578,3 +1578,63 @@ def test_the_soft_limit_line_is_drawn_only_where_springs_take_the_stretch():
     # not: 0.6-1.8 beside 1.6-1.8, the figures referee's find)
     panels = figures.rough_preload(sweep(256), "regular", 256).axes[:3]
     assert len({ax.get_ylim() for ax in panels}) == 1, [ax.get_ylim() for ax in panels]
+
+
+def test_rough_roughness_draws_each_seed_at_its_drawn_height_spread():
+    """`rough_roughness` drew F_ad at the roughness S asked for alone, though a
+    brush of few pillars draws far from it (16 at S = 1: 1.23 and 0.52 for
+    two seeds), so part of a seed bar was that scatter (the figures
+    referee's find).  Each seed is now also an open marker at the SD of its
+    heights as drawn (`pillar_height_sd_normalized`), under a key and an x
+    label that say which is which; a sweep without the SD draws as before."""
+    from brushcore.data import figures
+    from brushcore.data.aggregate import HEIGHT_SD
+    from brushcore.data.figures.rough import DRAWN_SPREAD_LABEL
+
+    dims = ("layout", "n_pillars", "kbar", "seed", "roughness", "preload", "kbar_spread")
+    force = np.array([[2.0, 2.0], [1.5, 1.3], [0.6, 0.4]]).T.reshape(1, 1, 1, 2, 3, 1, 1)
+    drawn = np.array([[0.0, 0.0], [0.37, 0.16], [1.23, 0.52]]).T.reshape(force.shape)
+    sweep = xr.Dataset({"adhesive_force_normalized": (dims, force), HEIGHT_SD: (dims, drawn)},
+                       coords={"layout": ["regular"], "n_pillars": [16], "kbar": [math.inf],
+                               "seed": [0, 1], "roughness": [0.0, 0.3, 1.0], "preload": [0.5],
+                               "kbar_spread": [0.0]}, attrs={"phi": 0.12})
+
+    def open_points(fig) -> set[tuple[float, float]]:
+        return {(round(float(x), 9), float(y)) for line in fig.axes[0].lines
+                if line.get_markerfacecolor() == "none"
+                for x, y in zip(line.get_xdata(), line.get_ydata())}
+
+    fig = figures.rough_roughness(sweep, "regular", 16)
+    assert open_points(fig) == {(s, f) for s, f in zip(drawn.ravel(), force.ravel())}
+    assert DRAWN_SPREAD_LABEL in [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "as drawn (open)" in fig.axes[0].get_xlabel()
+    assert [float(x) for x in fig.axes[0].containers[0].lines[0].get_xdata()] == [0.0, 0.3, 1.0]
+    before = figures.rough_roughness(sweep.drop_vars(HEIGHT_SD), "regular", 16)
+    assert open_points(before) == set() and before.axes[0].get_xlabel() == r"roughness $S$ [$d_K$]"
+
+
+def test_rough_loop_keys_the_colours_of_its_contact_maps():
+    """`rough_loop`'s contact maps had no colour key, where Fig. 5's have one
+    (the figures referee's find); and their grey is not "detached" alone: at
+    the preload of a rough brush it is a pillar that never touched.  The key
+    names both colours, and with several cycles the loop's key says that
+    colour is the branch (approach, retraction) of every cycle."""
+    from brushcore.data import figures
+    from brushcore.data.figures.common import SNAPSHOT_CMAP
+    from matplotlib.colors import to_rgba
+
+    ds = simulate(BrushParams("regular", 9, 0.455, 48, roughness=1.0, preload=0.2))
+    at_preload = ds.contact_snapshot.values[0]
+    assert (at_preload == 0).any() and (at_preload == 1).any()  # short pillars never touched
+    fig = figures.rough_loop(ds)
+    assert len(fig.legends) == 1, fig.legends
+    key = {t.get_text(): to_rgba(h.get_facecolor())
+           for t, h in zip(fig.legends[0].get_texts(), fig.legends[0].legend_handles)}
+    assert key == {"attached": to_rgba(SNAPSHOT_CMAP(2)),
+                   "not in contact (detached or never touched)": to_rgba(SNAPSHOT_CMAP(1))}
+    loop = [t.get_text() for t in fig.axes[0].get_legend().get_texts()][:2]
+    assert loop == ["approach", "retraction"]  # one cycle
+    cycles = simulate(ROUGH9, protocol=[Waypoint("force", -0.5), Waypoint("separation"),
+                                        Waypoint("force", -1.0), Waypoint("separation")])
+    loop = [t.get_text() for t in figures.rough_loop(cycles).axes[0].get_legend().get_texts()]
+    assert loop[:2] == ["approaches (every cycle)", "retractions (every cycle)"], loop

@@ -18,6 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 from matplotlib.ticker import NullFormatter
 
 from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
@@ -57,6 +58,19 @@ OTHER_MARKERS = ("^", "v", "D", "P", "X", "<", ">", "p", "*")
 
 # detached / attached pillar element on a white background (no pillar)
 SNAPSHOT_CMAP = ListedColormap(["white", "0.8", "tab:red"])
+
+
+def snapshot_key(fig: Figure, not_in_contact: str = "detached", **where) -> None:
+    """The contact maps' colour key (`SNAPSHOT_CMAP`) as a figure legend.
+
+    ``not_in_contact`` names the grey elements: "detached" where every
+    pillar starts in contact (Fig. 5), wider where some may never have
+    touched (a rough brush at its preload).  ``where``: `Figure.legend`'s
+    placement keywords.
+    """
+    fig.legend(handles=[Patch(color=SNAPSHOT_CMAP(2), label="attached"),
+                        Patch(color=SNAPSHOT_CMAP(1), label=not_in_contact)],
+               **{"ncols": 2, "fontsize": 7, "frameon": False, **where})
 
 
 def layout_styles(layouts: Sequence[str]) -> dict[str, tuple[str, str]]:

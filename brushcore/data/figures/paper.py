@@ -15,7 +15,6 @@ from collections.abc import Sequence
 import numpy as np
 import xarray as xr
 from matplotlib.figure import Figure
-from matplotlib.patches import Patch
 from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 
 from brushcore.model import theory
@@ -29,8 +28,8 @@ from brushcore.data.figures.common import (FAD_LABEL, HEX_LABEL, HEX_LINE, K_LAB
                                            SHAPE_MARKERS, SNAPSHOT_CMAP, W_LABEL,
                                            break_before_rigid, brush_colors, kbar_axes, kbar_text,
                                            kbar_x, layout_styles, new_figure, no_data, panel_title,
-                                           rigid_ticks, rigid_x, shape_text, sweep_layouts,
-                                           sweep_phi)
+                                           rigid_ticks, rigid_x, shape_text, snapshot_key,
+                                           sweep_layouts, sweep_phi)
 
 
 #: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
@@ -129,14 +128,16 @@ def fig5(
                   for s in np.asarray(snap["snapshot_step"].values, dtype=float)]
         order = sorted(range(len(stored)), key=lambda j: (stored[j] < 0, stored[j]))
         steps = [stored[j] for j in order]
-        for slot, j in enumerate(order):
+        names = [str(snap["snapshot_label"].values[j]) for j in order]
+        for slot, shown in enumerate(_snapshot_panels(steps)):
             image_ax = fig.add_subplot(grid[row, 1 + slot])
             image_ax.set_axis_off()
+            j = order[shown[0]]
             if stored[j] < 0:
                 continue
             image_ax.imshow(snap["contact_snapshot"].values[j] + 1, cmap=SNAPSHOT_CMAP,
                             vmin=0, vmax=2, interpolation="nearest", origin="lower")
-            image_ax.set_title(f"{slot + 1}: {snap['snapshot_label'].values[j]}", fontsize=7)
+            image_ax.set_title(_snapshot_title(shown, names), fontsize=7)
         # One dot per distinct step; snapshots sharing a step share its label ("1,2").
         for step in sorted({s for s in steps if 0 <= s < d.size}):
             label = ",".join(str(j + 1) for j, s in enumerate(steps) if s == step)
@@ -144,10 +145,30 @@ def fig5(
             ax.annotate(label, (d[step], f[step]), textcoords="offset points",
                         xytext=(3, 3), fontsize=7)
     if n_snap:  # the maps' colour key
-        fig.legend(handles=[Patch(color=SNAPSHOT_CMAP(2), label="attached"),
-                            Patch(color=SNAPSHOT_CMAP(1), label="detached")],
-                   loc="upper right", ncols=2, fontsize=7, frameon=False)
+        snapshot_key(fig, loc="upper right")
     return fig
+
+
+def _snapshot_panels(steps: Sequence[int]) -> list[list[int]]:
+    """The snapshots each of Fig. 5's map panels draws, as indices into
+    ``steps`` (the snapshots' steps in the order of the curve, -1 for a
+    stage never reached).
+
+    Snapshots of one step share one panel, as they share one dot on the
+    curve ("1,2"): where nothing detaches before the maximum, "start" and
+    "before maximum" are the same step, whose map two panels drew twice.
+    A stage never reached keeps its own (empty) panel.
+    """
+    panels: dict[int, list[int]] = {}
+    for j, step in enumerate(steps):
+        panels.setdefault(step if step >= 0 else -1 - j, []).append(j)
+    return list(panels.values())
+
+
+def _snapshot_title(shown: Sequence[int], names: Sequence[str]) -> str:
+    """A map panel's title: its snapshots' numbers as on the curve's dot
+    ("1,2") and their stages, one per line ("1,2: start\n= before maximum")."""
+    return ",".join(str(j + 1) for j in shown) + ": " + "\n= ".join(names[j] for j in shown)
 
 
 def _shape_note(sweep: xr.Dataset) -> str:
@@ -227,9 +248,12 @@ def _fewer_seeds_key(ax, shown: bool) -> None:
 def fig6(sweep: xr.Dataset) -> Figure:
     """Fig. 6: adhesive force against kbar (log axis) per N, one panel per layout.
 
-    The rigid limit phi^(-1/4) (eq. 5) is the solid black line; the compact
-    punch F_ad = 1 is dotted; a hexagonal panel adds each N's lattice at its
-    local filling factor (`theory.hexagonal_rigid_limit`, dash-dot).  With
+    The rigid limit phi^(-1/4) (eq. 5) is the solid line, drawn for each N
+    at the phi its brush realised (`sweep_phi`), as Fig. 8's soft limit is:
+    black, or in the N's colour where they stand apart (`RIGID_LINES_APART`);
+    the compact punch F_ad = 1 is dotted; a hexagonal panel adds
+    each N's lattice at its local filling factor
+    (`theory.hexagonal_rigid_limit`, dash-dot).  With
     several seeds the bars span min to max, and a hollow marker is a mean of
     fewer seeds than its brush ran (`_fewer_seeds`).
     Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
@@ -254,16 +278,46 @@ def fig6(sweep: xr.Dataset) -> Figure:
             no_data(ax, f"no flat {layout} runs")
             continue
         if math.isfinite(phi):
-            ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
-                       label=rf"rigid limit $\varphi^{{-1/4}}$ = {theory.rigid_limit(phi):.2f}")
+            # each brush's own phi as realised, as its data are normalised (`sweep_phi`)
+            realised = {n: sweep_phi(sweep, layout, n) for n, _ in brushes}
+            limits = [theory.rigid_limit(realised[n]) for n, _ in brushes]
+            apart = _rigid_lines_apart(limits)
+            for (n, _), limit in zip(brushes, limits):
+                ax.axhline(limit, color=colors[n] if apart else "k", lw=1.2)
+            ax.plot([], [], "k-", lw=1.2, label=_rigid_label(limits, apart))
             if layout == "hexagonal":  # N that no lattice fills stand denser
                 for i, (n, _) in enumerate(brushes):
-                    ax.axhline(theory.hexagonal_rigid_limit(phi, n), color=colors[n],
+                    ax.axhline(theory.hexagonal_rigid_limit(realised[n], n), color=colors[n],
                                ls=HEX_LINE, lw=1.0, label=HEX_LABEL if i == 0 else None)
         ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
         _fewer_seeds_key(ax, fewer)
         ax.legend(fontsize=7)
     return fig
+
+
+#: Relative spread of a panel's rigid limits (one per N, at its realised phi)
+#: above which Fig. 6 draws each in its N's colour.  Below it they lie about
+#: a line's width apart, drawn as one black line: at 512^2 the default sweep's
+#: regular brushes realise phi 0.1172-0.12, limits 1.699-1.709 (0.6 %);
+#: at 64^2 regular 4 and 16 realise 0.117 and 0.125, limits 1.6 % apart.
+RIGID_LINES_APART = 0.01
+
+
+def _rigid_lines_apart(limits: Sequence[float]) -> bool:
+    """Whether Fig. 6's rigid limits of one panel (``limits``) differ by
+    more than `RIGID_LINES_APART`: enough to be told apart, by colour."""
+    return max(limits) - min(limits) > RIGID_LINES_APART * min(limits)
+
+
+def _rigid_label(limits: Sequence[float], apart: bool) -> str:
+    """Fig. 6's key of the rigid limit phi^(-1/4) at each brush's realised
+    phi (``limits``): its value, or the span of them, drawn ``apart`` in
+    their N's colours (`_rigid_lines_apart`) or as one black line."""
+    low, high = f"{min(limits):.3f}", f"{max(limits):.3f}"
+    if low == high:
+        return rf"rigid limit $\varphi^{{-1/4}}$ = {min(limits):.2f}"
+    return (rf"rigid limit $\varphi^{{-1/4}}$ = {low}-{high}" + "\n(each N's realised "
+            + r"$\varphi$" + (", in its colour)" if apart else ")"))
 
 
 def fig7(sweep: xr.Dataset) -> Figure:

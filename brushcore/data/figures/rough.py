@@ -14,9 +14,10 @@ from matplotlib.figure import Figure
 from brushcore.model import theory
 from brushcore.model.inputs import parse_protocol
 from brushcore.model.layout_file import curve_layout
+from brushcore.data.aggregate import HEIGHT_SD
 from brushcore.data.views import (finest_grid)
 from brushcore.data.figures.common import (FAD_LABEL, SNAPSHOT_CMAP, kbar_text, new_figure,
-                                           no_data, sweep_phi)
+                                           no_data, snapshot_key, sweep_phi)
 
 
 #: The rough figure draws the elastic foundation's soft limit where a pillar's
@@ -36,6 +37,29 @@ def _rough_series(sweep: xr.Dataset, name: str, layout: str, n: int, kbar: float
     runs = sweep[name].sel(layout=layout, n_pillars=n, kbar=kbar, kbar_spread=0.0, **at)
     return (runs.mean("seed", skipna=True), runs.min("seed", skipna=True),
             runs.max("seed", skipna=True))
+
+
+def _drawn_spread(sweep: xr.Dataset, layout: str, n: int, kbar: float, **at: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """(height SD as drawn [d_K], F_ad / F_K) of every seed and roughness of
+    one brush and kbar that ran; empty where the sweep does not record the
+    SD (`HEIGHT_SD`: a flat sweep, or one built before 2026-12-06).
+
+    The ``roughness`` coordinate is the S asked for, only the expectation of
+    what a seed draws: 16 pillars at S = 0.3 drew 0.370 and 0.157.
+    """
+    if HEIGHT_SD not in sweep:
+        return np.empty(0), np.empty(0)
+    where = dict(layout=layout, n_pillars=n, kbar=kbar, kbar_spread=0.0, **at)
+    spread = sweep[HEIGHT_SD].sel(where)
+    force = sweep["adhesive_force_normalized"].sel(where).transpose(*spread.dims)
+    spread, force = np.ravel(spread.values), np.ravel(force.values)
+    ran = np.isfinite(spread) & np.isfinite(force)
+    return spread[ran], force[ran]
+
+
+#: Legend entry of `rough_roughness`'s open markers (`_drawn_spread`).
+DRAWN_SPREAD_LABEL = "open: a seed at its heights' SD"
 
 
 def _rough_ready(sweep: xr.Dataset, fig: Figure) -> bool:
@@ -79,13 +103,17 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                     ) -> Figure:
     """Adhesive force against roughness per kbar, one panel per preload.
 
-    Bars span the seeds.  Dashed lines are the soft limit (elastic foundation,
+    Filled markers are the seed mean at the roughness S asked for, its bars
+    span the seeds; open markers are each seed at the standard deviation of
+    the heights it drew (`_drawn_spread`), which a brush of few pillars
+    draws far from S.  Dashed lines are the soft limit (elastic foundation,
     every pillar attached, large N): N^(1/4) G(S d_K / lambda) with G
     `theory.gaussian_spread_pull_off` and lambda `theory.foundation_stretch`,
     drawn where it applies: where lambda is at least `MIN_FOUNDATION_STRETCH`.
     """
     sweep = finest_grid(sweep)  # one value per case: the best-resolved one
-    fig = new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)), 3.6)
+    # 1.6 in more than a panel each: the side legend took a one-panel figure's axes
+    fig = new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)) + 1.6, 3.6)
     if not _rough_ready(sweep, fig):
         return fig
     preloads = [float(p) for p in sweep.preload.values]
@@ -95,7 +123,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     colors = {k: f"C{i}" for i, k in enumerate(kbars)}
     s_axis = np.asarray(sweep.roughness.values, dtype=float)
     given = _given(sweep, layout)  # heights given, not drawn: no Gaussian soft limit
-    soft_drawn = False
+    soft_drawn = spread_drawn = False
     protocol = sweep.attrs.get("protocol_normalized")  # its loads stand for the preload
     for ax, preload in zip(axes, preloads):
         for kbar in kbars:
@@ -105,17 +133,27 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
                 continue
             ax.errorbar(s_axis, mean, yerr=[mean - low, high - mean], marker="o", ms=4,
                         capsize=2, color=colors[kbar], label=rf"$\bar k$ = {kbar_text(kbar)}")
+            spread, force = _drawn_spread(sweep, layout, n_pillars, kbar, preload=preload)
+            if spread.size:  # part of a seed bar is the scatter of what the seeds drew
+                ax.plot(spread, force, "o", ms=5, mfc="none", mec=colors[kbar], mew=0.8)
+                spread_drawn = True
             lam = float(theory.foundation_stretch(n_pillars, phi, kbar))  # 0 if rigid
+            reach = max(s_axis.max(), spread.max(initial=0.0))  # to the widest drawn too
             if lam >= MIN_FOUNDATION_STRETCH and s_axis.max() > 0 and not given:
-                span = np.linspace(0.0, s_axis.max(), 60)
+                span = np.linspace(0.0, reach, 60)
                 soft = [theory.gaussian_spread_pull_off(s / lam) for s in span]
                 ax.plot(span, theory.soft_limit(n_pillars) * np.asarray(soft), "--", lw=1,
                         color=colors[kbar])
                 soft_drawn = True
         ax.set_title(f"preload {preload:g} " + r"$F_K$" if protocol is None else
                      "last retraction of\n" + textwrap.fill(protocol, 36), fontsize=8)
-        ax.set_xlabel(r"roughness $S$ [$d_K$]")
         ax.set_ylabel(FAD_LABEL)
+    for ax in axes:
+        ax.set_xlabel("height spread [$d_K$]: roughness $S$ asked for (filled),\n"
+                      "SD of the heights as drawn (open)" if spread_drawn else
+                      r"roughness $S$ [$d_K$]")
+    if spread_drawn:
+        axes[0].plot([], [], "o", ms=5, mfc="none", mec="k", mew=0.8, label=DRAWN_SPREAD_LABEL)
     if soft_drawn:
         axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
     _side_legend(fig, axes)
@@ -219,7 +257,8 @@ def rough_loop(curve: xr.Dataset) -> Figure:
     Left: F / F_K against d / d_K, approaches and retractions in two colours
     (compression is negative), the preload and each retraction's F_ad
     marked.  Right: the contact maps the curve file keeps at those two
-    stages (red attached, grey detached pillar elements).
+    stages (red attached, grey not in contact: detached, or a pillar that
+    never touched), with their colour key below.
     """
     fig = new_figure(10.5, 3.6)
     ax, *maps = fig.subplots(1, 3, width_ratios=[1.6, 1, 1])
@@ -229,12 +268,16 @@ def rough_loop(curve: xr.Dataset) -> Figure:
     # Approaches run from the end of one pull (first touch) to the start of the next.
     starts = [0] + [last for _, last in pulls]
     ends = [first for first, _ in pulls] + [d.size - 1]
+    # colour is the branch, not the cycle: the key says so where there are several
+    # cycles, which their F_ad markers' labels tell apart
+    every = " (every cycle)" if len(pulls) > 1 else ""
     for k, (a, b) in enumerate(zip(starts, ends)):
         if b > a:
             ax.plot(d[a:b + 1], f[a:b + 1], color="C0", lw=1,
-                    label="approach" if k == 0 else None)
+                    label=("approaches" if every else "approach") + every if k == 0 else None)
     for k, (a, b) in enumerate(pulls):
-        ax.plot(d[a:b + 1], f[a:b + 1], color="C3", lw=1, label="retraction" if k == 0 else None)
+        ax.plot(d[a:b + 1], f[a:b + 1], color="C3", lw=1,
+                label=("retractions" if every else "retraction") + every if k == 0 else None)
         i = a + int(np.argmax(f[a:b + 1]))
         if f[i] > 0:
             name = rf"$\bar F_{{ad}}$ = {f[i]:.3g}" if len(pulls) == 1 else \
@@ -259,6 +302,8 @@ def rough_loop(curve: xr.Dataset) -> Figure:
                    interpolation="nearest")
         title = {"preload": "the preload", "maximum force": r"$F_{ad}$"}.get(stage, stage)
         axm.set_title("contact at " + title, fontsize=9)
+    # grey is not "detached" alone here: a rough brush's short pillars may never touch
+    snapshot_key(fig, "not in contact (detached or never touched)", loc="outside lower right")
     a = curve.attrs
     fig.suptitle(f"{curve_layout(a)} brush, N = {a.get('n_pillars')}, "
                  rf"$\bar k$ = {float(a.get('kbar', math.nan)):g}, "
