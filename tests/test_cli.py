@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brushcore import BrushParams
+from brushcore import BrushParams, SolverOptions
 from brushcore.cli import main
 from brushcore.model.labelmap import count_touching_pairs
 from brushcore.model.layout import build_labels
@@ -821,3 +821,48 @@ def test_a_curve_under_another_suffix_is_warned_of_and_a_folder_named(tmp_path, 
     (tmp_path / "conv").mkdir()
     assert main(["converge", str(tmp_path / "conv"), "--out-dir", str(tmp_path / "o")]) == 2
     assert f"no such curve file: {tmp_path / 'conv'} (a folder)" in capsys.readouterr().err
+
+
+def test_every_solver_flag_reaches_the_curve(tmp_path) -> None:
+    """Each solver flag sets its option (the parser's mapping onto
+    SolverOptions is written out by hand, so a dropped one would pass
+    unseen): the curve records every field as given, non-defaults all."""
+    out = tmp_path / "c.nc"
+    given = dict(rtol=1e-5, max_iter=4000, tie_rtol=5e-7, lookahead=0.01, cascade="global",
+                 symmetry=False, precision="double", early_decisions=False,
+                 settle_decisions=False, fft_library="fftw")
+    assert all(getattr(SolverOptions(), k) != v for k, v in given.items())  # each one moves
+    with pytest.warns(UserWarning, match="--lookahead 0.01"):
+        assert main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                     "--grid", "48", "--rtol", "1e-5", "--max-iter", "4000",
+                     "--tie-rtol", "5e-7", "--lookahead", "0.01", "--cascade", "global",
+                     "--no-symmetry", "--precision", "double", "--no-early-decisions",
+                     "--no-settle-decisions", "--fft-library", "fftw", "--out", str(out),
+                     "--quiet"]) == 0
+    assert SolverOptions.from_curve(read_curve(out)) == SolverOptions(**given)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--max-iter", "0"], "--max-iter 0 is invalid: allowed an integer >= 1"),
+    (["--max-iter", "2.5"], "--max-iter: '2.5' is not an integer; allowed an integer >= 1"),
+    (["--tie-rtol", "1e-3"], r"--tie-rtol 0.001 is invalid: allowed a number in \[0, 1e-6\]"),
+])
+def test_bad_solver_limits_are_refused_by_flag(tmp_path, capsys, argv, message) -> None:
+    try:  # argparse's own readers exit, the options' checks return
+        rc = main(["simulate", "--layout", "regular", "--pillars", "4", "--kbar", "0.01",
+                   "--grid", "48", *argv, "--out", str(tmp_path / "c.nc")])
+    except SystemExit as exc:
+        rc = exc.code
+    assert rc == 2 and re.search(message, capsys.readouterr().err)
+    assert not list(tmp_path.iterdir())
+
+
+def test_cg_that_runs_out_of_iterations_names_the_flag_that_allows_more(tmp_path,
+                                                                        capsys) -> None:
+    rc = main(["simulate", "--layout", "random", "--pillars", "16", "--kbar", "0.1",
+               "--grid", "48", "--seed", "3", "--max-iter", "1", "--quiet",
+               "--out", str(tmp_path / "c.nc")])
+    err = capsys.readouterr().err
+    assert rc == 1 and "did not converge in 1 iterations" in err, err
+    assert "(--max-iter raises the limit)" in err
+    assert not list(tmp_path.iterdir())

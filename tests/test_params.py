@@ -612,3 +612,15 @@ def test_a_mistyped_keyword_names_the_closest_one():
             call()
         assert message in str(info.value), str(info.value)
     assert BrushParams("regular", 16, 0.1, 64, seed=2).seed == 2  # the known ones pass
+
+
+@pytest.mark.parametrize("layout, n", [("regular", 4), ("hexagonal", 6)])
+def test_min_gap_on_a_lattice_is_recorded_as_1_as_the_cli_does(layout, n) -> None:
+    """A lattice ignores min_gap (only a random draw keeps gaps): given one,
+    the Python API says so and records 1, as the CLI's --min-gap, so the
+    brush keeps one identity (it had two parameter hashes, and its curves
+    did not aggregate with the workflow's: "disagree on min_gap")."""
+    with pytest.warns(UserWarning, match=f"the {layout} layout ignores min_gap 5, recorded as 1"):
+        given = BrushParams(layout, n, 0.1, 48, min_gap=5)
+    assert given == BrushParams(layout, n, 0.1, 48) and given.min_gap == 1.0
+    assert BrushParams("random", 16, 0.1, 48, min_gap=5).min_gap == 5.0  # its draw's gap

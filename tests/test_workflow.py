@@ -400,6 +400,7 @@ def test_snakefmt_clean() -> None:
                          "'integer'; 64.5 is not of type 'array'"),
         ({"kbars": [1.0]}, "config key 'kbars' is unknown; did you mean 'kbar'?"),
         ({"solver": {"rtoll": 1e-5}}, "config key 'solver.rtoll' is unknown; did you mean"),
+        ({"solver": {"max_iter": 0}}, "config key 'solver.max_iter': 0 is less than the minimum"),
         ({"regular": [4, 10]}, "config: regular = 10 is invalid: allowed a perfect square"),
         # a shape setting no brush reads would seem to count (its default hides it later)
         ({"aspect": 3.0}, r"config key 'aspect': applies to ellipse pillars only, and no brush "
@@ -1106,6 +1107,11 @@ def test_the_config_schema_bounds_are_the_solvers():
     rtol = props["solver"]["properties"]["rtol"]
     assert (rtol["minimum"], rtol["maximum"]) == (SolverOptions.MIN_RTOL,
                                                   SolverOptions.MAX_RTOL)
+    tie = props["solver"]["properties"]["tie_rtol"]
+    assert (tie["minimum"], tie["maximum"]) == (0, SolverOptions.MAX_TIE_RTOL)
+    assert props["solver"]["properties"]["max_iter"]["minimum"] == 1
+    # no defaults filled in: they would reach every job's params and rerun finished curves
+    assert "default" not in tie and "default" not in props["solver"]["properties"]["max_iter"]
 
 
 @pytest.mark.parametrize("case,wildcards", [

@@ -23,7 +23,8 @@ from brushcore.model.params import (LAYOUTS, MAX_ASPECT, MAX_GRID, MAX_KBAR_SPRE
                                     MIN_KBAR, RANDOM_GAP_GRID, UNIT_RANGE, BrushParams)
 from brushcore.model.provenance import version
 from brushcore.model.shapes import SHAPES
-from brushcore.numerics.options import CASCADES, FFT_LIBRARIES, PRECISIONS, SolverOptions
+from brushcore.numerics.options import (CASCADES, FFT_LIBRARIES, PRECISIONS, SolverOptions,
+                                        short_float)
 from brushcore.numerics.platform.backend import USER_BACKENDS
 from brushcore.numerics.platform.threads import MAX_THREADS
 from brushcore.validation import overflows
@@ -35,6 +36,7 @@ DESCRIPTION = "Command line: ``brushcore simulate`` writes a curve, ``converge``
 FLAGS = {"n_pillars": "--pillars", "kbar": "--kbar", "grid": "--grid", "phi": "--phi",
          "seed": "--seed", "min_gap": "--min-gap", "e_star": "--e-star",
          "dgamma": "--dgamma", "h": "--h", "layout": "--layout", "rtol": "--rtol",
+         "max_iter": "--max-iter", "tie_rtol": "--tie-rtol",
          "lookahead": "--lookahead", "cascade": "--cascade", "symmetry": "--no-symmetry", "threads": "--threads",
          "precision": "--precision", "early_decisions": "--no-early-decisions",
          "settle_decisions": "--no-settle-decisions", "fft_library": "--fft-library",
@@ -337,6 +339,13 @@ def build_parser() -> argparse.ArgumentParser:
                             "adhesive_force and work_of_separation")
     sim.add_argument("--rtol", type=float, default=SolverOptions.rtol,
                      help=f"CG tolerance, in [{SolverOptions.MIN_RTOL:g}, 1e-3]")
+    sim.add_argument("--max-iter", type=_integer("an integer >= 1"),
+                     default=SolverOptions.max_iter,
+                     help="CG iterations a solve may take before the run stops, an integer >= 1")
+    sim.add_argument("--tie-rtol", type=float, default=SolverOptions.tie_rtol,
+                     help="elements whose stress lies within this relative distance of the "
+                          "critical stress detach together, as ties (mirror images stay "
+                          f"symmetric), in [0, {short_float(SolverOptions.MAX_TIE_RTOL)}]")
     sim.add_argument("--lookahead", type=float, default=SolverOptions.lookahead,
                      help="approximate: detach (rough brushes: also attach) within this relative "
                           "window of the next event, in [0, 0.1] (0 = exact)")

@@ -134,7 +134,8 @@ def run_simulate(args: argparse.Namespace) -> int:
         elif args.kbar_file is not None:  # it would seem to count
             warnings.warn(f"--kbar-file gives every pillar's stiffness: --kbar {args.kbar:g} "
                           "is recorded as the curve's kbar but no pillar runs it")
-        options = SolverOptions(rtol=args.rtol, lookahead=args.lookahead, cascade=args.cascade,
+        options = SolverOptions(rtol=args.rtol, max_iter=args.max_iter, tie_rtol=args.tie_rtol,
+                                lookahead=args.lookahead, cascade=args.cascade,
                                 symmetry=args.symmetry, precision=args.precision,
                                 early_decisions=args.early_decisions,
                                 settle_decisions=args.settle_decisions,
@@ -203,7 +204,9 @@ def run_simulate(args: argparse.Namespace) -> int:
         say_error(str(exc), progress)
         return 2
     except (ConvergenceError, SolverError) as exc:
-        say_error(f"solver failed: {exc}", progress)
+        # the one limit a user may raise for it (the config's solver.max_iter)
+        hint = " (--max-iter raises the limit)" if "did not converge in" in str(exc) else ""
+        say_error(f"solver failed: {exc}{hint}", progress)
         return 1
     except MemoryError:  # what memory_note could only warn of
         where = f" at --grid {args.grid}" if args.grid else ""  # else a label map's own

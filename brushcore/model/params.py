@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import MISSING, asdict, dataclass, field, fields
 
@@ -106,7 +107,9 @@ class BrushParams:
         ignored for flat lattices; in [0, 2**63 - 1].
     min_gap : minimum gap between pillar edges for "random", in elements
         of the 512 x 512 grid (L / 512 each, whatever ``grid``, so that a
-        seed names one brush on every grid), in [1, 512).
+        seed names one brush on every grid), in [1, 512); other layouts
+        record 1 (another value is warned of and recorded as 1, as the
+        CLI's --min-gap).
     e_star : effective modulus E* [stress], in [1e-30, 1e30] (`UNIT_RANGE`).
     dgamma : work of adhesion [energy / area], in [1e-30, 1e30].
     h : element size [length], in [1e-30, 1e30].
@@ -220,6 +223,12 @@ class BrushParams:
         require(is_real(self.min_gap) and 1.0 <= self.min_gap < RANDOM_GAP_GRID,
                  "min_gap", self.min_gap,
                  f"a number of L / {RANDOM_GAP_GRID} lengths in [1, {RANDOM_GAP_GRID})")
+        if self.layout != "random" and self.min_gap != 1.0:
+            # as the CLI does: kept, it would give one brush two parameter hashes
+            # and stop its curves aggregating with the workflow's
+            warnings.warn(f"min_gap applies to random layouts only: the {self.layout} layout "
+                          f"ignores min_gap {self.min_gap:g}, recorded as 1", stacklevel=4)
+            object.__setattr__(self, "min_gap", 1.0)
         low, high = UNIT_RANGE
         for name in ("e_star", "dgamma", "h"):
             value = getattr(self, name)
@@ -228,7 +237,7 @@ class BrushParams:
         require_switches(self, ("allow_coarse",), "True or False")
         self._check_rough()
         require(is_one_of(self.backend, BACKENDS), "backend", self.backend,
-                 "'cpu' (the default) or 'gpu'")
+                 "'cpu' (the default) or 'gpu' ('strict': the tests' array-API check)")
         r = self.narrowest_radius_elements
         floor = FLOOR_RADIUS_ELEMENTS if self.allow_coarse else MIN_RADIUS_ELEMENTS
         needed = math.ceil(floor * self.grid / r)

@@ -24,6 +24,11 @@ FFT_LIBRARIES = ("auto", "fftw", "mkl")
 REQUESTED_RTOL = "rtol_requested"
 
 
+def short_float(value: float) -> str:
+    """A bound as a user would write it: 1e-6, not Python's 1e-06."""
+    return np.format_float_scientific(value, trim="-", exp_digits=1)
+
+
 @suggest_keywords
 @dataclass(frozen=True)
 class SolverOptions:
@@ -114,6 +119,9 @@ class SolverOptions:
     MIN_RTOL = 1e-12
     #: Loosest tolerance accepted (the default is 1e-4).
     MAX_RTOL = 1e-3
+    #: Widest tie window: past it ties would join elements that are not
+    #: mirror images but merely close (the default is 1e-7).
+    MAX_TIE_RTOL = 1e-6
     #: Below this rtol single-precision transforms would limit the accuracy.
     MIXED_MIN_RTOL = 1e-6
 
@@ -213,11 +221,11 @@ class SolverOptions:
                   ("cascade", "precision", "fft_library"))
         require(is_real(self.rtol) and self.MIN_RTOL <= self.rtol <= self.MAX_RTOL, "rtol",
                 self.rtol, f"a number in [{self.MIN_RTOL:g}, "
-                f"{np.format_float_scientific(self.MAX_RTOL, trim='-', exp_digits=1)}]")
+                f"{short_float(self.MAX_RTOL)}]")
         require(is_integer(self.max_iter) and self.max_iter >= 1, "max_iter",
                  self.max_iter, "an integer >= 1")
-        require(is_real(self.tie_rtol) and 0 <= self.tie_rtol <= 1e-6, "tie_rtol",
-                 self.tie_rtol, "a number in [0, 1e-6]")
+        require(is_real(self.tie_rtol) and 0 <= self.tie_rtol <= self.MAX_TIE_RTOL, "tie_rtol",
+                self.tie_rtol, f"a number in [0, {short_float(self.MAX_TIE_RTOL)}]")
         require(is_real(self.lookahead) and 0 <= self.lookahead <= 0.1, "lookahead",
                  self.lookahead, "a number in [0, 0.1]")
         require(is_one_of(self.cascade, CASCADES), "cascade", self.cascade,
