@@ -916,6 +916,27 @@ def test_the_readmes_notebook_snippet_runs_and_says_what_it_shows(capsys):
     assert "% in contact" in capsys.readouterr().out
 
 
+def test_the_readmes_figures_without_the_workflow_run(tmp_path, monkeypatch):
+    """The README's lines that draw Figs. 6-8 of curves run from Python
+    (without Snakemake) run as written and write the three figures, whose
+    plotted points are the sweep's."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = text[text.index("**Figures of curves run without the workflow**"):]
+    code = section[section.index("```python") + len("```python"):]
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(code[:code.index("```")], "README.md", "exec"), scope)  # noqa: S102
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig6.png", "fig7.png", "fig8.png"]
+    sweep = scope["sweep"]
+    fig = scope["figures"].fig6(sweep)
+    drawn = np.concatenate([np.asarray(line.get_ydata(), dtype=float)
+                            for line in fig.axes[0].lines])
+    fad = sweep["adhesive_force_normalized"].sel(layout="regular").values
+    assert np.isin(np.round(fad[np.isfinite(fad)], 12), np.round(drawn, 12)).all()
+
+
 def test_a_study_refuses_curves_of_other_given_arrays():
     """Per-pillar stiffnesses given by hand are no case coordinate: curves of
     one case whose grids were given other arrays are two brushes, and a study
