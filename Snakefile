@@ -67,6 +67,7 @@ localrules:
     curve_figure,
     convergence,
     lattices,
+    rigid_phi,
 
 
 rule all:

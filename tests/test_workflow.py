@@ -1091,9 +1091,12 @@ def test_the_config_schema_bounds_are_the_solvers():
     from brushcore.numerics.platform.threads import MAX_THREADS
 
     props = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
-    grid, props = props["$defs"]["grid"], props["properties"]
+    grid, phi, props = props["$defs"]["grid"], props["$defs"]["phi"], props["properties"]
     assert (grid["minimum"], grid["maximum"]) == (p.MIN_GRID, p.MAX_GRID)
-    assert (props["phi"]["exclusiveMinimum"], props["phi"]["maximum"]) == (0, p.MAX_PHI)
+    assert (phi["exclusiveMinimum"], phi["maximum"]) == (0, p.MAX_PHI)
+    # a number or a list of them, each of that range
+    assert [form.get("$ref", form.get("items", {}).get("$ref"))
+            for form in props["phi"]["oneOf"]] == ["#/$defs/phi"] * 2
     assert props["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert props["fig5"]["properties"]["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert (props["aspect"]["minimum"], props["aspect"]["maximum"]) == (1, p.MAX_ASPECT)

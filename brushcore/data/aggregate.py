@@ -11,7 +11,10 @@ when a sweep has one grid, so that mesh-refinement studies
 figures and tables.  Pillar shapes other than discs and rough brushes add
 the dimensions ``shape`` and roughness, preload, kbar_spread, only when such
 a case ran; `brushcore.data.views.flat_slice` gives the flat disc brushes
-the paper's figures show.
+the paper's figures show.  Curves of generated brushes asked for different
+filling factors add the dimension ``phi`` (the phi asked for; a file brush
+sits at its file's), and `brushcore.data.views.phi_slice` gives one of them;
+a sweep of one phi keeps it as the attribute ``phi`` alone.
 Contact snapshots are large, so only a chosen subset of cases (of one grid) keeps
 them, stacked along a ``case`` dimension.  The result opens with plain
 ``xarray.open_dataset``; `encoding` gives the compression to write it with.
@@ -31,8 +34,10 @@ import xarray as xr
 from brushcore.model import provenance
 from brushcore.model.params import narrowest_radius
 from brushcore.model.curve_format import FILL_VALUES, fill_value, mark_element_units
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
 from brushcore.model.shapes import parse_shape_label
-from brushcore.data.curve_set import (IN_MEMORY_PATTERN, ROUGH_DIMS, SHAPE_DIM, SWEEP_DIMS,
+from brushcore.data.curve_set import (IN_MEMORY_PATTERN, PHI_DIM, ROUGH_DIMS, SHAPE_DIM,
+                                      SWEEP_DIMS,
                                       CaseKey, check_one_brush_per_case,
                                       check_one_file_per_layout, common_attr, file_sha256,
                                       given_inputs, load_curves)
@@ -115,12 +120,21 @@ CURVE_VARIABLES = (
 
 
 def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:
-    """The case dimensions and grid, plus SHAPE_DIM when any pillar is not a disc
-    and ROUGH_DIMS when any case is not flat."""
+    """The case dimensions and grid, plus PHI_DIM when the generated brushes
+    (not files, whose phi is their own) were asked for more than one phi,
+    SHAPE_DIM when any pillar is not a disc and ROUGH_DIMS when any case is
+    not flat."""
     keys = list(keys)
+    phi = (PHI_DIM,) if len(generated_phis(keys)) > 1 else ()
     shape = (SHAPE_DIM,) if any(k.shape != "disc" for k in keys) else ()
     rough = () if all(k.is_flat for k in keys) else ROUGH_DIMS
-    return SWEEP_DIMS + shape + rough
+    return SWEEP_DIMS + phi + shape + rough
+
+
+def generated_phis(keys: Iterable[CaseKey]) -> list[float]:
+    """The filling factors the generated brushes (not files) of ``keys`` were asked for, sorted."""
+    return sorted({float(k.phi) for k in keys
+                   if k.phi is not None and not k.layout.startswith(FILE_LAYOUT_PREFIX)})
 
 
 def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
@@ -133,6 +147,9 @@ def _case_coords(keys: Iterable[CaseKey]) -> dict[str, np.ndarray]:
         "kbar": np.array(sorted({k.kbar for k in keys}), dtype=np.float64),
         "seed": np.array(sorted({k.seed for k in keys}), dtype=np.int64),
         "grid": np.array(sorted({k.grid for k in keys}), dtype=np.int64),
+        # a file brush's own phi too: it sits there, NaN at the phis asked of the others
+        PHI_DIM: np.array(sorted({float(k.phi) for k in keys if k.phi is not None}),
+                          dtype=np.float64),
     }
     for dim in ROUGH_DIMS:
         coords[dim] = np.array(sorted({getattr(k, dim) for k in keys}), dtype=np.float64)
@@ -186,8 +203,9 @@ def build_sweep(
     Returns
     -------
     xarray.Dataset
-        Scalars on (layout, n_pillars, kbar, seed, grid) (+ shape, + the
-        rough dims, see `case_dims`); curves on the same dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
+        Scalars on (layout, n_pillars, kbar, seed, grid) (+ phi where the
+        generated brushes' curves differ in it, + shape, + the rough dims,
+        see `case_dims`); curves on the same dims plus ``step``; snapshots of one grid on (case, snapshot, y, x);
         provenance attrs.
 
     Raises
@@ -201,8 +219,10 @@ def build_sweep(
     # A file brush has its file's phi (each case's phi_actual); the attribute is
     # that of the generated brushes, whose phi the figures' theory lines take.
     generated = {k: pc for k, pc in curves.items() if pc[1].attrs.get("layout") != "file"}
-    phi = common_attr(generated, "phi") if generated else None
     coords = _case_coords(curves)
+    # several: the coordinate phi says each case's, and the attribute is NaN
+    phi = (common_attr(generated, "phi") if generated else None) \
+        if len(generated_phis(curves)) < 2 else math.nan
     # A brush as made is not flat whatever its coordinates: the rough dims say so.
     given = {key: given_inputs(curve) for key, (_, curve) in curves.items()}
     dims = tuple(dict.fromkeys(case_dims(curves) + (ROUGH_DIMS if any(given.values()) else ())))
@@ -378,6 +398,8 @@ def _coordinate_arrays(coords: dict[str, np.ndarray],
         "roughness": {"units": "1", "long_name": "std of pillar heights / d_K"},
         "preload": {"units": "1", "long_name": "preload / F_K"},
         "kbar_spread": {"units": "1", "long_name": "coefficient of variation of kbar"},
+        PHI_DIM: {"units": "1", "long_name": "filling factor A / L^2 asked for (a file brush's: "
+                                            "its file's; phi_actual is the one realised)"},
         # a label, like layout: no units
         SHAPE_DIM: {"long_name": "pillar cross-section: disc, square[_orientation in "
                                  "degrees] or ellipse{aspect}_{orientation in degrees}"},

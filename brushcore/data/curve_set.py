@@ -38,6 +38,10 @@ SHAPE_DIM = "shape"
 #: Extra case dimensions of rough, preloaded or graded brushes.  A
 #: sweep of flat brushes only keeps the four base dimensions.
 ROUGH_DIMS = ("roughness", "preload", "kbar_spread")
+#: The filling factor asked for: a dimension only when the generated brushes'
+#: curves differ in phi (a file brush keeps its file's), so a sweep of one phi
+#: keeps its dimensions and the attribute ``phi``.
+PHI_DIM = "phi"
 #: The resolution dimension (elements per side n of the L x L square).
 GRID_DIM = "grid"
 SWEEP_DIMS = (*CASE_DIMS, GRID_DIM)
@@ -61,6 +65,9 @@ class CaseKey:
     grid : elements per side n of the L x L square.
     roughness, preload, kbar_spread : rough-brush parameters (0 when flat).
     shape : `shape_label` of the pillar cross-section ("disc" by default).
+    phi : the filling factor asked for (a file brush's: its file's), as its
+        curve's attribute ``phi``; None where unknown (a case the workflow
+        names, whose phi it gives beside it).
     """
 
     layout: str
@@ -72,6 +79,7 @@ class CaseKey:
     preload: float = 0.0
     kbar_spread: float = 0.0
     shape: str = "disc"
+    phi: float | None = None
 
     @property
     def is_flat(self) -> bool:
@@ -118,7 +126,8 @@ def case_key(curve: xr.Dataset) -> CaseKey:
                         number("orientation", 0.0))  # files without a shape: discs
     return CaseKey(layout, number("n_pillars", integer=True), number("kbar"),
                    number("seed", integer=True), number("grid", integer=True),
-                   *(number(name, 0.0) for name in ROUGH_DIMS), shape=shape)
+                   *(number(name, 0.0) for name in ROUGH_DIMS), shape=shape,
+                   phi=number("phi"))
 
 
 def file_sha256(path: str | Path) -> str:
@@ -219,10 +228,11 @@ def check_named_case(path: Path, key: CaseKey, phi: float, case: CaseKey,
     """Refuse a file that holds another case than the one its name stands for
     (a curve copied or moved by hand would otherwise enter the sweep as its
     own case, and the case asked for would be NaN)."""
-    if (key, phi) != (case, case_phi):
+    if (replace(key, phi=None), phi) != (replace(case, phi=None), case_phi):
         raise AggregationError(
-            f"curve file {path} holds {brief(key)}, phi={phi!r}, not the case its name "
-            f"stands for ({brief(case)}, phi={case_phi!r}): delete it and rerun")
+            f"curve file {path} holds {brief(replace(key, phi=None))}, phi={phi!r}, not the "
+            f"case its name stands for ({brief(replace(case, phi=None))}, phi={case_phi!r}): "
+            "delete it and rerun")
 
 
 def check_brush(path: Path, curve: xr.Dataset, key: CaseKey) -> None:

@@ -26,7 +26,8 @@ from brushcore.model import theory
 from brushcore.model.layout import pillars_differ
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.io import markdown_table, write_text_atomic
-from brushcore.data.views import finest_grid, flat_slice, kbar_index
+from brushcore.data.views import finest_grid, flat_slice, kbar_index, phi_slice
+from brushcore.data.views import phi_note as phi_shown
 from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
@@ -210,7 +211,10 @@ def headline_rows(
         brush at its first kbar (a `shape_label` for the shape); the
         paper's, quoted in its text, is regular 16 x 16 discs at 0.455.
         A NaN kbar (a config without a Fig. 5 brush) leaves its row out.
+        Of a sweep of several phi, the rows are of one (`phi_slice`: the
+        one nearest the paper's 0.12), which the rigid-limit row names.
     """
+    sweep = phi_slice(sweep)
     phi = float(sweep.attrs.get("phi", math.nan))
     scalars = [v for v in sweep.data_vars if "step" not in sweep[v].dims and "case" not in
                sweep[v].dims]
@@ -228,7 +232,8 @@ def headline_rows(
             "close to the rigid limit" if papers else
             f"the config's Fig. 5 brush ({fig5_shape} pillars); the paper's ~1.8 is regular "
             "16 x 16 discs at kbar 0.455"))
-    phi_note = f"phi = {_fmt(phi)} requested"
+    phi_note = f"phi = {_fmt(phi)} requested" + (
+        f" (every row: {shown} shown)" if (shown := phi_shown(sweep)) else "")
     if not math.isfinite(phi) and "phi_actual" in sweep:  # tables: each its own phi
         realised = sweep["phi_actual"].values
         if np.isfinite(realised).any():

@@ -2,7 +2,7 @@
 the slices that the figures, the summary and a reader's analysis take.
 
 `flat_slice` gives the flat disc brushes the paper's figures show,
-`shape_slice` one pillar shape, `snapshots` the contact maps of one case
+`shape_slice` one pillar shape, `phi_slice` one filling factor, `snapshots` the contact maps of one case
 and `finest_grid` each case at the finest grid it ran on.
 """
 
@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from brushcore.data.aggregate import GRID_DIM, ROUGH_DIMS, SHAPE_DIM, SHAPE_NUMBERS
+from brushcore.model.layout_file import FILE_LAYOUT_PREFIX
+from brushcore.data.aggregate import GRID_DIM, PHI_DIM, ROUGH_DIMS, SHAPE_DIM, SHAPE_NUMBERS
 
 
 def flat_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
@@ -90,6 +91,110 @@ def shape_slice(sweep: xr.Dataset, shape: str | None = "disc") -> xr.Dataset:
 SHOWN_SHAPE = "pillar_shape_shown"
 
 
+#: The paper's filling factor (He, Li & Popov 2020): of a sweep of several,
+#: the figures and the summary show the one nearest it (`shown_phi`).
+PAPER_PHI = 0.12
+#: Attributes of a `phi_slice` taken from a sweep of several phi: the phi
+#: shown, and every phi the generated brushes ran (figures say "0.12 of 0.08,
+#: 0.12, 0.2").
+SHOWN_PHI = "phi_shown"
+PHIS_RUN = "phi_run"
+
+
+def _ran(sweep: xr.Dataset) -> xr.DataArray | None:
+    """Where a case ran (``n_steps``, else F_ad, finite), or None where the sweep holds neither."""
+    for name in ("n_steps", "adhesive_force_normalized"):
+        if name in sweep:
+            return sweep[name].notnull()
+    return None
+
+
+def _is_file(layout: object) -> bool:
+    return str(layout).startswith(FILE_LAYOUT_PREFIX)
+
+
+def swept_phis(sweep: xr.Dataset) -> list[float]:
+    """The filling factors the generated brushes (not files) of a sweep ran,
+    ascending: the ``phi`` coordinate, or its attribute ``phi`` where the sweep
+    has one (an empty list where that is NaN)."""
+    if PHI_DIM not in sweep.dims:
+        phi = float(sweep.attrs.get("phi", np.nan))
+        return [phi] if np.isfinite(phi) else []
+    values = np.asarray(sweep[PHI_DIM].values, dtype=float)
+    ran = _ran(sweep)
+    generated = [str(v) for v in sweep.layout.values if not _is_file(v)]
+    if ran is None or not generated:
+        return values.tolist()
+    ran = ran.sel(layout=generated)
+    hit = ran.any([d for d in ran.dims if d != PHI_DIM]).values
+    return values[hit].tolist()
+
+
+def shown_phi(phis) -> float:
+    """Of several filling factors, the one nearest `PAPER_PHI` (the smaller
+    of two as near); NaN of none."""
+    phis = [float(p) for p in phis]
+    return min(phis, key=lambda p: (abs(p - PAPER_PHI), p)) if phis else float("nan")
+
+
+def phi_slice(sweep: xr.Dataset, phi: float | None = None) -> xr.Dataset:
+    """The brushes of one filling factor, without the phi dimension.
+
+    A sweep without PHI_DIM (one phi) is returned as it is.  Otherwise the
+    generated brushes are taken at ``phi`` (None: `shown_phi` of those they
+    ran), a brush read from a file at its own phi (the one it ran), and the
+    attribute ``phi`` becomes the one shown; `SHOWN_PHI` and `PHIS_RUN` say
+    which of which, for figures to name (as `SHOWN_SHAPE` does).  A phi not
+    run gives NaN for the generated brushes.  Snapshots of other phi are
+    dropped.
+    """
+    if PHI_DIM not in sweep.dims:
+        return sweep
+    values = np.asarray(sweep[PHI_DIM].values, dtype=float)
+    run = swept_phis(sweep)
+    chosen = shown_phi(run or values) if phi is None else float(phi)
+    hit = np.flatnonzero(np.isclose(values, chosen, rtol=CASE_RTOL, atol=0.0))
+    ran = _ran(sweep)
+    index = np.full(sweep.sizes["layout"], hit[0] if hit.size else 0, dtype=np.int64)
+    missing = np.zeros(sweep.sizes["layout"], dtype=bool)
+    own = {}  # a file brush's phi, where it ran
+    for i, layout in enumerate(sweep.layout.values):
+        if _is_file(layout) and ran is not None:
+            one = ran.isel(layout=i)
+            at = np.flatnonzero(one.any([d for d in one.dims if d != PHI_DIM]).values)
+            if at.size:
+                index[i] = at[0]
+                own[str(layout)] = float(values[at[0]])
+                continue
+        missing[i] = not hit.size
+    out = sweep.isel({PHI_DIM: xr.DataArray(index, dims="layout")}).drop_vars(PHI_DIM)
+    if missing.any():  # the phi was not run: NaN, as `shape_slice` gives an unrun shape
+        gone = xr.DataArray(missing, dims="layout", coords={"layout": out.layout})
+        floats = [n for n, v in out.data_vars.items()
+                  if "layout" in v.dims and np.issubdtype(v.dtype, np.floating)]
+        out = out.assign({n: out[n].where(~gone) for n in floats})
+    name = f"case_{PHI_DIM}"
+    if name in out.variables:
+        case_phi = np.asarray(out[name].values, dtype=float)
+        layouts = out["case_layout"].values.astype(str)
+        want = np.array([own.get(lay, chosen) for lay in layouts], dtype=float)
+        keep = np.isclose(case_phi, want, rtol=CASE_RTOL, atol=0.0)
+        out = out.isel(case=np.flatnonzero(keep)).drop_vars(name)
+    out.attrs["phi"] = chosen
+    out.attrs[SHOWN_PHI] = chosen  # one phi of several: figures say which
+    out.attrs[PHIS_RUN] = np.asarray(run, dtype=np.float64)
+    return out
+
+
+def phi_note(sweep: xr.Dataset) -> str:
+    """"phi = 0.12 of 0.08, 0.12, 0.2" for a `phi_slice` of a sweep of
+    several phi, "" otherwise."""
+    if SHOWN_PHI not in sweep.attrs:
+        return ""
+    run = ", ".join(f"{float(p):g}" for p in np.atleast_1d(sweep.attrs.get(PHIS_RUN, [])))
+    return f"phi = {float(sweep.attrs[SHOWN_PHI]):g}" + (f" of {run}" if run else "")
+
+
 #: Relative tolerance a case's kbar and rough values are matched to: a
 #: config's values as they survive the curve file names.
 CASE_RTOL = 1e-9
@@ -103,7 +208,8 @@ def kbar_index(kbars: np.ndarray, kbar: float) -> int | None:
 
 
 def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed: int = 0,
-              *, shape: str = "disc", grid: int | None = None, **rough: float):
+              *, shape: str = "disc", grid: int | None = None, phi: float | None = None,
+              **rough: float):
     """Contact snapshots of one case, or None when the sweep did not keep them.
 
     Parameters
@@ -114,6 +220,8 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         sweep holds several shapes)
     grid : the grid whose maps are wanted (None: whichever the sweep kept);
         a curve drawn at another grid must not take their step numbers
+    phi : the filling factor asked for, where the sweep holds several (None:
+        the one nearest `PAPER_PHI` of those kept for the case)
     rough : its ``roughness``, ``preload`` and ``kbar_spread`` (each 0, the
         flat brush, unless given; where the sweep holds rough cases)
 
@@ -152,6 +260,10 @@ def snapshots(sweep: xr.Dataset, layout: str, n_pillars: int, kbar: float, seed:
         elif float(rough.get(name, 0.0)) != 0.0:
             return None
     idx = np.flatnonzero(hit.values)
+    if idx.size and f"case_{PHI_DIM}" in sweep.variables:
+        phis = np.asarray(sweep[f"case_{PHI_DIM}"].values, dtype=float)[idx]
+        want = shown_phi(phis) if phi is None else float(phi)
+        idx = idx[np.isclose(phis, want, rtol=CASE_RTOL, atol=0.0)]
     if idx.size == 0:
         return None
     names = [n for n in ("contact_snapshot", "snapshot_step", "snapshot_label") if n in sweep]

@@ -111,6 +111,12 @@ def _deterministic_seeds(config, rough):
     return config["seeds"] if drawn else [0]
 
 
+def config_phis(config):
+    """The config's `phi` (a number or a list) as a list of floats, in its order."""
+    value = config["phi"]
+    return [float(p) for p in (value if isinstance(value, list) else [value])]
+
+
 def sweep_cases(config):
     """Every (layout, n_pillars, kbar, seed, grid, phi, rough, shape) the config asks for, once.
 
@@ -118,9 +124,10 @@ def sweep_cases(config):
     seed 0 only; rough or graded ones (heights and stiffness drawn from the
     seed) run every seed.  Every brush runs every pillar shape of `shape`.
     The Fig. 5 brush adds its own kbar values to the sweep of its layout and
-    shape.
+    shape.  Every generated brush runs at each phi of `config_phis`; a file
+    brush at its file's.
     """
-    phi = config["phi"]
+    phis = config_phis(config)
     cases = set()
     shapes = [shape_tag(config, s) for s in config["shape"]]
 
@@ -171,6 +178,7 @@ def sweep_cases(config):
         (*case[:4], grid, phi, case[4], case[5])
         for case in ordered
         for grid in case_grids(config, case[1])
+        for phi in phis
     ] + sorted(files, key=lambda c: (c[0], float(c[2]), c[3], c[6], c[4]))
 
 

@@ -30,6 +30,9 @@ def check_config(config, schema_path):
     overflow = _typed_text(config)
     if overflow:
         raise ConfigError(overflow)
+    bad_phi = _bad_phi(config, schema)
+    if bad_phi:
+        raise ConfigError(bad_phi)
     error = jsonschema.exceptions.best_match(
         jsonschema.Draft202012Validator(schema).iter_errors(config)
     )
@@ -274,16 +277,32 @@ def _shape_settings_used(config, schema):
             )
 
 
+def _resolved(schema, node):
+    """A schema node with its `$ref` to `$defs` followed."""
+    while "$ref" in node:
+        node = schema["$defs"][node["$ref"].rsplit("/", 1)[-1]]
+    return node
+
+
+def _forms(schema, node):
+    """A schema node and the forms of its `oneOf` (a number or a list: phi, grid)."""
+    node = _resolved(schema, node)
+    return [node, *(_resolved(schema, form) for form in node.get("oneOf", []))]
+
+
+_BOUNDS = {"minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"}
+
+
 def _schema_range(schema, where):
-    """The range the schema allows at a dotted config key ("phi", "kbar.0",
-    "fig5.kbar.1"), in a message's words: "a number in (0, 0.5]"."""
+    """The range the schema allows at a dotted config key ("phi", "phi.1",
+    "kbar.0", "fig5.kbar.1"), in a message's words: "a number in (0, 0.5]"."""
     node = schema
     for part in where.split("."):
-        node = (
-            node.get("items", {})
-            if part.isdigit()
-            else node.get("properties", {}).get(part, {})
-        )
+        if part.isdigit():  # the list form's items
+            node = next((f["items"] for f in _forms(schema, node) if "items" in f), {})
+        else:
+            node = _resolved(schema, node).get("properties", {}).get(part, {})
+    node = next((f for f in _forms(schema, node) if _BOUNDS & set(f)), {})
     low = node.get("exclusiveMinimum", node.get("minimum"))
     high = node.get("exclusiveMaximum", node.get("maximum"))
     if high is None:
@@ -294,6 +313,36 @@ def _schema_range(schema, where):
     left = "(" if "exclusiveMinimum" in node else "["
     right = ")" if "exclusiveMaximum" in node else "]"
     return f"a number in {left}{low:g}, {high:g}{right}"
+
+
+def _bad_phi(config, schema):
+    """The first value of `phi` (a number, or each of a list) that is no
+    number or out of the schema's range, named by its key with that range
+    (the schema's two forms would say "fits none of its forms"); None where
+    all are (a NaN is `_first_nan`'s, an empty or repeated list the schema's)."""
+    value = config.get("phi")
+    if value is None:
+        return None
+    items = (
+        [(f"phi.{i}", v) for i, v in enumerate(value)]
+        if isinstance(value, list)
+        else [("phi", value)]
+    )
+    low, high = (
+        schema["$defs"]["phi"]["exclusiveMinimum"],
+        schema["$defs"]["phi"]["maximum"],
+    )
+    for where, v in items:
+        number = isinstance(v, (int, float)) and not isinstance(v, bool)
+        if number and (math.isnan(v) or low < v <= high):
+            continue
+        said = "is not a number" if not number else "is out of range"
+        return (
+            f"config key '{where}': {v!r} {said}; allowed "
+            f"{_schema_range(schema, where)}"
+            + (" or a list of such numbers" if where == "phi" else "")
+        )
+    return None
 
 
 def _first_nan(value, where=""):

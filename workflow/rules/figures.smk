@@ -179,3 +179,28 @@ rule lattices:
         shape=None,
     script:
         "../scripts/figure.py"
+
+
+rule rigid_phi:
+    """The rigid limit F_ad (kbar = inf) against phi per N, with phi^(-1/4)."""
+    input:
+        "results/sweep.nc",
+    output:
+        png=report(
+            "results/figures/rigid_phi.png",
+            caption="../report/rigid_phi.rst",
+            category="Figures",
+        ),
+        pdf="results/figures/rigid_phi.pdf",
+    log:
+        "logs/figures/rigid_phi.log",
+    benchmark:
+        "results/benchmarks/figures/rigid_phi.tsv"
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        figure="rigid_phi",
+        options={},
+    script:
+        "../scripts/figure.py"

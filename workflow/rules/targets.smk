@@ -68,6 +68,8 @@ def rough_example_curve(config):
             -tag.get("preload", 0.0),
             tag.get("kbar_spread", 0.0),
             abs(math.log10(float(case[2])) + 2.0),
+            # of several phi, the paper's (as Figs. 5-8 show)
+            abs(float(case[5]) - 0.12),
         )
 
     return curve_file(*min(rough, key=rank))
@@ -98,6 +100,13 @@ def lattice_figure_files(config):
     return [f"results/figures/lattices.{ext}" for ext in ("png", "pdf")]
 
 
+def phi_figure_files(config):
+    """The rigid limit against phi, for configs that list more than one phi."""
+    if "phi" not in config or len(config_phis(config)) < 2:
+        return []
+    return [f"results/figures/rigid_phi.{ext}" for ext in ("png", "pdf")]
+
+
 CONVERGENCE_FILES = (
     "results/convergence.nc",
     "results/convergence.csv",
@@ -118,6 +127,7 @@ def sweep_targets(config):
         *paper_figure_files(config),
         *rough_figure_files(config),
         *lattice_figure_files(config),
+        *phi_figure_files(config),
         *(CONVERGENCE_FILES if wants_convergence(config) else ()),
     ]
 
@@ -137,6 +147,7 @@ def stale_outputs(config, root=".", since=None):
         *ROUGH_FIGURES,
         *CURVE_FIGURES,
         "lattices",
+        "rigid_phi",
         *(f"fig{n}" for n in (5, 6, 7, 8)),
     )
     made = {f"results/figures/{n}.{ext}" for n in names for ext in ("png", "pdf")}

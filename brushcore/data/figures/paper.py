@@ -1,8 +1,11 @@
-"""The paper's Figures 5-8 drawn from a sweep dataset, and `lattices`, which
-compares layouts and pillar shapes of the same N.
+"""The paper's Figures 5-8 drawn from a sweep dataset, `lattices`, which
+compares layouts and pillar shapes of the same N, and `rigid_phi`, the rigid
+limit against the filling factor of a sweep of several phi.
 
 Each function takes the dataset of `brushcore.data.aggregate.build_sweep`
-and returns a `matplotlib.figure.Figure`.  Brushes or layouts absent from a
+and returns a `matplotlib.figure.Figure`.  Of a sweep of several phi the
+figures but `rigid_phi` draw one (`brushcore.data.views.phi_slice`: the one
+nearest the paper's 0.12) and say which in their title.  Brushes or layouts absent from a
 sweep are skipped, and a panel with nothing to show says so instead of
 failing.
 """
@@ -10,6 +13,7 @@ failing.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 
 import numpy as np
@@ -20,9 +24,9 @@ from matplotlib.ticker import LogLocator, NullFormatter, ScalarFormatter
 from brushcore.model import theory
 from brushcore.model.lattices import hexagonal_lattice
 from brushcore.model.shapes import parse_shape_label
-from brushcore.data.aggregate import SHAPE_DIM
-from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index,
-                                  shape_slice, snapshots)
+from brushcore.data.aggregate import PHI_DIM, SHAPE_DIM
+from brushcore.data.views import (SHOWN_SHAPE, finest_grid, flat_slice, kbar_index, phi_note,
+                                  phi_slice, shape_slice, snapshots, swept_phis)
 from brushcore.data.summary import fit_soft_prefactor, on_plateau, seed_mean, soft_plateau
 from brushcore.data.figures.common import (FAD_LABEL, HEX_LABEL, HEX_LINE, K_LABEL, LAYOUT_COLORS,
                                            SHAPE_MARKERS, SNAPSHOT_CMAP, W_LABEL,
@@ -87,6 +91,7 @@ def fig5(
     """
     if SHAPE_DIM in sweep.dims:
         sweep = shape_slice(sweep, shape)
+    sweep = phi_slice(sweep)  # of several phi, the one nearest the paper's, said in the title
     sweep = finest_grid(flat_slice(sweep, None))  # one curve per case: the best-resolved one
     cases = [k for k in kbar if _curve(sweep, layout, n_pillars, k, seed) is not None]
     n_snap = int(sweep.sizes.get("snapshot", 0))
@@ -95,8 +100,10 @@ def fig5(
     grid = fig.add_gridspec(rows, 1 + n_snap, width_ratios=[3.0] + [1.0] * n_snap)
     side = math.isqrt(n_pillars)
     name = f"{side} x {side}" if layout == "regular" and side * side == n_pillars else str(n_pillars)
-    pillars = "" if shape == "disc" else f" ({shape_text(shape)})"
-    fig.suptitle(f"{layout} brush, N = {name} pillars{pillars}")
+    notes = ([] if shape == "disc" else [shape_text(shape)]) + (
+        [phi_note(sweep)] if phi_note(sweep) else [])
+    pillars = f" ({', '.join(notes)})" if notes else ""
+    fig.suptitle(_wrapped(fig, f"{layout} brush, N = {name} pillars{pillars}"))
     if not cases:
         no_data(fig.add_subplot(grid[0, :]), f"no flat {layout} runs with N = {n_pillars}")
         return fig
@@ -171,10 +178,20 @@ def _snapshot_title(shown: Sequence[int], names: Sequence[str]) -> str:
     return ",".join(str(j + 1) for j in shown) + ": " + "\n= ".join(names[j] for j in shown)
 
 
+def _wrapped(fig: Figure, title: str) -> str:
+    """A title wrapped to the figure's width (a one-panel figure clipped
+    "... (phi = 0.12 of 0.08, 0.12, 0.2)" at both ends)."""
+    return textwrap.fill(title, max(30, int(10 * fig.get_figwidth())))
+
+
 def _shape_note(sweep: xr.Dataset) -> str:
-    """" (disc pillars)" where the sweep is one shape of several (`shape_slice`)."""
+    """" (disc pillars)" where the sweep is one shape of several (`shape_slice`),
+    " (phi = 0.12 of 0.08, 0.12, 0.2)" where it is one phi of several
+    (`phi_slice`), both joined where both."""
     shape = sweep.attrs.get(SHOWN_SHAPE)
-    return f" ({shape} pillars)" if shape else ""
+    notes = ([f"{shape} pillars"] if shape else []) + ([phi_note(sweep)] if phi_note(sweep)
+                                                       else [])
+    return f" ({', '.join(notes)})" if notes else ""
 
 
 def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, object]]:
@@ -182,7 +199,7 @@ def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, 
     fig = new_figure(4.2 * max(len(layouts), 1), 3.6)
     # One y range for every layout: the panels are read against each other.
     axes = fig.subplots(1, max(len(layouts), 1), squeeze=False, sharey=True)[0]
-    fig.suptitle(title + _shape_note(sweep))
+    fig.suptitle(_wrapped(fig, title + _shape_note(sweep)))
     if not layouts:  # a sweep of brushes as made alone: said, not a blank panel
         no_data(axes[0], "no flat runs (brushes given heights, stiffnesses or a gap map\n"
                          "are drawn in rough_*.png)")
@@ -198,8 +215,9 @@ def _brush_series(sweep: xr.Dataset, name: str, layout: str) -> list[tuple[int, 
 def _kbar_figure(sweep: xr.Dataset, title: str) -> tuple:
     """What Figs. 6 and 8 start from: the sweep at each case's finest grid,
     the figure and its panel per layout, a colour per N, the kbar values and
-    the x of the rigid column (`rigid_x`)."""
-    sweep = finest_grid(sweep)
+    the x of the rigid column (`rigid_x`); of a sweep of several phi, one
+    (`phi_slice`), which the title names."""
+    sweep = finest_grid(phi_slice(sweep))
     fig, axes = _per_brush_panels(sweep, title)
     kbars = np.asarray(sweep.kbar.values, dtype=float)
     return sweep, fig, axes, brush_colors(sweep.n_pillars.values), kbars, rigid_x(kbars)
@@ -330,10 +348,10 @@ def fig7(sweep: xr.Dataset) -> Figure:
     fit F = c N^(1/4), drawn in its colour, with 1/c (the paper's 1.2-1.3)
     and the free exponent printed on the plot.
     """
-    sweep = finest_grid(sweep)
+    sweep = finest_grid(phi_slice(sweep))
     fig = new_figure(4.6, 3.8)
     ax = fig.add_subplot()
-    ax.set_title("Soft plateau of the adhesive force" + _shape_note(sweep))
+    ax.set_title(_wrapped(fig, "Soft plateau of the adhesive force" + _shape_note(sweep)))
     fitted: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # layout -> plateau (N, F)
     styles = layout_styles(sweep_layouts(sweep))
     off = []  # (N, F) of brushes whose softest kbar is not on the plateau
@@ -464,13 +482,14 @@ def lattices(sweep: xr.Dataset) -> Figure:
     ----------
     sweep : flat brushes of a sweep with every shape (`flat_slice(sweep, None)`).
     """
-    sweep = finest_grid(sweep[["adhesive_force_normalized"]])
+    sweep = finest_grid(phi_slice(sweep)[["adhesive_force_normalized"]])
     series = {int(n): _lattice_series(sweep, int(n)) for n in sweep.n_pillars.values}
     compared = {n: s for n, s in series.items() if len(s) > 1} or \
         {n: s for n, s in series.items() if s}
     fig = new_figure(5.2 * max(len(compared), 1), 4.0)
     axes = fig.subplots(1, max(len(compared), 1), squeeze=False)[0]
-    fig.suptitle("Adhesive force of lattices and pillar shapes of the same N")
+    fig.suptitle(_wrapped(fig, "Adhesive force of lattices and pillar shapes of the same N"
+                          + (f" ({phi_note(sweep)})" if phi_note(sweep) else "")))
     if not compared:
         no_data(axes[0], "no runs")
         return fig
@@ -503,4 +522,66 @@ def lattices(sweep: xr.Dataset) -> Figure:
         ax.set_xlabel(K_LABEL)
         ax.set_ylabel(FAD_LABEL)
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # off the data
+    return fig
+
+
+def rigid_phi(sweep: xr.Dataset) -> Figure:
+    """The rigid limit against the filling factor: F_ad of rigid pillars
+    (kbar = inf) per N against phi, one panel per layout that ran rigid,
+    with the rigid limit phi^(-1/4) (eq. 5, solid) and the compact punch
+    F_ad = 1 (dotted).
+
+    Each brush is drawn at the phi it realised (the mean ``phi_actual`` of
+    its seeds), as its F_ad is normalised by Kendall's force of the area it
+    realised; with several seeds the dot is their mean and the bars span
+    min to max.  Each case at its finest grid.  Drawn where the generated
+    brushes ran more than one phi (the sweep's ``phi`` dimension); a sweep
+    of one phi, or without rigid runs, gets a panel that says so.
+    """
+    sweep = finest_grid(sweep)
+    layouts = sweep_layouts(sweep)
+    kbars = np.asarray(sweep.kbar.values, dtype=float)
+    rigid = np.flatnonzero(np.isinf(kbars))
+    runs = {}
+    if PHI_DIM in sweep.dims and rigid.size:
+        force = sweep["adhesive_force_normalized"].isel(kbar=int(rigid[0]))
+        phi = sweep["phi_actual"].isel(kbar=int(rigid[0]))
+        for layout in layouts:
+            for n in sweep.n_pillars.values:
+                f = force.sel(layout=layout, n_pillars=n)
+                ran = f.notnull().any("seed")
+                if int(ran.sum()):
+                    runs.setdefault(layout, []).append(
+                        (int(n), phi.sel(layout=layout, n_pillars=n).mean("seed", skipna=True)
+                         .values[ran.values], f.mean("seed", skipna=True).values[ran.values],
+                         f.min("seed", skipna=True).values[ran.values],
+                         f.max("seed", skipna=True).values[ran.values]))
+    fig = new_figure(4.2 * max(len(runs), 1), 3.6)
+    axes = fig.subplots(1, max(len(runs), 1), squeeze=False, sharey=True)[0]
+    fig.suptitle(_wrapped(fig, "Rigid limit against the filling factor" + _shape_note(sweep)))
+    if not runs:
+        phis = swept_phis(sweep)
+        no_data(axes[0], "no rigid runs (kbar = inf) at several phi" if len(phis) > 1 or
+                PHI_DIM in sweep.dims else
+                "one filling factor only" + (f" (phi = {phis[0]:g})" if phis else "")
+                + ":\nrun a list of phi with rigid pillars (kbar .inf)")
+        return fig
+    colors = brush_colors([n for brushes in runs.values() for n, *_ in brushes])
+    for index, (ax, (layout, brushes)) in enumerate(zip(axes, runs.items())):
+        drawn = []
+        for n, x, mean, low, high in brushes:
+            order = np.argsort(x)
+            x, mean, low, high = x[order], mean[order], low[order], high[order]
+            ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker="o", ms=4, capsize=2,
+                        color=colors[n], label=f"N = {n}")
+            drawn += [float(v) for v in x if np.isfinite(v)]
+        if drawn:
+            span = np.linspace(min(drawn) / 1.1, max(drawn) * 1.1, 60)
+            ax.plot(span, theory.rigid_limit(span), "k-", lw=1.2,
+                    label=r"rigid limit $\varphi^{-1/4}$ (eq. 5)")
+        ax.axhline(1.0, color="k", lw=0.8, ls=":", label="compact punch")
+        ax.set_title(panel_title(index, layout) + r", $\bar k$ = rigid", loc="left")
+        ax.set_xlabel(r"filling factor $\varphi$ (as realised)")
+        ax.set_ylabel(FAD_LABEL)
+        ax.legend(fontsize=7)
     return fig

@@ -15,7 +15,7 @@ from brushcore.model import theory
 from brushcore.model.inputs import parse_protocol
 from brushcore.model.layout_file import curve_layout
 from brushcore.data.aggregate import HEIGHT_SD
-from brushcore.data.views import (finest_grid)
+from brushcore.data.views import finest_grid, phi_note, phi_slice
 from brushcore.data.figures.common import (FAD_LABEL, SNAPSHOT_CMAP, kbar_text, new_figure,
                                            no_data, snapshot_key, sweep_phi)
 
@@ -84,13 +84,15 @@ GIVEN_WORDS = {"kbar_values": "pillar stiffnesses", "gap_map": "gap map"}
 
 
 def _rough_brush_title(what: str, layout: str, n_pillars: int, given: str,
-                       width: float) -> str:
+                       width: float, phi: str = "") -> str:
     """A rough figure's title, wrapped to its ``width`` [in]: a rough brush,
-    or a brush as made with what it was given."""
+    or a brush as made with what it was given; ``phi`` (`phi_note`) where
+    the sweep ran several phi."""
     words = ", ".join(GIVEN_WORDS.get(name, name) for name in given.split())
     brush = (f"the {layout} brush as made ({words} given)" if given
              else f"a rough {layout} brush")
-    return textwrap.fill(f"{what} {brush}, N = {n_pillars}", max(30, int(11 * width)))
+    return textwrap.fill(f"{what} {brush}, N = {n_pillars}" + (f" ({phi})" if phi else ""),
+                         max(30, int(11 * width)))
 
 
 def _heights_text(roughness: float, given: str) -> str:
@@ -111,7 +113,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
     `theory.gaussian_spread_pull_off` and lambda `theory.foundation_stretch`,
     drawn where it applies: where lambda is at least `MIN_FOUNDATION_STRETCH`.
     """
-    sweep = finest_grid(sweep)  # one value per case: the best-resolved one
+    sweep = finest_grid(phi_slice(sweep))  # one value per case: the best-resolved one
     # 1.6 in more than a panel each: the side legend took a one-panel figure's axes
     fig = new_figure(4.2 * max(1, sweep.sizes.get("preload", 1)) + 1.6, 3.6)
     if not _rough_ready(sweep, fig):
@@ -158,7 +160,7 @@ def rough_roughness(sweep: xr.Dataset, layout: str = "regular", n_pillars: int =
         axes[0].plot([], [], "k--", lw=1, label="soft limit (elastic foundation)")
     _side_legend(fig, axes)
     fig.suptitle(_rough_brush_title("Adhesive force of", layout, n_pillars, given,
-                                    fig.get_figwidth()))
+                                    fig.get_figwidth(), phi_note(sweep)))
     return fig
 
 
@@ -190,7 +192,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
                   ) -> Figure:
     """Adhesive force against preload per kbar, one panel per roughness, on
     one y range."""
-    sweep = finest_grid(sweep)  # one value per case: the best-resolved one
+    sweep = finest_grid(phi_slice(sweep))  # one value per case: the best-resolved one
     fig = new_figure(4.2 * max(1, sweep.sizes.get("roughness", 1)), 3.6)
     if not _rough_ready(sweep, fig):
         return fig
@@ -226,7 +228,7 @@ def rough_preload(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 2
         _no_false_zoom(ax)
     _side_legend(fig, axes)
     fig.suptitle(_rough_brush_title("Adhesive force against preload of", layout, n_pillars,
-                                    given, fig.get_figwidth()))
+                                    given, fig.get_figwidth(), phi_note(sweep)))
     return fig
 
 
