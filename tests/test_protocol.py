@@ -1638,3 +1638,229 @@ def test_rough_loop_keys_the_colours_of_its_contact_maps():
                                         Waypoint("force", -1.0), Waypoint("separation")])
     loop = [t.get_text() for t in figures.rough_loop(cycles).axes[0].get_legend().get_texts()]
     assert loop[:2] == ["approaches (every cycle)", "retractions (every cycle)"], loop
+
+
+# --- The stiffness spread C (kbar_spread) in the figures and the summary -------------------
+
+SPREAD_DIMS = ("layout", "n_pillars", "kbar", "seed", "roughness", "preload", "kbar_spread")
+
+
+def _spread_sweep(spreads=(0.0, 0.25, 0.5)) -> xr.Dataset:
+    """A synthetic graded sweep: regular 16, kbar 1e-3, 0.1 and rigid, two
+    seeds, roughness 0 and 0.3, preload 0.5, the spreads given; as the
+    workflow runs it: rigid pillars at C = 0 alone, the flat lattice
+    (S = 0, C = 0) seed 0 alone, and seed 1 of kbar 0.1 at S = 0, C = 0.5
+    missing (a failed job)."""
+    kbars, seeds, roughs = [1e-3, 0.1, math.inf], [0, 1], [0.0, 0.3]
+    shape = (1, 1, len(kbars), len(seeds), len(roughs), 1, len(spreads))
+    force = (2.0 - np.arange(np.prod(shape)).reshape(shape) % 17 * 0.05)
+    for i, kbar in enumerate(kbars):
+        for j, spread in enumerate(spreads):
+            if math.isinf(kbar) and spread > 0:
+                force[0, 0, i, :, :, 0, j] = np.nan
+            if spread == 0:
+                force[0, 0, i, 1, 0, 0, j] = np.nan
+    if 0.5 in spreads:
+        force[0, 0, 1, 1, 0, 0, spreads.index(0.5)] = np.nan
+    return xr.Dataset(
+        {"adhesive_force_normalized": (SPREAD_DIMS, force),
+         "phi_actual": (SPREAD_DIMS, np.full(shape, 0.12))},
+        coords={"layout": ["regular"], "n_pillars": [16], "kbar": kbars, "seed": seeds,
+                "roughness": roughs, "preload": [0.5], "kbar_spread": list(spreads)},
+        attrs={"phi": 0.12})
+
+
+def test_lognormal_stiffness_pull_off_is_the_foundation_of_the_drawn_stiffnesses():
+    """F_ad of equal-height soft pillars of lognormal stiffness (mean k, CV
+    C: `lognormal_kbar`, the kbar_spread): each lets go at its own stretch
+    f_c / k_i, stiffest first, so F / (N f_c) = max_x x Phi((-ln x -
+    sigma^2/2) / sigma).  It matches the exact discrete formula
+    (`foundation_pull_off`) of 2e5 draws (sorted: O(N log N)) to 2e-3, is 1
+    at C = 0 and falls with C; `drawn_stiffness_pull_off` is that formula
+    of a seed's own draws, and the solver's soft brush (regular 16, kbar
+    1e-4, lambda 490 d_K, 64^2) lies within its flat brush's distance from
+    N^(1/4) (the half space's interaction, 9 %) of it."""
+    from brushcore.model.draws import lognormal_kbar
+
+    spreads = (0.1, 0.25, 0.5, 1.0)
+    closed = theory.lognormal_stiffness_pull_off(np.array(spreads))
+    assert theory.lognormal_stiffness_pull_off(0.0) == 1.0
+    assert np.all(np.diff(closed) < 0) and closed[0] < 1.0
+    for spread, value in zip(spreads, closed):
+        k = np.sort(lognormal_kbar(1.0, spread, 200_000, 3))[::-1]  # stiffest lets go first
+        held = np.cumsum(k[::-1])[::-1]  # the force / d of the pillars still held
+        assert value == pytest.approx((held / k).max() / k.size, abs=2e-3), spread
+    few = lognormal_kbar(1.0, 0.5, 16, 0)
+    assert theory.drawn_stiffness_pull_off(16, 0.5, [0]) == pytest.approx(
+        theory.foundation_pull_off(np.zeros(16), few, 1.0) / 16, rel=1e-12)
+    flat = float(simulate(BrushParams("regular", 16, 1e-4, 64)).adhesive_force_normalized)
+    interaction = 1.0 - flat / float(theory.soft_limit(16))
+    assert 0 < interaction < 0.1, flat
+    assert float(theory.foundation_stretch(16, 0.12, 1e-4)) > 100  # the springs take it all
+    for spread, seed in ((0.25, 0), (0.5, 0), (0.5, 1)):
+        ds = simulate(BrushParams("regular", 16, 1e-4, 64, kbar_spread=spread, seed=seed))
+        model = float(theory.soft_limit(16)) * theory.drawn_stiffness_pull_off(16, spread, [seed])
+        assert float(ds.adhesive_force_normalized) / model == pytest.approx(
+            1.0, abs=interaction), (spread, seed)
+
+
+def test_rough_spread_draws_the_sweep_against_the_stiffness_spread():
+    """The stiffness spread C reached no figure (the rough ones select C = 0).
+    `rough_spread` draws F_ad against C per kbar, a panel per roughness: the
+    seed mean with min-max bars, hollow where fewer seeds ran than the brush
+    did (not the flat lattice's seed 0 alone), and on equal heights the soft
+    limit N^(1/4) G(C) (dashed) and that of the seeds' own stiffnesses
+    (dotted), only where a kbar's let-go stretch is at least 3 d_K; a sweep
+    of C = 0 alone draws a placeholder."""
+    from brushcore.data import figures
+    from brushcore.data.figures.paper import FEWER_SEEDS_LABEL
+    from brushcore.data.figures.rough import SEED_LIMIT_LABEL, SPREAD_LIMIT_LABEL
+
+    sweep = _spread_sweep()
+    fig = figures.rough_spread(sweep, "regular", 16)
+    flat, rough = fig.axes[:2]
+    assert "roughness 0 " in flat.get_title() and "roughness 0.3 " in rough.get_title()
+    assert len({ax.get_ylim() for ax in (flat, rough)}) == 1  # read against each other
+    for ax, s in ((flat, 0.0), (rough, 0.3)):
+        for container in ax.containers:
+            kbar = float(container.get_label().split("= ")[1].replace("$", "")
+                         .replace("rigid", "inf"))
+            runs = sweep.adhesive_force_normalized.sel(kbar=kbar, roughness=s).squeeze()
+            mean = runs.mean("seed").values
+            ran = np.isfinite(mean)
+            x, y = container.lines[0].get_data()
+            assert np.array_equal(x, sweep.kbar_spread.values[ran]), kbar
+            np.testing.assert_allclose(y, mean[ran], rtol=1e-12)
+            bars = container.lines[2][0].get_segments()  # min-max over the seeds
+            np.testing.assert_allclose([b[:, 1] for b in bars], np.stack(
+                [runs.min("seed").values[ran], runs.max("seed").values[ran]], axis=1))
+        assert [c.get_label() for c in ax.containers][-1] == r"$\bar k$ = rigid"
+    hollow = [(line.get_xdata().tolist(), line.get_ydata().tolist()) for line in flat.lines
+              if line.get_markerfacecolor() == "white" and len(line.get_xdata())]
+    half = float(sweep.adhesive_force_normalized.sel(kbar=0.1, roughness=0.0, seed=0,
+                                                     kbar_spread=0.5).squeeze())
+    assert hollow == [([0.5], [half])], hollow  # seed 1 missing; not C = 0's seed 0 alone
+    dashed = [line for line in flat.lines if line.get_linestyle() == "--" and
+              len(line.get_xdata())]
+    dotted = [line for line in flat.lines if line.get_linestyle() == ":" and
+              len(line.get_xdata())]
+    assert len(dashed) == len(dotted) == 1  # kbar 1e-3 (lambda 49 d_K) alone: one limit
+    x, y = dashed[0].get_data()
+    np.testing.assert_allclose(y, 2.0 * theory.lognormal_stiffness_pull_off(x), rtol=1e-12)
+    x, y = dotted[0].get_data()
+    np.testing.assert_allclose(
+        y, [2.0 * theory.drawn_stiffness_pull_off(16, c, [0, 1]) for c in x], rtol=1e-12)
+    assert not [line for line in rough.lines if line.get_linestyle() in ("--", ":")
+                and len(line.get_xdata())]  # unequal heights: not the closed form's case
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert {SPREAD_LIMIT_LABEL, SEED_LIMIT_LABEL, FEWER_SEEDS_LABEL} <= set(labels), labels
+    soft = _spread_sweep().sel(kbar=[0.1, math.inf])  # lambda 0.49 d_K: no soft limit
+    assert not [line for line in figures.rough_spread(soft, "regular", 16).axes[0].lines
+                if line.get_linestyle() == "--"]
+    flat_only = figures.rough_spread(_spread_sweep((0.0,)), "regular", 16)
+    assert [t.get_text() for t in flat_only.axes[0].texts] == [
+        "no stiffness spread in this sweep\n(kbar_spread: 0)"]
+    one = figures.rough_spread(_spread_sweep((0.5,)), "regular", 16)  # one C > 0: drawn
+    assert one.axes[0].containers and not one.axes[0].texts
+
+
+def test_rough_figures_draw_the_smallest_spread_when_0_did_not_run():
+    """`kbar_spread: [0.5]` alone made every rough figure a "no rough runs"
+    placeholder (they selected C = 0).  They now draw the smallest C that
+    ran and say so in their title."""
+    from brushcore.data import figures
+
+    sweep = _spread_sweep((0.25, 0.5))
+    for name in ("rough_roughness", "rough_preload"):
+        fig = getattr(figures, name)(sweep, "regular", 16)
+        assert not fig.axes[0].texts, name
+        title = " ".join(fig._suptitle.get_text().split())  # wrapped to the figure's width
+        assert "stiffness spread C = 0.25 (the smallest run)" in title, title
+        ys = {float(y) for ax in fig.axes for c in ax.containers
+              for y in np.ravel(c.lines[0].get_ydata())}
+        want = sweep.adhesive_force_normalized.sel(kbar_spread=0.25).mean("seed").values
+        assert ys == {float(v) for v in np.ravel(want) if np.isfinite(v)}, name
+        # the Gaussian-heights soft limit assumes equal stiffness: not drawn at C > 0
+        assert not [line for ax in fig.axes for line in ax.lines
+                    if line.get_linestyle() == "--" and len(line.get_xdata())], name
+    # rough_preload's shared y range holds every panel's points: the zoom guard
+    # ran on the first panel alone and fixed the range to its 1.47-1.54, which
+    # cut off roughness 0.5's 0.97 (a run of regular 16 at C = 0.25)
+    narrow = sweep.sel(kbar=[1e-3, 0.1]).copy(deep=True)
+    narrow["adhesive_force_normalized"][:] = np.reshape([1.488, 1.493, 1.538, 0.972], (
+        1, 1, 2, 1, 2, 1, 1))
+    for fig in (figures.rough_preload(narrow, "regular", 16),
+                figures.rough_spread(narrow, "regular", 16)):
+        for ax in fig.axes[:2]:
+            low, high = ax.get_ylim()
+            ys = [float(y) for c in ax.containers for y in np.ravel(c.lines[0].get_ydata())]
+            assert ys and all(low <= y <= high for y in ys), (ys, low, high)
+    fig = figures.rough_roughness(_spread_sweep(), "regular", 16)  # C = 0 ran: as before
+    assert "spread" not in fig._suptitle.get_text()
+    assert [line for line in fig.axes[0].lines
+            if line.get_linestyle() == "--" and len(line.get_xdata())]  # kbar 1e-3's limit
+
+
+def test_rough_roughness_does_not_zoom_into_rounding():
+    """With one roughness value rough_roughness's y axis read
+    "1e-12+1.354190643" (matplotlib's autoscale of two F_ad equal to
+    rounding); it takes `_no_false_zoom` as rough_preload does."""
+    from brushcore.data import figures
+
+    sweep = _spread_sweep((0.0,)).sel(roughness=[0.0], kbar=[0.1, math.inf])
+    sweep["adhesive_force_normalized"][:] = 1.354190643 + np.array(
+        [0.0, 1e-12]).reshape(1, 1, 2, 1, 1, 1, 1)
+    ax = figures.rough_roughness(sweep, "regular", 16).axes[0]
+    ax.figure.canvas.draw()
+    low, high = ax.get_ylim()
+    assert high - low >= 0.049 * 1.354190643, (low, high)
+    assert ax.yaxis.get_offset_text().get_text() == ""
+
+
+def test_one_curve_figures_state_the_spread_and_the_preload():
+    """`rough_loop` and `load_sharing` named kbar and roughness alone: a
+    graded, preloaded curve read as the flat one.  Both titles now state
+    the stiffness spread C and the preload (the first load of a protocol)."""
+    from brushcore.data import figures
+
+    ds = simulate(BrushParams("regular", 9, 0.01, 48, kbar_spread=0.5, preload=1.0, seed=1))
+    loop = figures.rough_loop(ds)._suptitle.get_text()
+    sharing = figures.load_sharing(ds).axes[0].get_title()
+    for title in (loop, sharing):
+        assert "stiffness spread C = 0.5" in title and "preload 1 $F_K$" in title, title
+        assert "roughness 0 $d_K$" in title and "seed 1" in title, title
+    legend = [t.get_text() for t in figures.rough_loop(simulate(FLAT)).axes[0].get_legend()
+              .get_texts()]
+    assert "preload 0 $F_K$" in legend, legend  # not "preload -0"
+    protocol = simulate(ROUGH9, protocol=[Waypoint("force", -0.5), Waypoint("separation")])
+    title = figures.rough_loop(protocol)._suptitle.get_text()
+    assert "first load 0.5 $F_K$" in title and "spread" not in title, title
+
+
+def test_the_summary_has_a_row_per_graded_case():
+    """The summary selected C = 0 (`flat_slice`): every graded case vanished
+    from it.  Now a row per brush, kbar, roughness and C > 0 gives its seed
+    mean, the C = 0 value, and on equal heights of a soft brush the soft
+    limits N^(1/4) G(C) and of the seeds' own stiffnesses."""
+    from brushcore.data.summary import headline_rows
+
+    sweep = _spread_sweep()
+    rows = [r for r in headline_rows(sweep, fig5_n_pillars=16) if "spread" in r.quantity]
+    # kbar 1e-3 and 0.1 (rigid runs C = 0 alone) x S 0, 0.3 x C 0.25, 0.5
+    assert len(rows) == 8, [r.quantity for r in rows]
+    force = sweep.adhesive_force_normalized
+    for row in rows:
+        rough = 0.3 if "roughness 0.3" in row.quantity else 0.0
+        spread = float(row.quantity.split("C = ")[1].split(",")[0])
+        runs = force.sel(kbar=float(row.kbar), roughness=rough, kbar_spread=spread).squeeze()
+        assert row.value == f"{float(runs.mean('seed')):.3g}", row
+        flat = force.sel(kbar=float(row.kbar), roughness=rough, kbar_spread=0.0)
+        assert f"C = 0: {float(flat.mean('seed').squeeze()):.3g}" in row.note, row
+        soft = float(row.kbar) == 1e-3 and rough == 0.0
+        assert ("soft limit" in row.note) == soft, row
+        if soft:
+            limit = 2.0 * theory.lognormal_stiffness_pull_off(spread)
+            assert f"N^1/4 G(C) = {limit:.3g}" in row.note, row
+        assert row.note.endswith("preload 0.5 F_K"), row  # the smallest preload ran
+    assert not [r for r in headline_rows(_spread_sweep((0.0,)), fig5_n_pillars=16)
+                if "spread" in r.quantity]

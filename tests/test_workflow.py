@@ -1175,3 +1175,23 @@ def test_near_duplicates_are_floats_one_ulp_apart_not_integers() -> None:
     assert near([12345678901, 12345678902, 0.5]) is None
     assert near([1e-4, 1.00000001e-4]) is None  # 1e-8 apart: two values meant
     assert near([True, 1.0, float("inf"), float("inf")]) is None
+
+
+def test_a_stiffness_spread_asks_for_its_figure() -> None:
+    """`kbar_spread` reached no figure: `rough_spread` (F_ad against C) is a
+    target where the config asks for a spread C > 0, and not otherwise (a
+    rough config of equal stiffness); stale-output checks know its name."""
+    from snakemake.utils import validate
+
+    rules = _common_rules()
+
+    def config(**keys) -> dict:
+        merged = {**yaml.safe_load((REPO / "config/test.yaml").read_text()), **keys}
+        validate(merged, str(REPO / "workflow/schemas/config.schema.yaml"), set_default=True)
+        return merged
+
+    for keys, drawn in (({"kbar_spread": [0.0, 0.25, 0.5]}, True), ({"kbar_spread": [0.5]}, True),
+                        ({"roughness": [0.0, 0.3]}, False), ({}, False)):
+        files = rules["rough_figure_files"](config(**keys))
+        assert ("results/figures/rough_spread.png" in files) == drawn, (keys, files)
+    assert "rough_spread" in rules["SPREAD_FIGURES"]

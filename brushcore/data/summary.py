@@ -26,7 +26,8 @@ from brushcore.model import theory
 from brushcore.model.layout import pillars_differ
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.io import markdown_table, write_text_atomic
-from brushcore.data.views import finest_grid, flat_slice, kbar_index, phi_slice
+from brushcore.data.views import (finest_grid, flat_slice, kbar_index, phi_slice, shape_slice,
+                                  without_brushes_as_made)
 from brushcore.data.views import phi_note as phi_shown
 from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
 
@@ -218,6 +219,7 @@ def headline_rows(
     phi = float(sweep.attrs.get("phi", math.nan))
     scalars = [v for v in sweep.data_vars if "step" not in sweep[v].dims and "case" not in
                sweep[v].dims]
+    full = sweep[scalars]  # the graded cases' rows (`spread_rows`) read the rough dimensions
     fig5 = finest_grid(flat_slice(sweep[scalars], fig5_shape))
     sweep = finest_grid(flat_slice(sweep[scalars]))
     rigid_theory = theory.rigid_limit(phi) if math.isfinite(phi) else math.nan
@@ -301,7 +303,74 @@ def headline_rows(
                         ("Fig. 6" + ("; every kbar run lies on it, the stiffest included "
                                      "(few or far-apart pillars)" if on_all else ""))
                         if reached else "no plateau in the kbar run"))
+    rows.extend(spread_rows(full))  # discs, as the flat rows but Fig. 5a
     return rows
+
+
+#: A soft brush's let-go stretch (in d_K) from which its elastic-foundation
+#: limit is quoted (as `brushcore.data.figures.rough.MIN_FOUNDATION_STRETCH`).
+SPREAD_SOFT_STRETCH = 3.0
+
+
+def spread_rows(sweep: xr.Dataset, shape: str = "disc") -> list[Row]:
+    """F_ad of every graded case (stiffness spread C > 0, ``kbar_spread``):
+    one `Row` per brush, kbar, roughness and C, at the preload the flat rows
+    take (0, else the smallest run).  The flat rows select C = 0
+    (`flat_slice`), so these cases left no trace in the summary before.
+
+    The note gives F_ad of the same brush at C = 0 where it ran and, on
+    equal heights where the let-go stretch is at least `SPREAD_SOFT_STRETCH`
+    d_K, the elastic-foundation soft limit: N^(1/4) G(C) for many pillars
+    (`theory.lognormal_stiffness_pull_off`) and for the stiffnesses these
+    seeds drew.
+    """
+    if "kbar_spread" not in sweep.dims or not (sweep.kbar_spread.values > 0).any():
+        return []
+    sweep = finest_grid(shape_slice(without_brushes_as_made(sweep), shape))
+    preload = 0.0 if 0.0 in sweep.preload.values else float(sweep.preload.min())
+    force = sweep["adhesive_force_normalized"].sel(preload=preload)
+    phi = float(sweep.attrs.get("phi", math.nan))
+    at = f"; preload {preload:g} F_K" if preload else ""
+    rows = []
+    for layout in sweep.layout.values:
+        for n in sweep.n_pillars.values:
+            for rough in sweep.roughness.values:
+                for kbar in sweep.kbar.values:
+                    runs = force.sel(layout=layout, n_pillars=n, roughness=rough, kbar=kbar)
+                    for spread in sweep.kbar_spread.values:
+                        seeds = runs.sel(kbar_spread=spread).values
+                        seeds = seeds[np.isfinite(seeds)]
+                        if spread == 0 or not seeds.size:
+                            continue
+                        rows.append(_spread_row(
+                            str(layout), int(n), float(kbar), float(rough), float(spread),
+                            seeds, runs, phi, at))
+    return rows
+
+
+def _spread_row(layout: str, n: int, kbar: float, rough: float, spread: float,
+                seeds: np.ndarray, runs: xr.DataArray, phi: float, at: str) -> Row:
+    """`spread_rows`' row of one graded case (``runs``: its brush against
+    kbar_spread and seed)."""
+    notes = [f"mean of {seeds.size} seed{'s' if seeds.size > 1 else ''}"
+             + (f" ({_fmt(seeds.min())}-{_fmt(seeds.max())})" if seeds.size > 1 else "")]
+    flat = runs.sel(kbar_spread=0.0).values if 0.0 in runs.kbar_spread.values else []
+    flat = np.asarray(flat)[np.isfinite(flat)]
+    if flat.size:
+        notes.append(f"C = 0: {_fmt(float(flat.mean()))}")
+    lam = float(theory.foundation_stretch(n, phi, kbar)) if math.isfinite(phi) else math.nan
+    if rough == 0 and lam >= SPREAD_SOFT_STRETCH:
+        ran = [int(s) for s, v in zip(runs.seed.values, runs.sel(kbar_spread=spread).values)
+               if math.isfinite(v)]
+        root = float(theory.soft_limit(n))
+        notes.append(f"soft limit (elastic foundation, lambda {_fmt(lam, 2)} d_K): "
+                     f"N^1/4 G(C) = {_fmt(root * theory.lognormal_stiffness_pull_off(spread))}"
+                     f" for many pillars, "
+                     f"{_fmt(root * theory.drawn_stiffness_pull_off(n, spread, ran))} for "
+                     "these seeds' stiffnesses")
+    rough_text = f", roughness {rough:g} d_K" if rough else ""
+    return Row(f"F_ad (normalised), stiffness spread C = {spread:g}{rough_text}", layout,
+               str(n), _fmt(kbar), _fmt(float(seeds.mean())), "", "; ".join(notes) + at)
 
 
 def _papers(layout: str, n_pillars: int) -> bool:

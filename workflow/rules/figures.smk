@@ -100,7 +100,8 @@ rule fig8:
 
 
 rule rough_figure:
-    """Rough brushes: F_ad against roughness with the soft limit, and against preload."""
+    """Rough brushes: F_ad against roughness with the soft limit, against preload,
+    and against the stiffness spread C."""
     input:
         "results/sweep.nc",
     output:
@@ -115,7 +116,7 @@ rule rough_figure:
     benchmark:
         "results/benchmarks/figures/{rough_figure}.tsv"
     wildcard_constraints:
-        rough_figure="rough_roughness|rough_preload",
+        rough_figure="rough_roughness|rough_preload|rough_spread",
     resources:
         mem_mb=2000,
         runtime=10,

@@ -7,6 +7,9 @@ from pathlib import Path
 
 ROUGH_FIGURES = ("rough_roughness", "rough_preload")
 
+#: F_ad against the stiffness spread C: drawn where `kbar_spread` asks for a C > 0.
+SPREAD_FIGURES = ("rough_spread",)
+
 
 def rough_brush(config, axes=True):
     """(layout, N) the rough figures show: the first brush as made (a
@@ -84,7 +87,12 @@ def rough_figure_files(config):
     )
     if flat and config.get("protocol") is None and not made_brush(config):
         return []
-    names = ROUGH_FIGURES + (CURVE_FIGURES if rough_example_curve(config) else ())
+    spread = any(float(c) > 0 for c in config["kbar_spread"])
+    names = (
+        ROUGH_FIGURES
+        + (SPREAD_FIGURES if spread else ())
+        + (CURVE_FIGURES if rough_example_curve(config) else ())
+    )
     return [f"results/figures/{name}.{ext}" for name in names for ext in ("png", "pdf")]
 
 
@@ -145,6 +153,7 @@ def stale_outputs(config, root=".", since=None):
     since = PLANNED_AT if since is None else since
     names = (
         *ROUGH_FIGURES,
+        *SPREAD_FIGURES,
         *CURVE_FIGURES,
         "lattices",
         "rigid_phi",
