@@ -24,7 +24,9 @@ def test_very_soft_springs_sit_on_the_plateau():
     f6, w6 = _fw(simulate(BrushParams("regular", 16, 1e-6, 64)))
     assert f8 == pytest.approx(f6, rel=1e-3)  # soft plateau reached
     assert w8 / w6 == pytest.approx(100.0, rel=1e-3)  # spring energy ~ 1/k (eq. 27)
-    assert f8 < theory.soft_limit(16)  # never above independent Kendall pillars
+    # below eq. 6: at phi 0.12 the neighbours' fields lower each pillar's let-go
+    # force (Fig. 7's 1/c ~ 1.2); a loose check of the plateau's side, not a law
+    assert f8 < theory.soft_limit(16)
 
 
 def test_very_stiff_springs_are_rigid():
@@ -35,10 +37,11 @@ def test_very_stiff_springs_are_rigid():
 
 @pytest.mark.parametrize("kbar", [1e-8, 1.0, math.inf])
 def test_single_pillar_is_kendall_at_any_stiffness(kbar):
-    """Kendall's force from above within 2 %, as test_physics's punches of
-    radius 10-60 h (+0.2 ... +1.7 %); measured +1.51 % at every stiffness."""
+    """Kendall's force within 2 %, as test_physics's punches of radius 10-60 h
+    (+0.2 ... +1.7 %); measured +1.51 % at every stiffness (the spring
+    changes nothing: a flat punch lets go at its own force whatever pulls it)."""
     f, _ = _fw(simulate(BrushParams("regular", 1, kbar, 64, phi=0.3)))  # radius 19.8 h
-    assert 1 < f < 1.02, f"F_ad/F_K = {f:.4f}"
+    assert abs(f - 1) < 0.02, f"F_ad/F_K = {f:.4f}"
 
 
 def _agrees_with_exact(ds, params: BrushParams) -> None:
@@ -65,16 +68,17 @@ def test_densest_resolvable_regular_brush():
 
 @pytest.mark.parametrize("phi", [0.01, 0.5])
 def test_filling_factor_extremes(phi):
-    # phi 0.01: radius 3.6 elements, realised 7 % high; the test compares with phi-free eq. 6
+    # phi 0.01: radius 3.6 elements; F_ad / F_K of soft separated pillars is
+    # N^(1/4) f_c / F_K(a_p) (1 - eps) whatever phi (eq. 6 normalised)
     ds = simulate(BrushParams("regular", 4, 1e-4, 128, phi=phi, allow_coarse=True))
     f, _ = _fw(ds)
     if phi == 0.01:  # far apart and soft: independent pillars, eq. 6
-        # measured 1.386 against 1.414 (-2.0 %): eq. 6 takes phi as asked, the
-        # pillars realise it 7 % high (F ~ a^3/2 per pillar, a^-3/2 in F_K:
-        # eq. 6 holds for the realised area), and the neighbours 10 radii
-        # apart cost 1-2 % (test_protocol's soft foundation: 1.9 %)
+        # measured 1.386 against 1.414 (-2.0 %): the 3.6-element pillar alone
+        # lets go 1.3 % below Kendall's force of its own area (the edge's
+        # element pattern), and the neighbours 10 radii apart cost 0.75 % more
+        # (F_ad = 0.9925 of four such pillars; a physics referee's runs)
         assert f == pytest.approx(theory.soft_limit(4), rel=0.03)
-    else:  # touching neighbours still never beat independent pillars
+    else:  # touching neighbours: above the compact punch, below independent pillars
         assert 1.0 < f < theory.soft_limit(4)
         _agrees_with_exact(ds, BrushParams("regular", 4, 1e-4, 128, phi=phi,
                                            allow_coarse=True))  # 3.3e-5 measured

@@ -82,8 +82,12 @@ def test_displacement_scale_is_kendalls_critical_displacement(rigid_punches, a):
 
 
 def test_kendall_is_approached_as_the_punch_spans_more_elements(rigid_punches):
-    """Kendall's force from above, within 1 % from a = 40 elements on (measured
-    +0.62, +0.55, +0.45 % at a = 40, 50, 60; +1.63 % at 30, +1.70 % at 10).
+    """Kendall's force within 1 % from a = 40 elements on (measured +0.62,
+    +0.55, +0.45 % at a = 40, 50, 60; +1.63 % at 30, +1.70 % at 10).  From
+    above on these punches, but that is no law of the model: the element
+    pattern at the edge scatters it (a physics referee's punches: within
+    ±0.6 % from a = 24 on, -0.002 % at a = 128; a pillar of 3.6 elements
+    1.3 % below), so the band is two-sided.
 
     A detachment stress off by 1 % moves F_ad by about 1 %, so this band
     pins sigma_c: C = sqrt(2) in place of 1.4537 (sigma_c 2.7 % low) gives
@@ -91,7 +95,7 @@ def test_kendall_is_approached_as_the_punch_spans_more_elements(rigid_punches):
     """
     ratios = [float(rigid_punches[a].adhesive_force)
               / theory.kendall_force(_a0(rigid_punches[a]), 1.0, 1.0) for a in (40, 50, 60)]
-    assert all(1 < r < 1.01 for r in ratios), ratios
+    assert all(abs(r - 1) < 0.01 for r in ratios), ratios
 
 
 def test_mesh_convergence_of_stiffness(rigid_punches):
