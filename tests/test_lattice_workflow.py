@@ -605,6 +605,16 @@ def test_figures_draw_a_hexagonal_panel_and_the_lattice_comparison(shape_sweep,
         round(theory.hexagonal_rigid_limit(realised("hexagonal", n), n), 9) for n in all_n}
     assert not levels(fig6.axes[0], "regular")
     fig = figures.lattices(flat_slice(shape_sweep, None))
+    # its rigid limits too at the phi the lattices realised (they took the one asked)
+    every = flat_slice(shape_sweep, None)
+    for ax in fig.axes:
+        n = int(ax.get_title(loc="left").split("N = ")[1])
+        lines = {round(float(line.get_ydata()[0]), 9) for line in ax.get_lines()
+                 if len(set(np.ravel(line.get_ydata()))) == 1}
+        for layout, limit in (("regular", theory.rigid_limit),
+                              ("hexagonal", lambda phi: theory.hexagonal_rigid_limit(phi, n))):
+            phi = float(every["phi_actual"].sel(layout=layout, n_pillars=n).mean(skipna=True))
+            assert round(limit(phi), 9) in lines, (layout, n, lines)
     labels = fig.axes[0].get_legend_handles_labels()[1]
     for label in ("regular, disc", "regular, square", "hexagonal, square", "random, square"):
         assert label in labels, labels

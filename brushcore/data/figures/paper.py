@@ -466,6 +466,14 @@ def _lattice_series(sweep: xr.Dataset, n_pillars: int) -> list[tuple[str, str, x
     return out
 
 
+def _lattice_phi(sweep: xr.Dataset, layout: str, n_pillars: int) -> float:
+    """The phi a layout's N-pillar brush realised (`sweep_phi`, its shapes'
+    mean), or the sweep's where that brush did not run."""
+    if layout not in sweep.layout.values or n_pillars not in sweep.n_pillars.values:
+        return sweep_phi(sweep)
+    return sweep_phi(sweep, layout, n_pillars)
+
+
 def lattices(sweep: xr.Dataset) -> Figure:
     """Adhesive force against kbar for every (layout, shape) of the same N.
 
@@ -473,16 +481,19 @@ def lattices(sweep: xr.Dataset) -> Figure:
     layout, marker and line style the pillar shape; with several seeds
     (random layouts) the dots are the mean and the bars span min to max.
     Rigid pillars (kbar = inf) are drawn at "rigid" (`rigid_x`), not joined
-    to the finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, dashed) and
-    the soft limit N^(1/4) of discs (eq. 6, dotted: other shapes let go below
+    to the finite kbar.  Black lines: the rigid limit phi^(-1/4) (eq. 5, solid,
+    at the phi the panel's regular brush realised, as Figs. 6 and 8) and the
+    soft limit N^(1/4) of discs (eq. 6, dashed: other shapes let go below
     Kendall's force); grey dash-dot: the hexagonal lattice's rigid limit at its
-    local filling factor phi / fill (`theory.hexagonal_rigid_limit`).
+    local filling factor phi / fill (`theory.hexagonal_rigid_limit`), at the
+    phi the hexagonal brush realised.
 
     Parameters
     ----------
     sweep : flat brushes of a sweep with every shape (`flat_slice(sweep, None)`).
     """
-    sweep = finest_grid(phi_slice(sweep)[["adhesive_force_normalized"]])
+    sweep = finest_grid(phi_slice(sweep)[[name for name in ("adhesive_force_normalized",
+                                                            "phi_actual") if name in sweep]])
     series = {int(n): _lattice_series(sweep, int(n)) for n in sweep.n_pillars.values}
     compared = {n: s for n, s in series.items() if len(s) > 1} or \
         {n: s for n, s in series.items() if s}
@@ -508,11 +519,11 @@ def lattices(sweep: xr.Dataset) -> Figure:
                         label=f"{layout}, {shape_text(shape)}")
         if math.isfinite(phi):
             # solid as in Fig. 6, the soft limit dashed as in Fig. 8: one key for all
-            ax.axhline(theory.rigid_limit(phi), color="k", lw=1.2,
-                       label=r"rigid limit $\varphi^{-1/4}$")
+            ax.axhline(theory.rigid_limit(_lattice_phi(sweep, "regular", n)), color="k",
+                       lw=1.2, label=r"rigid limit $\varphi^{-1/4}$")
             if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
-                ax.axhline(theory.hexagonal_rigid_limit(phi, n), color="0.45",
-                           ls=HEX_LINE, lw=1.0, label=HEX_LABEL)
+                ax.axhline(theory.hexagonal_rigid_limit(_lattice_phi(sweep, "hexagonal", n), n),
+                           color="0.45", ls=HEX_LINE, lw=1.0, label=HEX_LABEL)
         # Kendall's force per pillar: squares and ellipses let go below it
         ax.axhline(theory.soft_limit(n), color="k", ls="--", lw=1.0,
                    label=r"soft limit $N^{1/4}$ (discs)")
