@@ -76,6 +76,22 @@ def test_rough_hexagonal_brushes_run_every_seed(repo_copy: Path,  # noqa: F811
     assert names == {stem.format(0, ""), *(stem.format(s, "_S0.2_P0.0_C0.0") for s in (0, 1))}
 
 
+def test_lists_of_aspects_and_orientations_run_every_shape(repo_copy: Path,  # noqa: F811
+                                                           tmp_path: Path) -> None:
+    """aspect and orientation take lists: every ellipse at each aspect, every
+    square and ellipse at each orientation, one shape label (and curve) each;
+    discs keep their names.  (One value each was all a sweep could vary.)"""
+    names = planned_curves(repo_copy, tmp_path, {
+        "regular": [4], "random": [], "kbar": [0.1], "shape": ["disc", "square", "ellipse"],
+        "aspect": [2.0, 3.0], "orientation": [0.0, 30.0], "allow_coarse": True,
+        "fig5": {"kbar": []},
+    })
+    stem = "results/curves/regular/N4_kbar0.1_seed0_grid64_phi0.12{}.nc"
+    assert names == {stem.format(s) for s in (
+        "", "_square", "_square_30.0", "_ellipse2.0_0.0", "_ellipse2.0_30.0",
+        "_ellipse3.0_0.0", "_ellipse3.0_30.0")}, names
+
+
 def test_lattice_config_plans_the_study(repo_copy: Path) -> None:  # noqa: F811
     config = yaml.safe_load((repo_copy / "config/lattices.yaml").read_text())
     proc = snakemake(repo_copy, "-n", "--cores", "2", "--forceall", "--configfile",
@@ -103,6 +119,8 @@ def test_disc_config_makes_no_lattice_figure(repo_copy: Path) -> None:  # noqa: 
         ({"hexagonal": [7]}, r"config: hexagonal = 7 is invalid"),
         ({"shape": ["disc", "hexagon"]}, r"config key 'shape\.1': 'hexagon' is not one of"),
         ({"aspect": 20.0}, r"config key 'aspect': 20\.0 is greater than the maximum"),
+        ({"aspect": [2.0, 20.0], "shape": ["ellipse"]},
+         r"config key 'aspect\.1': 20\.0 is greater than the maximum of 10"),
         ({"fig5": {"n_pillars": 16, "shape": "star", "kbar": [0.01]}},
          r"config key 'fig5\.shape': 'star' is not one of"),
         ({"fig5": {"n_pillars": 16, "layout": "random", "kbar": [0.01]}},

@@ -1090,17 +1090,21 @@ def test_the_config_schema_bounds_are_the_solvers():
     from brushcore.numerics.options import SolverOptions
     from brushcore.numerics.platform.threads import MAX_THREADS
 
-    props = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
-    grid, phi, props = props["$defs"]["grid"], props["$defs"]["phi"], props["properties"]
+    schema = yaml.safe_load((REPO / "workflow/schemas/config.schema.yaml").read_text())
+    grid, phi, props = schema["$defs"]["grid"], schema["$defs"]["phi"], schema["properties"]
     assert (grid["minimum"], grid["maximum"]) == (p.MIN_GRID, p.MAX_GRID)
     assert (phi["exclusiveMinimum"], phi["maximum"]) == (0, p.MAX_PHI)
     # a number or a list of them, each of that range
     assert [form.get("$ref", form.get("items", {}).get("$ref"))
             for form in props["phi"]["oneOf"]] == ["#/$defs/phi"] * 2
+    for name in ("aspect", "orientation"):
+        assert [form.get("$ref", form.get("items", {}).get("$ref"))
+                for form in props[name]["oneOf"]] == [f"#/$defs/{name}"] * 2
     assert props["kbar"]["items"]["minimum"] == p.MIN_KBAR
     assert props["fig5"]["properties"]["kbar"]["items"]["minimum"] == p.MIN_KBAR
-    assert (props["aspect"]["minimum"], props["aspect"]["maximum"]) == (1, p.MAX_ASPECT)
-    assert (props["orientation"]["minimum"], props["orientation"]["maximum"]) == (
+    aspect, orientation = (schema["$defs"][name] for name in ("aspect", "orientation"))
+    assert (aspect["minimum"], aspect["maximum"]) == (1, p.MAX_ASPECT)
+    assert (orientation["minimum"], orientation["maximum"]) == (
         -p.MAX_ORIENTATION, p.MAX_ORIENTATION)
     assert props["seeds"]["items"]["maximum"] == p.MAX_SEED
     for name in ("roughness", "preload"):

@@ -89,13 +89,30 @@ def _rough_tags(config, kbar):
     )
 
 
-def shape_tag(config, shape):
-    """File-name suffix of a pillar shape: "" for discs (names unchanged), else
-    "_" + `shape_label` with the config's aspect (ellipses) and orientation."""
+def config_values(config, key):
+    """A config key that takes a number or a list (phi, aspect, orientation),
+    as a list of floats in its order."""
+    value = config[key]
+    return [float(v) for v in (value if isinstance(value, list) else [value])]
+
+
+def shape_tags(config, shape):
+    """File-name suffixes of a pillar shape, one per aspect (ellipses) and
+    orientation the config lists: [""] for discs (names unchanged), else
+    "_" + `shape_label` of each."""
     if shape == "disc":
-        return ""
-    aspect = config["aspect"] if shape == "ellipse" else 1.0
-    return "_" + shape_label(shape, aspect, config["orientation"])
+        return [""]
+    aspects = config_values(config, "aspect") if shape == "ellipse" else [1.0]
+    return [
+        "_" + shape_label(shape, aspect, orientation)
+        for aspect in aspects
+        for orientation in config_values(config, "orientation")
+    ]
+
+
+def shape_tag(config, shape):
+    """The first of `shape_tags`: the Fig. 5 brush's, which draws one."""
+    return shape_tags(config, shape)[0]
 
 
 def parse_shape_tag(tag):
@@ -113,8 +130,7 @@ def _deterministic_seeds(config, rough):
 
 def config_phis(config):
     """The config's `phi` (a number or a list) as a list of floats, in its order."""
-    value = config["phi"]
-    return [float(p) for p in (value if isinstance(value, list) else [value])]
+    return config_values(config, "phi")
 
 
 def sweep_cases(config):
@@ -122,14 +138,15 @@ def sweep_cases(config):
 
     Flat lattice brushes (regular, hexagonal) ignore the seed, so they run with
     seed 0 only; rough or graded ones (heights and stiffness drawn from the
-    seed) run every seed.  Every brush runs every pillar shape of `shape`.
+    seed) run every seed.  Every brush runs every pillar shape of `shape`,
+    ellipses at every `aspect` and squares and ellipses at every `orientation`.
     The Fig. 5 brush adds its own kbar values to the sweep of its layout and
     shape.  Every generated brush runs at each phi of `config_phis`; a file
     brush at its file's.
     """
     phis = config_phis(config)
     cases = set()
-    shapes = [shape_tag(config, s) for s in config["shape"]]
+    shapes = [tag for s in config["shape"] for tag in shape_tags(config, s)]
 
     def lattice(layout, n, kbar, shape):
         for rough in _rough_tags(config, kbar):
