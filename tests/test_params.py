@@ -624,3 +624,22 @@ def test_min_gap_on_a_lattice_is_recorded_as_1_as_the_cli_does(layout, n) -> Non
         given = BrushParams(layout, n, 0.1, 48, min_gap=5)
     assert given == BrushParams(layout, n, 0.1, 48) and given.min_gap == 1.0
     assert BrushParams("random", 16, 0.1, 48, min_gap=5).min_gap == 5.0  # its draw's gap
+
+
+def test_a_lattice_curve_that_recorded_another_min_gap_still_aggregates() -> None:
+    """Before 2026-12-07 the Python API recorded a lattice's min_gap as given;
+    such a curve beside today's (min_gap 1) stopped the sweep ("curve files
+    disagree on min_gap"), though only a random draw reads it: the sweep's
+    min_gap is its random brushes' (1 where none ran)."""
+    from brushcore import simulate
+    from brushcore.data.aggregate import AggregationError, build_sweep
+
+    old = simulate(BrushParams("regular", 4, 0.01, 32))
+    old.attrs["min_gap"] = 3.0  # as that API wrote it
+    lattices = [old, simulate(BrushParams("regular", 4, 1.0, 32))]
+    assert build_sweep(lattices).attrs["min_gap"] == 1.0
+    drawn = simulate(BrushParams("random", 4, 1.0, 32, min_gap=2.0, seed=1))
+    assert build_sweep([*lattices, drawn]).attrs["min_gap"] == 2.0
+    other = simulate(BrushParams("random", 4, 0.01, 32, seed=1))  # min_gap 1
+    with pytest.raises(AggregationError, match="disagree on min_gap"):
+        build_sweep([drawn, other])  # two random draws of other gaps: two rules

@@ -222,3 +222,19 @@ def test_a_phi_list_plans_one_curve_a_phi(repo_copy: Path, tmp_path: Path) -> No
 def test_a_bad_phi_is_refused_by_name_before_any_job(repo_copy: Path, tmp_path: Path,  # noqa: F811
                                                      bad: dict, message: str) -> None:
     assert_refused_at_plan_time(repo_copy, tmp_path, bad, message)
+
+
+def test_the_convergence_figure_names_each_rows_phi() -> None:
+    """A study over two phi draws one row per phi: each title names its phi
+    (two rows read "regular N=4, kbar=rigid" alike, with other results)."""
+    from brushcore import BrushParams, simulate
+    from brushcore.data.aggregate import build_sweep
+    from brushcore.data.convergence import extrapolate_sweep
+    from brushcore.data.figures import convergence
+
+    curves = [simulate(BrushParams("regular", 4, math.inf, grid, phi=phi))
+              for phi in PHIS for grid in (32, 41, 48)]
+    fig = convergence(extrapolate_sweep(build_sweep(curves)))
+    titles = sorted({ax.get_title() for ax in fig.axes if ax.get_title()})
+    assert len(titles) == 2 and all(", phi " in t for t in titles), titles
+    assert {t.rsplit(", phi ", 1)[1] for t in titles} == {f"{p:g}" for p in PHIS}, titles

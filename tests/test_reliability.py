@@ -938,6 +938,28 @@ def test_a_job_that_cannot_write_its_curve_says_so_in_one_line(tmp_path, monkeyp
     assert not out.exists()
 
 
+def test_a_job_whose_cg_runs_out_of_iterations_names_the_config_key(tmp_path) -> None:
+    """CG's "did not converge in N iterations" in a workflow job's log names
+    the config key that allows more (the CLI's says --max-iter)."""
+    from types import SimpleNamespace
+
+    from brushcore.data import simulate_job
+
+    out, log = tmp_path / "curve.nc", tmp_path / "curve.log"
+    smk = SimpleNamespace(
+        output=[str(out)], log=[str(log)], threads=1,
+        wildcards=SimpleNamespace(layout="random", n_pillars="16", kbar="0.1", seed="3",
+                                  grid="48", phi="0.12"),
+        params=SimpleNamespace(layout_file="", rough={}, shape={}, solver={"max_iter": 1}),
+        config={"allow_coarse": False, "backend": "cpu"})
+    with pytest.raises(ConvergenceError):
+        simulate_job.run_job(smk)
+    said = log.read_text()
+    assert "did not converge in 1 iterations" in said
+    assert "the config's solver.max_iter raises the limit" in said
+    assert not out.exists()
+
+
 def test_the_code_that_ran_is_named_where_git_cannot(tmp_path, monkeypatch) -> None:
     """An installed wheel says "git unknown" and version 0.1.0 whatever it was
     built from (an installation helper's find: curves of two commits went

@@ -119,6 +119,19 @@ CURVE_VARIABLES = (
 )
 
 
+def _shared_attr(curves: dict[CaseKey, tuple[Path, xr.Dataset]], name: str) -> object:
+    """`common_attr` of every curve, but for ``min_gap``: only a random draw
+    keeps it, so it must agree among the random brushes alone; a lattice
+    records 1 (and did, but from Python before 2026-12-07, whatever it was
+    given: such a curve's min_gap disagreed with the rest and stopped the sweep)."""
+    if name != "min_gap":
+        return common_attr(curves, name)
+    drawn = {k: c for k, c in curves.items() if c[1].attrs.get("layout") == "random"}
+    if drawn:
+        return common_attr(drawn, name)
+    return 1.0 if any(name in c.attrs for _, c in curves.values()) else None
+
+
 def case_dims(keys: Iterable[CaseKey]) -> tuple[str, ...]:
     """The case dimensions and grid, plus PHI_DIM when the generated brushes
     (not files, whose phi is their own) were asked for more than one phi,
@@ -305,7 +318,7 @@ def build_sweep(
     sweep = sweep.set_coords([n for n in sweep.data_vars if n.startswith("case_")])
     sweep.attrs = _provenance(curves, phi=phi)
     for name in SHARED_ATTRIBUTES:
-        value = common_attr(curves, name)
+        value = _shared_attr(curves, name)
         if value is not None:
             sweep.attrs[name] = value
     for name in SOLVER_ATTRIBUTES:

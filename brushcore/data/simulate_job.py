@@ -34,6 +34,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
     from brushcore.model.curve import FirstTouchWarning, simulate
     from brushcore.numerics.options import SolverOptions
+    from brushcore.numerics.linear.cg import ConvergenceError
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.model.inputs import parse_protocol
@@ -59,10 +60,15 @@ def _simulate(smk, clock: CurveClock) -> None:
     print(f"{params}{given} on {smk.threads} thread(s)", flush=True)
     text = smk.config.get("protocol")  # checked at plan time; named in the file by its digest
     protocol = None if text is None else parse_protocol(text)
-    with warnings.catch_warnings():  # said below, in the config's words
-        warnings.filterwarnings("ignore", category=FirstTouchWarning)
-        curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
-                         protocol=protocol)
+    try:
+        with warnings.catch_warnings():  # said below, in the config's words
+            warnings.filterwarnings("ignore", category=FirstTouchWarning)
+            curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
+                             protocol=protocol)
+    except ConvergenceError as exc:
+        if "did not converge in" in str(exc):  # the one limit a config may raise for it
+            exc.add_note("the config's solver.max_iter raises the limit")
+        raise
     orphaned()
     try:
         write_curve(curve, smk.output[0])

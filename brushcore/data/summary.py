@@ -26,9 +26,8 @@ from brushcore.model import theory
 from brushcore.model.layout import pillars_differ
 from brushcore.data.aggregate import GRID_DIM
 from brushcore.data.io import markdown_table, write_text_atomic
-from brushcore.data.views import (finest_grid, flat_slice, kbar_index, phi_slice, shape_slice,
-                                  without_brushes_as_made)
-from brushcore.data.views import phi_note as phi_shown
+from brushcore.data.views import (finest_grid, flat_slice, kbar_index, phi_note, phi_slice,
+                                  shape_slice, without_brushes_as_made)
 from brushcore.data.convergence import SMALLEST, UNDER_RESOLVED_RADIUS
 
 #: F_ad within this relative distance of the soft plateau counts as on it.
@@ -234,17 +233,17 @@ def headline_rows(
             "close to the rigid limit" if papers else
             f"the config's Fig. 5 brush ({fig5_shape} pillars); the paper's ~1.8 is regular "
             "16 x 16 discs at kbar 0.455"))
-    phi_note = f"phi = {_fmt(phi)} requested" + (
-        f" (every row: {shown} shown)" if (shown := phi_shown(sweep)) else "")
+    phi_text = f"phi = {_fmt(phi)} requested" + (
+        f" (every row: {shown} shown)" if (shown := phi_note(sweep)) else "")
     if not math.isfinite(phi) and "phi_actual" in sweep:  # tables: each its own phi
         realised = sweep["phi_actual"].values
         if np.isfinite(realised).any():
             low, high = np.nanmin(realised), np.nanmax(realised)
             rigid_theory = float(theory.rigid_limit(float(np.nanmean(realised))))
-            phi_note = (f"phi = {_fmt(float(np.nanmean(realised)))} realised, the mean over "
+            phi_text = (f"phi = {_fmt(float(np.nanmean(realised)))} realised, the mean over "
                         "the brushes" + (f" ({_fmt(low)}-{_fmt(high)})" if high > low else ""))
     rows.append(Row("rigid limit phi^-1/4 (eq. 5)", "", "", "", _fmt(rigid_theory), "1.7",
-                    phi_note))
+                    phi_text))
     brushes = _brushes(sweep)
     for layout, n in brushes:
         kbar, force = rigid_end(sweep, layout, n)
@@ -307,9 +306,6 @@ def headline_rows(
     return rows
 
 
-#: A soft brush's let-go stretch (in d_K) from which its elastic-foundation
-#: limit is quoted (as `brushcore.data.figures.rough.MIN_FOUNDATION_STRETCH`).
-SPREAD_SOFT_STRETCH = 3.0
 
 
 def spread_rows(sweep: xr.Dataset, shape: str = "disc") -> list[Row]:
@@ -319,7 +315,7 @@ def spread_rows(sweep: xr.Dataset, shape: str = "disc") -> list[Row]:
     (`flat_slice`), so these cases left no trace in the summary before.
 
     The note gives F_ad of the same brush at C = 0 where it ran and, on
-    equal heights where the let-go stretch is at least `SPREAD_SOFT_STRETCH`
+    equal heights where the let-go stretch is at least `theory.MIN_FOUNDATION_STRETCH`
     d_K, the elastic-foundation soft limit: N^(1/4) G(C) for many pillars
     (`theory.lognormal_stiffness_pull_off`) and for the stiffnesses these
     seeds drew.
@@ -359,7 +355,7 @@ def _spread_row(layout: str, n: int, kbar: float, rough: float, spread: float,
     if flat.size:
         notes.append(f"C = 0: {_fmt(float(flat.mean()))}")
     lam = float(theory.foundation_stretch(n, phi, kbar)) if math.isfinite(phi) else math.nan
-    if rough == 0 and lam >= SPREAD_SOFT_STRETCH:
+    if rough == 0 and lam >= theory.MIN_FOUNDATION_STRETCH:
         ran = [int(s) for s, v in zip(runs.seed.values, runs.sel(kbar_spread=spread).values)
                if math.isfinite(v)]
         root = float(theory.soft_limit(n))

@@ -49,6 +49,14 @@ def _convergence_cases(conv: xr.Dataset, quantity: str) -> list[dict[str, object
 FLAG_LINE_CHARS = 58
 
 
+def _value_text(value: object) -> str:
+    """A case coordinate in a title: a number as %g, a label as it is."""
+    try:
+        return f"{float(value):g}"
+    except (TypeError, ValueError):
+        return str(value)
+
+
 def convergence(
     conv: xr.Dataset,
     *,
@@ -84,6 +92,9 @@ def convergence(
                  rf"$\bar k$={kbar_text(float(case.get('kbar', math.nan)))}")
         if case.get("seed", 0):
             title += f", seed {case['seed']}"
+        # the other case dimensions (phi, shape, the rough ones), which tell rows apart
+        title += "".join(f", {name} {_value_text(value)}" for name, value in case.items()
+                         if name not in ("layout", "n_pillars", "kbar", "seed"))
         finest, coarsest = (float(r.sel(case)) for r in flag_radii(conv))
         for col, q in enumerate(quantities):
             ax = axes[row][col]

@@ -316,7 +316,8 @@ def fig6(sweep: xr.Dataset) -> Figure:
 #: Relative spread of a panel's rigid limits (one per N, at its realised phi)
 #: above which Fig. 6 draws each in its N's colour.  Below it they lie about
 #: a line's width apart, drawn as one black line: at 512^2 the default sweep's
-#: regular brushes realise phi 0.1172-0.12, limits 1.699-1.709 (0.6 %);
+#: regular brushes realise phi 0.1172-0.1182, limits 1.706-1.709 (0.2 %; 0.6 %
+#: above the 1.699 of the phi asked), its random ones 0.1198-0.1201 (0.05 %);
 #: at 64^2 regular 4 and 16 realise 0.117 and 0.125, limits 1.6 % apart.
 RIGID_LINES_APART = 0.01
 

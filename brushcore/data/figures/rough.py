@@ -21,15 +21,8 @@ from brushcore.data.figures.common import (FAD_LABEL, SNAPSHOT_CMAP, kbar_text, 
                                            no_data, snapshot_key, sweep_phi)
 
 
-#: The rough figure draws the elastic foundation's soft limit where a pillar's
-#: let-go stretch lambda (`theory.foundation_stretch`, in d_K) is at least
-#: this: the springs then take most of the pull-off displacement (the half
-#: space's own is 0.72-0.77 d_K at F_ad for the default sweep's brushes at
-#: kbar 100), as the model assumes.  Below
-#: it the line fails: regular 256 at kbar 0.01 (lambda 0.6) lies 1.6x below
-#: the line at S = 0 and 3.5x above it at S = 1 (a review helper's check);
-#: at kbar 1e-3 (lambda 6) the data follow its shape, 1/1.25 below.
-MIN_FOUNDATION_STRETCH = 3.0
+#: Where the elastic foundation's soft limit is drawn (`theory`'s, shared with the summary).
+MIN_FOUNDATION_STRETCH = theory.MIN_FOUNDATION_STRETCH
 
 
 def _rough_series(sweep: xr.Dataset, name: str, layout: str, n: int, kbar: float,
