@@ -21,7 +21,7 @@ from brushcore.data.joblog import (EXIT_INTERRUPTED, EXIT_TERMINATED, INTERRUPTE
 from brushcore.model.labelmap import count_touching_pairs, touching_note
 from brushcore.model.params import MAX_PHI_ERROR, BrushParams
 from brushcore.numerics.events.pulloff import SolverError
-from brushcore.numerics.linear.cg import ConvergenceError
+from brushcore.numerics.linear.cg import ConvergenceError, ran_out_of_iterations
 from brushcore.numerics.options import SolverOptions
 from brushcore.numerics.platform.backend import resolve_backend
 from brushcore.numerics.platform.threads import MAX_THREADS
@@ -205,7 +205,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         return 2
     except (ConvergenceError, SolverError) as exc:
         # the one limit a user may raise for it (the config's solver.max_iter)
-        hint = " (--max-iter raises the limit)" if "did not converge in" in str(exc) else ""
+        hint = " (--max-iter raises the limit)" if ran_out_of_iterations(exc) else ""
         say_error(f"solver failed: {exc}{hint}", progress)
         return 1
     except MemoryError:  # what memory_note could only warn of

@@ -34,7 +34,7 @@ def _simulate(smk, clock: CurveClock) -> None:
     """Build the brush from the job's wildcards and params, pull it off, write the curve."""
     from brushcore.model.curve import FirstTouchWarning, simulate
     from brushcore.numerics.options import SolverOptions
-    from brushcore.numerics.linear.cg import ConvergenceError
+    from brushcore.numerics.linear.cg import ConvergenceError, ran_out_of_iterations
     from brushcore.data.io import check_output_path, remove_stale_temporaries, write_curve
     from brushcore.data.joblog import parent_watch
     from brushcore.model.inputs import parse_protocol
@@ -66,7 +66,7 @@ def _simulate(smk, clock: CurveClock) -> None:
             curve = simulate(params, SolverOptions(**smk.params.solver), progress=progress,
                              protocol=protocol)
     except ConvergenceError as exc:
-        if "did not converge in" in str(exc):  # the one limit a config may raise for it
+        if ran_out_of_iterations(exc):  # the one limit a config may raise for it
             exc.add_note("the config's solver.max_iter raises the limit")
         raise
     orphaned()

@@ -306,8 +306,6 @@ def headline_rows(
     return rows
 
 
-
-
 def spread_rows(sweep: xr.Dataset, shape: str = "disc") -> list[Row]:
     """F_ad of every graded case (stiffness spread C > 0, ``kbar_spread``):
     one `Row` per brush, kbar, roughness and C, at the preload the flat rows

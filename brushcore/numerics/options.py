@@ -183,16 +183,9 @@ class SolverOptions:
 
     @classmethod
     def _from_recorded(cls, attrs: Mapping[str, object]) -> SolverOptions:
-        """`from_attrs`' work, warning at its caller's caller (the user's line)."""
-        values, note = cls._recorded(attrs)
-        if note:
-            warnings.warn(note, stacklevel=3)
-        return cls(**values)
-
-    @classmethod
-    def _recorded(cls, attrs: Mapping[str, object]) -> tuple[dict[str, object], str]:
-        """The fields `from_attrs` takes from ``attrs``, and why its rtol may not
-        be the one asked for ("" where it is)."""
+        """`from_attrs`' work: the fields of ``attrs``, a protocol's rtol from
+        `REQUESTED_RTOL`, warned of at its caller's caller (the user's line)
+        where the file predates it."""
         require(isinstance(attrs, Mapping), "attrs", type(attrs).__name__,
                 "a mapping of a curve file's attributes (ds.attrs)")
         names = [f.name for f in fields(cls)]
@@ -206,15 +199,16 @@ class SolverOptions:
             if isinstance(f.default, bool) and is_integer(value) and value in (0, 1):
                 value = bool(value)  # netCDF's 0/1; other values left for the check
             values[f.name] = value
-        note = ""
         if REQUESTED_RTOL in attrs:
             values["rtol"] = attrs[REQUESTED_RTOL]
         elif "protocol" in attrs:  # every protocol curve's; a flat run never tightens
-            note = (f"the curve records the rtol its protocol ran at ({values['rtol']!r}), "
-                    f"not the one asked for ({REQUESTED_RTOL}, written since 2026-12-07): a "
-                    "rerun tightens it again where the run was tightened for its loads or "
-                    "stiffness span, more accurate than the curve, not the same numbers")
-        return values, note
+            warnings.warn(
+                f"the curve records the rtol its protocol ran at ({values['rtol']!r}), "
+                f"not the one asked for ({REQUESTED_RTOL}, written since 2026-12-07): a "
+                "rerun tightens it again where the run was tightened for its loads or "
+                "stiffness span, more accurate than the curve, not the same numbers",
+                stacklevel=3)
+        return cls(**values)
 
     def __post_init__(self) -> None:
         normalise(self, ("max_iter",), ("rtol", "tie_rtol", "lookahead"),

@@ -128,11 +128,6 @@ def _deterministic_seeds(config, rough):
     return config["seeds"] if drawn else [0]
 
 
-def config_phis(config):
-    """The config's `phi` (a number or a list) as a list of floats, in its order."""
-    return config_values(config, "phi")
-
-
 def sweep_cases(config):
     """Every (layout, n_pillars, kbar, seed, grid, phi, rough, shape) the config asks for, once.
 
@@ -141,10 +136,10 @@ def sweep_cases(config):
     seed) run every seed.  Every brush runs every pillar shape of `shape`,
     ellipses at every `aspect` and squares and ellipses at every `orientation`.
     The Fig. 5 brush adds its own kbar values to the sweep of its layout and
-    shape.  Every generated brush runs at each phi of `config_phis`; a file
+    shape.  Every generated brush runs at each `phi` (`config_values`); a file
     brush at its file's.
     """
-    phis = config_phis(config)
+    phis = config_values(config, "phi")
     cases = set()
     shapes = [tag for s in config["shape"] for tag in shape_tags(config, s)]
 

@@ -110,7 +110,7 @@ def lattice_figure_files(config):
 
 def phi_figure_files(config):
     """The rigid limit against phi, for configs that list more than one phi."""
-    if "phi" not in config or len(config_phis(config)) < 2:
+    if "phi" not in config or len(config_values(config, "phi")) < 2:
         return []
     return [f"results/figures/rigid_phi.{ext}" for ext in ("png", "pdf")]
 

@@ -117,6 +117,20 @@ def brush_colors(n_pillars: Sequence[int]) -> dict[int, str]:
     return {int(n): f"C{i}" for i, n in enumerate(sorted(n_pillars))}
 
 
+def seed_range(runs: xr.DataArray) -> tuple[xr.DataArray, xr.DataArray, xr.DataArray]:
+    """Mean, min and max over ``seed`` of the seeds that ran (NaN skipped):
+    a marker and its bar."""
+    return (runs.mean("seed", skipna=True), runs.min("seed", skipna=True),
+            runs.max("seed", skipna=True))
+
+
+def title_notes(*notes: str) -> str:
+    """A title's parenthesised notes, the empty ones left out: " (disc
+    pillars, phi = 0.12 of 0.08, 0.12)", or "" where every one is empty."""
+    shown = [note for note in notes if note]
+    return f" ({', '.join(shown)})" if shown else ""
+
+
 def no_data(ax: Axes, message: str) -> None:
     """Write ``message`` in the middle of an empty panel (a case not run)."""
     ax.text(0.5, 0.5, message, ha="center", va="center", transform=ax.transAxes)
@@ -129,9 +143,11 @@ def sweep_phi(sweep: xr.Dataset, layout: str | None = None, n_pillars: int | Non
     ``n_pillars``, the one brush's as realised (its curves' mean
     ``phi_actual``), as its data are normalised (regular 256 and 2304
     realise 0.117 of 0.12 at 512^2, which put its soft-work line 1.2 %
-    low)."""
-    if "phi_actual" in sweep and layout is not None and (
-            n_pillars is not None or layout.startswith(FILE_LAYOUT_PREFIX)):
+    low).  A brush the sweep does not hold takes the sweep's."""
+    held = layout in sweep.layout.values and (
+        n_pillars in sweep.n_pillars.values if n_pillars is not None
+        else layout.startswith(FILE_LAYOUT_PREFIX))
+    if "phi_actual" in sweep and held:
         realised = sweep["phi_actual"].sel(layout=layout)
         if n_pillars is not None:
             realised = realised.sel(n_pillars=n_pillars)

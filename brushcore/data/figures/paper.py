@@ -32,8 +32,8 @@ from brushcore.data.figures.common import (FAD_LABEL, HEX_LABEL, HEX_LINE, K_LAB
                                            SHAPE_MARKERS, SNAPSHOT_CMAP, W_LABEL,
                                            break_before_rigid, brush_colors, kbar_axes, kbar_text,
                                            kbar_x, layout_styles, new_figure, no_data, panel_title,
-                                           rigid_ticks, rigid_x, shape_text, snapshot_key,
-                                           sweep_layouts, sweep_phi)
+                                           rigid_ticks, rigid_x, seed_range, shape_text,
+                                           snapshot_key, sweep_layouts, sweep_phi, title_notes)
 
 
 #: Fig. 8 draws eq. 27 only where it exceeds this (W of a compact punch is 1).
@@ -100,9 +100,7 @@ def fig5(
     grid = fig.add_gridspec(rows, 1 + n_snap, width_ratios=[3.0] + [1.0] * n_snap)
     side = math.isqrt(n_pillars)
     name = f"{side} x {side}" if layout == "regular" and side * side == n_pillars else str(n_pillars)
-    notes = ([] if shape == "disc" else [shape_text(shape)]) + (
-        [phi_note(sweep)] if phi_note(sweep) else [])
-    pillars = f" ({', '.join(notes)})" if notes else ""
+    pillars = title_notes("" if shape == "disc" else shape_text(shape), phi_note(sweep))
     fig.suptitle(_wrapped(fig, f"{layout} brush, N = {name} pillars{pillars}"))
     if not cases:
         no_data(fig.add_subplot(grid[0, :]), f"no flat {layout} runs with N = {n_pillars}")
@@ -189,9 +187,7 @@ def _shape_note(sweep: xr.Dataset) -> str:
     " (phi = 0.12 of 0.08, 0.12, 0.2)" where it is one phi of several
     (`phi_slice`), both joined where both."""
     shape = sweep.attrs.get(SHOWN_SHAPE)
-    notes = ([f"{shape} pillars"] if shape else []) + ([phi_note(sweep)] if phi_note(sweep)
-                                                       else [])
-    return f" ({', '.join(notes)})" if notes else ""
+    return title_notes(f"{shape} pillars" if shape else "", phi_note(sweep))
 
 
 def _per_brush_panels(sweep: xr.Dataset, title: str) -> tuple[Figure, dict[str, object]]:
@@ -467,14 +463,6 @@ def _lattice_series(sweep: xr.Dataset, n_pillars: int) -> list[tuple[str, str, x
     return out
 
 
-def _lattice_phi(sweep: xr.Dataset, layout: str, n_pillars: int) -> float:
-    """The phi a layout's N-pillar brush realised (`sweep_phi`, its shapes'
-    mean), or the sweep's where that brush did not run."""
-    if layout not in sweep.layout.values or n_pillars not in sweep.n_pillars.values:
-        return sweep_phi(sweep)
-    return sweep_phi(sweep, layout, n_pillars)
-
-
 def lattices(sweep: xr.Dataset) -> Figure:
     """Adhesive force against kbar for every (layout, shape) of the same N.
 
@@ -501,7 +489,7 @@ def lattices(sweep: xr.Dataset) -> Figure:
     fig = new_figure(5.2 * max(len(compared), 1), 4.0)
     axes = fig.subplots(1, max(len(compared), 1), squeeze=False)[0]
     fig.suptitle(_wrapped(fig, "Adhesive force of lattices and pillar shapes of the same N"
-                          + (f" ({phi_note(sweep)})" if phi_note(sweep) else "")))
+                          + title_notes(phi_note(sweep))))
     if not compared:
         no_data(axes[0], "no runs")
         return fig
@@ -511,8 +499,7 @@ def lattices(sweep: xr.Dataset) -> Figure:
     for index, (ax, (n, brushes)) in enumerate(zip(axes, compared.items())):
         for layout, shape, runs in brushes:
             x, mean, low, high = break_before_rigid(
-                x_inf, kbar_x(runs.kbar.values, x_inf), runs.mean("seed", skipna=True),
-                runs.min("seed", skipna=True), runs.max("seed", skipna=True))
+                x_inf, kbar_x(runs.kbar.values, x_inf), *seed_range(runs))
             marker, line = SHAPE_MARKERS.get(parse_shape_label(shape)["shape"], ("^", "-."))
             ax.errorbar(x, mean, yerr=[mean - low, high - mean], marker=marker, ls=line, ms=4,
                         capsize=2, color=LAYOUT_COLORS.get(layout, f"C{3 + index}"),
@@ -520,10 +507,10 @@ def lattices(sweep: xr.Dataset) -> Figure:
                         label=f"{layout}, {shape_text(shape)}")
         if math.isfinite(phi):
             # solid as in Fig. 6, the soft limit dashed as in Fig. 8: one key for all
-            ax.axhline(theory.rigid_limit(_lattice_phi(sweep, "regular", n)), color="k",
+            ax.axhline(theory.rigid_limit(sweep_phi(sweep, "regular", n)), color="k",
                        lw=1.2, label=r"rigid limit $\varphi^{-1/4}$")
             if any(b[0] == "hexagonal" for b in brushes) and hexagonal_lattice(n):
-                ax.axhline(theory.hexagonal_rigid_limit(_lattice_phi(sweep, "hexagonal", n), n),
+                ax.axhline(theory.hexagonal_rigid_limit(sweep_phi(sweep, "hexagonal", n), n),
                            color="0.45", ls=HEX_LINE, lw=1.0, label=HEX_LABEL)
         # Kendall's force per pillar: squares and ellipses let go below it
         ax.axhline(theory.soft_limit(n), color="k", ls="--", lw=1.0,
@@ -563,11 +550,9 @@ def rigid_phi(sweep: xr.Dataset) -> Figure:
                 f = force.sel(layout=layout, n_pillars=n)
                 ran = f.notnull().any("seed")
                 if int(ran.sum()):
+                    realised = phi.sel(layout=layout, n_pillars=n).mean("seed", skipna=True)
                     runs.setdefault(layout, []).append(
-                        (int(n), phi.sel(layout=layout, n_pillars=n).mean("seed", skipna=True)
-                         .values[ran.values], f.mean("seed", skipna=True).values[ran.values],
-                         f.min("seed", skipna=True).values[ran.values],
-                         f.max("seed", skipna=True).values[ran.values]))
+                        (int(n), *(v.values[ran.values] for v in (realised, *seed_range(f)))))
     fig = new_figure(4.2 * max(len(runs), 1), 3.6)
     axes = fig.subplots(1, max(len(runs), 1), squeeze=False, sharey=True)[0]
     fig.suptitle(_wrapped(fig, "Rigid limit against the filling factor" + _shape_note(sweep)))

@@ -18,7 +18,8 @@ from brushcore.data.aggregate import HEIGHT_SD
 from brushcore.data.views import finest_grid, phi_note, phi_slice
 from brushcore.data.figures.paper import FEWER_SEEDS_LABEL
 from brushcore.data.figures.common import (FAD_LABEL, SNAPSHOT_CMAP, kbar_text, new_figure,
-                                           no_data, snapshot_key, sweep_phi)
+                                           no_data, seed_range, snapshot_key, sweep_phi,
+                                           title_notes)
 
 
 #: Where the elastic foundation's soft limit is drawn (`theory`'s, shared with the summary).
@@ -31,8 +32,7 @@ def _rough_series(sweep: xr.Dataset, name: str, layout: str, n: int, kbar: float
     at the figure's stiffness spread (`_spread_shown`) unless ``at`` names one."""
     at = {"kbar_spread": _spread_shown(sweep), **at}
     runs = sweep[name].sel(layout=layout, n_pillars=n, kbar=kbar, **at)
-    return (runs.mean("seed", skipna=True), runs.min("seed", skipna=True),
-            runs.max("seed", skipna=True))
+    return seed_range(runs)
 
 
 def _spread_shown(sweep: xr.Dataset) -> float:
@@ -57,8 +57,7 @@ def _notes(sweep: xr.Dataset, spread: bool = True) -> str:
     """A rough figure's title notes: the stiffness spread shown where it is
     not 0 (`_spread_note`, unless ``spread`` is False: a figure over C), and
     the phi shown of several (`phi_note`)."""
-    phi = phi_note(sweep)
-    return (_spread_note(sweep) if spread else "") + (f" ({phi})" if phi else "")
+    return (_spread_note(sweep) if spread else "") + title_notes(phi_note(sweep))
 
 
 def _drawn_spread(sweep: xr.Dataset, layout: str, n: int, kbar: float, **at: float
@@ -342,8 +341,7 @@ def rough_spread(sweep: xr.Dataset, layout: str = "regular", n_pillars: int = 25
             for i, kbar in enumerate(kbars):
                 runs = sweep["adhesive_force_normalized"].sel(
                     layout=layout, n_pillars=n_pillars, kbar=kbar, **at)
-                mean, low, high = (runs.mean("seed", skipna=True),
-                                   runs.min("seed", skipna=True), runs.max("seed", skipna=True))
+                mean, low, high = seed_range(runs)
                 ok = np.isfinite(mean.values)
                 if not ok.any():
                     continue

@@ -14,6 +14,17 @@ class ConvergenceError(RuntimeError):
     """CG did not reach its tolerance, or produced non-finite numbers."""
 
 
+#: CG's words where it ran out of iterations, the one failure that more
+#: iterations (``max_iter``) can mend; the events re-raise the message with
+#: their place appended, so the words are what travels.
+OUT_OF_ITERATIONS = "did not converge in"
+
+
+def ran_out_of_iterations(exc: BaseException) -> bool:
+    """Whether ``exc`` is CG's running out of iterations (`OUT_OF_ITERATIONS`)."""
+    return isinstance(exc, ConvergenceError) and OUT_OF_ITERATIONS in str(exc)
+
+
 def pcg(apply: Callable[[np.ndarray], np.ndarray],
         precondition: Callable[[np.ndarray], np.ndarray],
         b: np.ndarray, x0: np.ndarray, rtol: float, max_iter: int,
@@ -141,6 +152,6 @@ def pcg_image(apply: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
         p += z
         rz = rz_new
     raise ConvergenceError(
-        f"CG did not converge in {max_iter} iterations: relative correction "
+        f"CG {OUT_OF_ITERATIONS} {max_iter} iterations: relative correction "
         f"{history[-1] if history else float('nan'):.3e} > rtol {rtol:.1e} (size {b.size}; "
         f"last values {', '.join(f'{h:.2e}' for h in history[-5:])})")
